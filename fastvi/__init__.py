@@ -1,0 +1,26 @@
+"""fastvi: high-order Galerkin variational integrators for constrained mechanical systems.
+
+Public API: :class:`Model`, :func:`integrate`, :class:`Result`, :class:`IntegrationError`,
+:class:`Status`, :func:`method`, and the ready-made mechanisms in :mod:`fastvi.scenes`.
+"""
+
+from . import _numba  # noqa: F401  (numba settings first)
+from . import scenes
+from .integrate import IntegrationError, Result, integrate
+from .model import CALLBACK_SIGNATURE, Model
+from .status import Status
+from .tables import Method, method
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Model",
+    "integrate",
+    "Result",
+    "IntegrationError",
+    "Status",
+    "Method",
+    "method",
+    "scenes",
+    "CALLBACK_SIGNATURE",
+]

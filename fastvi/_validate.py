@@ -1,0 +1,188 @@
+"""Argument validation shared by every public entry point.
+
+Each validator returns the cleaned value; each message names the argument in backticks,
+states the rule, and shows the value received.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import warnings
+
+import numpy as np
+
+from .tables import Method, method as _method
+
+#: |g(q0)| (relative to the size of q0) above which initial data are rejected, not projected.
+CONSISTENCY_TOL = 1e-6
+#: below this the projection of initial data is round-off and happens silently.
+SILENT_PROJECTION = 1e-12
+#: Newton tolerance on the scaled increment of the control points (see fastvi.integrate).
+DEFAULT_TOL = 1e-14
+DEFAULT_MAX_ITER = 30
+
+_EXAMPLE_NAMES = [f"P{s}L-Q{r}{q}{v}" for s in range(1, 7) for r in range(1, 9) for q in "GL"
+                  for v in ("", "-NE-CE", "-NL-CN", "-NL-CE")]
+
+
+def vector(x, name: str, n: int) -> np.ndarray:
+    """A finite float64 vector of length ``n``."""
+    try:
+        arr = np.asarray(x)
+    except Exception:  # noqa: BLE001 - anything numpy cannot read
+        raise TypeError(f"`{name}` must be an array of {n} floats, got {type(x).__name__}") from None
+    if arr.dtype.kind not in "fiu" or arr.dtype == bool:
+        raise TypeError(f"`{name}` must be an array of real numbers, got dtype {arr.dtype}")
+    if arr.shape != (n,):
+        raise ValueError(f"`{name}` must have shape ({n},), got {arr.shape}")
+    arr = np.ascontiguousarray(arr, dtype=np.float64)
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"`{name}` must be finite, got {arr}")
+    return arr
+
+
+def params(p, model) -> np.ndarray:
+    if p is None:
+        return model.params
+    arr = vector(p, "params", model.params.shape[0])
+    return arr
+
+
+def step_size(h) -> float:
+    if isinstance(h, bool) or not isinstance(h, (int, float, np.integer, np.floating)):
+        raise TypeError(f"`h` must be a float, got {h!r}")
+    h = float(h)
+    if not (h > 0.0 and math.isfinite(h)):
+        raise ValueError(f"`h` must be positive and finite, got {h}")
+    return h
+
+
+def _count(x, name: str, least: int) -> int:
+    if isinstance(x, bool) or not isinstance(x, (int, np.integer)):
+        if isinstance(x, (float, np.floating)) and float(x).is_integer():
+            x = int(x)
+        else:
+            raise TypeError(f"`{name}` must be an integer, got {x!r}")
+    if x < least:
+        raise ValueError(f"`{name}` must be >= {least}, got {x}")
+    return int(x)
+
+
+def step_count(h: float, t_end, n_steps) -> int:
+    """Exactly one of ``t_end`` and ``n_steps``; ``t_end`` must be a multiple of ``h``."""
+    if (t_end is None) == (n_steps is None):
+        raise ValueError("give exactly one of `t_end` and `n_steps`"
+                         f" (got t_end={t_end!r}, n_steps={n_steps!r})")
+    if n_steps is not None:
+        return _count(n_steps, "n_steps", 1)
+    if isinstance(t_end, bool) or not isinstance(t_end, (int, float, np.integer, np.floating)):
+        raise TypeError(f"`t_end` must be a float, got {t_end!r}")
+    t_end = float(t_end)
+    if not (t_end > 0.0 and math.isfinite(t_end)):
+        raise ValueError(f"`t_end` must be positive and finite, got {t_end}")
+    k = round(t_end / h)
+    if k < 1 or abs(k * h - t_end) > 1e-9 * t_end:
+        raise ValueError(
+            f"`t_end` = {t_end} is not a whole number of steps of `h` = {h} "
+            f"(t_end/h = {t_end / h:.6g}); fixed-step integration needs t_end = n·h: "
+            f"pass `n_steps` or choose h = {t_end / max(1, k):.6g}"
+        )
+    return int(k)
+
+
+def save_every(k) -> int:
+    return _count(k, "save_every", 1)
+
+
+def tolerance(tol) -> float:
+    if isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating)):
+        raise TypeError(f"`tol` must be a float, got {tol!r}")
+    tol = float(tol)
+    if not (0.0 < tol < 1e-2):
+        raise ValueError(f"`tol` must be in (0, 1e-2), got {tol}")
+    return tol
+
+
+def max_iter(k) -> int:
+    return _count(k, "max_iter", 1)
+
+
+def method(name) -> Method:
+    try:
+        return _method(name)
+    except ValueError as exc:
+        if isinstance(name, str):
+            close = difflib.get_close_matches(name.strip().upper(), _EXAMPLE_NAMES, n=3, cutoff=0.6)
+            if close:
+                raise ValueError(f"{exc}. Did you mean: {', '.join(close)}?") from None
+        raise
+
+
+def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray):
+    """Check M(q0), G(q0), and project (q0, v0) onto g = 0, G v = 0.
+
+    Data off the constraint manifold by more than ``CONSISTENCY_TOL`` (relative) raise;
+    smaller violations are projected, with a warning when the move exceeds round-off.
+    """
+    M = model.mass_matrix(q0, prm)
+    if not np.all(np.isfinite(M)):
+        raise ValueError(f"the mass matrix at `q0` is not finite: {M}")
+    try:
+        np.linalg.cholesky(0.5 * (M + M.T))
+        sym = np.allclose(M, M.T, rtol=1e-10, atol=1e-14 * np.abs(M).max())
+    except np.linalg.LinAlgError:
+        sym = False
+    if not sym:
+        raise ValueError(f"the mass matrix at `q0` must be symmetric positive definite, got {M}")
+    if not np.isfinite(model.potential_energy(q0, prm)):
+        raise ValueError("the potential energy at `q0` is not finite (callback `potential`)")
+    if model.m == 0:
+        return q0, v0
+    scale = max(1.0, float(np.max(np.abs(q0))))
+    g = model.constraint_value(q0, prm)
+    if not np.all(np.isfinite(g)):
+        raise ValueError(f"callback `constraint` returned non-finite values at `q0`: {g}")
+    G = model.constraint_jacobian_value(q0, prm)
+    if not np.all(np.isfinite(G)):
+        raise ValueError(f"callback `constraint_jacobian` returned non-finite values at `q0`: {G}")
+    sv = np.linalg.svd(G, compute_uv=False)
+    if sv.size < model.m or sv[-1] <= 1e-10 * max(sv[0], 1e-300):
+        raise ValueError(
+            f"the constraint Jacobian at `q0` must have full row rank {model.m}; "
+            f"its singular values are {sv}"
+        )
+    gmax = float(np.max(np.abs(g)))
+    if gmax > CONSISTENCY_TOL * scale:
+        raise ValueError(
+            f"`q0` violates the constraints: max|g(q0)| = {gmax:.3e} > {CONSISTENCY_TOL:.0e}·{scale:g}; "
+            "start from a consistent state (the scenes' `initial_state` helpers give one)"
+        )
+    q = q0.copy()
+    for _ in range(20):
+        Minv_Gt = np.linalg.solve(M, G.T)
+        q = q - Minv_Gt @ np.linalg.solve(G @ Minv_Gt, g)
+        g = model.constraint_value(q, prm)
+        G = model.constraint_jacobian_value(q, prm)
+        if model.mass_matrix_constant is None:
+            M = model.mass_matrix(q, prm)
+        if np.max(np.abs(g)) <= 4e-16 * scale:
+            break
+    moved = float(np.max(np.abs(q - q0)))
+    if gmax > SILENT_PROJECTION * scale:
+        warnings.warn(f"`q0` was projected onto the constraints (max|g| was {gmax:.2e}; "
+                      f"q moved by {moved:.2e})", stacklevel=3)
+    Minv_Gt = np.linalg.solve(M, G.T)
+    gv = G @ v0
+    vscale = max(1.0, float(np.max(np.abs(v0))))
+    gvmax = float(np.max(np.abs(gv)))
+    if gvmax > CONSISTENCY_TOL * vscale * max(1.0, scale):
+        raise ValueError(
+            f"`v0` violates the hidden constraint G(q0) v0 = 0: max|G v0| = {gvmax:.3e}; "
+            "start from a consistent state"
+        )
+    v = v0 - Minv_Gt @ np.linalg.solve(G @ Minv_Gt, G @ v0)
+    if gvmax > SILENT_PROJECTION * vscale * max(1.0, scale):
+        warnings.warn(f"`v0` was projected onto G(q0) v = 0 (max|G v0| was {gvmax:.2e}; "
+                      f"v moved by {float(np.max(np.abs(v - v0))):.2e})", stacklevel=3)
+    return q, v

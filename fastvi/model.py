@@ -1,0 +1,355 @@
+"""Mechanical models as compiled callbacks.
+
+A :class:`Model` turns plain Python functions (numba's nopython subset) into ``numba.cfunc``
+callbacks that all share **one signature**, :data:`CALLBACK_SIGNATURE`::
+
+    void cb(float64* q, float64* v, float64* params, float64* out)
+
+``q`` is the configuration (n), ``v`` the second vector argument (a velocity (n) or, for
+the constraint Hessian, the impulse vector (m); unused otherwise), ``params`` the flat
+parameter vector (k), and ``out`` the output written in place (C order for matrices).
+Because every callback has this one type, the kernels take them as first-class function
+values and compile once for every model (and are cached on disk).
+
+You never write that signature yourself: pass ordinary functions on arrays and the
+``Model`` wraps each in a cfunc, with the array sizes baked in (``numba.carray``). Values
+the functions need go in ``params`` rather than in closures, so one compiled model serves
+every parameter value (a closure constant is frozen at compile time).
+
+User functions, with ``q, v`` of shape (n,), ``eta`` of shape (m,), ``params`` of shape (k,):
+
+==========================  =============================================  ==============
+argument                    function                                        ``out`` shape
+==========================  =============================================  ==============
+``mass``                    ``mass(q, params, out)``: M(q), or an array     (n, n)
+``potential``               ``potential(q, params) -> float``: V(q)         --
+``potential_grad``          ``potential_grad(q, params, out)``: ∇V          (n,)
+``kinetic_grad``            ``kinetic_grad(q, v, params, out)``: ∂T/∂q      (n,)
+``constraint``              ``constraint(q, params, out)``: g(q)            (m,)
+``constraint_jacobian``     ``constraint_jacobian(q, params, out)``: G      (m, n)
+``potential_hessian``       ``potential_hessian(q, params, out)``: ∇²V      (n, n)
+``constraint_hessian``      ``constraint_hessian(q, eta, params, out)``:    (n, n)
+                            ``Σ_a eta_a ∇²g_a(q)``
+``kinetic_hessian``         ``kinetic_hessian(q, v, params, out)``: ∂²T/∂q² (n, n)
+``momentum_jacobian``       ``momentum_jacobian(q, v, params, out)``:       (n, n)
+                            ``∂(M(q) v)/∂q``, entry [a, b] = ∂(Mv)_a/∂q_b
+==========================  =============================================  ==============
+
+The last four are optional: a missing one is replaced by central finite differences of the
+first derivative it differentiates (inside the kernel, without allocation). They only enter
+the Newton matrix, so they change the Newton convergence rate, not the solution.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Callable
+
+import numba as nb
+import numpy as np
+from numba import carray, types
+
+from ._numba import njit
+
+__all__ = ["Model", "CALLBACK_SIGNATURE", "SLOTS"]
+
+#: The one signature of every compiled model callback: ``void(q*, v*, params*, out*)``.
+CALLBACK_SIGNATURE = types.void(
+    types.CPointer(types.float64),
+    types.CPointer(types.float64),
+    types.CPointer(types.float64),
+    types.CPointer(types.float64),
+)
+
+#: Order of the callbacks in the tuple handed to the kernels.
+SLOTS = (
+    "mass",
+    "kinetic_grad",
+    "potential",
+    "potential_grad",
+    "constraint",
+    "constraint_jacobian",
+    "potential_hessian",
+    "constraint_hessian",
+    "kinetic_hessian",
+    "momentum_jacobian",
+)
+_SECOND = SLOTS[6:]
+# flags vector handed to the kernels: [n, m, has_mass_fn, exact second derivatives (4)]
+_F_N, _F_M, _F_MASSFN, _F_EXACT = 0, 1, 2, 3
+
+
+@nb.cfunc(CALLBACK_SIGNATURE, cache=True)
+def _absent(q, v, params, out):  # pragma: no cover - never called: flags skip it
+    pass
+
+
+@njit
+def _call(fn, q, v, params, out):
+    """Evaluate one compiled callback from Python (validation, diagnostics, baselines)."""
+    fn(q.ctypes, v.ctypes, params.ctypes, out.ctypes)
+
+
+def _wrap(kind: str, fn: Callable, n: int, m: int, k: int):
+    """Compile ``fn`` into a cfunc of :data:`CALLBACK_SIGNATURE` (sizes baked in)."""
+    jf = fn if isinstance(fn, nb.core.dispatcher.Dispatcher) else nb.njit(fn)
+    nn = (n, n)
+    if kind == "potential":
+
+        def cb(q, v, p, out):
+            out[0] = jf(carray(q, (n,)), carray(p, (k,)))
+
+    elif kind in ("mass", "potential_hessian"):
+
+        def cb(q, v, p, out):
+            jf(carray(q, (n,)), carray(p, (k,)), carray(out, nn))
+
+    elif kind == "potential_grad":
+
+        def cb(q, v, p, out):
+            jf(carray(q, (n,)), carray(p, (k,)), carray(out, (n,)))
+
+    elif kind == "constraint":
+
+        def cb(q, v, p, out):
+            jf(carray(q, (n,)), carray(p, (k,)), carray(out, (m,)))
+
+    elif kind == "constraint_jacobian":
+
+        def cb(q, v, p, out):
+            jf(carray(q, (n,)), carray(p, (k,)), carray(out, (m, n)))
+
+    elif kind == "constraint_hessian":
+
+        def cb(q, v, p, out):
+            jf(carray(q, (n,)), carray(v, (m,)), carray(p, (k,)), carray(out, nn))
+
+    elif kind == "kinetic_grad":
+
+        def cb(q, v, p, out):
+            jf(carray(q, (n,)), carray(v, (n,)), carray(p, (k,)), carray(out, (n,)))
+
+    else:  # kinetic_hessian, momentum_jacobian
+
+        def cb(q, v, p, out):
+            jf(carray(q, (n,)), carray(v, (n,)), carray(p, (k,)), carray(out, nn))
+
+    try:
+        return nb.cfunc(CALLBACK_SIGNATURE)(cb)
+    except nb.core.errors.TypingError as exc:
+        raise TypeError(
+            f"`{kind}` could not be compiled by numba with the documented signature "
+            f"(see fastvi.model): {exc}"
+        ) from None
+
+
+def _as_int(value, name: str, least: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"`{name}` must be an integer, got {value!r}")
+    if value < least:
+        raise ValueError(f"`{name}` must be >= {least}, got {value}")
+    return int(value)
+
+
+def _as_params(params, name: str = "params") -> np.ndarray:
+    arr = np.asarray(params, dtype=np.float64) if not isinstance(params, np.ndarray) else params
+    if arr.dtype != np.float64:
+        try:
+            arr = arr.astype(np.float64, casting="same_kind")
+        except TypeError:
+            raise TypeError(f"`{name}` must be a float64 vector, got dtype {arr.dtype}") from None
+    if arr.ndim != 1:
+        raise ValueError(f"`{name}` must be a 1-D vector, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"`{name}` must be finite, got {arr}")
+    return np.ascontiguousarray(arr)
+
+
+class Model:
+    r"""A mechanical system ``L(q, v) = ½ vᵀ M(q) v − V(q)`` with constraints ``g(q) = 0``.
+
+    Parameters
+    ----------
+    n : int
+        Number of (redundant) coordinates.
+    m : int, default 0
+        Number of holonomic constraints. ``m = 0`` means an unconstrained model: no
+        constraint callbacks, and the kernels skip the constraint rows entirely.
+    params : array_like, shape (k,)
+        Parameter vector handed to every callback (float64).
+    mass : ndarray (n, n) or callable
+        Constant symmetric positive definite mass matrix, or ``mass(q, params, out)``.
+        With a constant matrix no kinetic-energy callbacks are called at all.
+    potential, potential_grad : callable
+        ``V(q)`` and ``∇V(q)``.
+    kinetic_grad : callable, optional
+        ``∂T/∂q = ½ vᵀ (∂M/∂q) v``; required when ``mass`` is a function.
+    constraint, constraint_jacobian : callable, optional
+        ``g(q)`` (m,) and ``G(q) = ∂g/∂q`` (m, n); required when ``m > 0``.
+    potential_hessian, constraint_hessian, kinetic_hessian, momentum_jacobian : callable, optional
+        Exact second derivatives (see the module docstring). Missing ones are replaced by
+        finite differences of the first derivatives.
+    name : str, optional
+        A label used in summaries and error messages.
+
+    Notes
+    -----
+    The callbacks are compiled once per ``Model`` (a fraction of a second each); the
+    integration kernels are compiled once for all models and cached on disk.
+    """
+
+    def __init__(
+        self,
+        n: int,
+        m: int = 0,
+        *,
+        params=(),
+        mass,
+        potential: Callable,
+        potential_grad: Callable,
+        kinetic_grad: Callable | None = None,
+        constraint: Callable | None = None,
+        constraint_jacobian: Callable | None = None,
+        potential_hessian: Callable | None = None,
+        constraint_hessian: Callable | None = None,
+        kinetic_hessian: Callable | None = None,
+        momentum_jacobian: Callable | None = None,
+        name: str | None = None,
+    ):
+        self.n = _as_int(n, "n", 1)
+        self.m = _as_int(m, "m", 0)
+        self.params = _as_params(params)
+        self.name = name or "model"
+        self._recipe = None  # set by scenes / pickling support
+        funcs = dict(
+            kinetic_grad=kinetic_grad,
+            potential=potential,
+            potential_grad=potential_grad,
+            constraint=constraint,
+            constraint_jacobian=constraint_jacobian,
+            potential_hessian=potential_hessian,
+            constraint_hessian=constraint_hessian,
+            kinetic_hessian=kinetic_hessian,
+            momentum_jacobian=momentum_jacobian,
+        )
+        if callable(mass):
+            funcs["mass"] = mass
+            self.mass_matrix_constant = None
+            if kinetic_grad is None:
+                raise ValueError(
+                    "`kinetic_grad` (∂T/∂q) is required when `mass` is a function of q"
+                )
+        else:
+            M = np.array(mass, dtype=np.float64)
+            if M.shape != (self.n, self.n):
+                raise ValueError(f"`mass` must be an ({self.n}, {self.n}) array or a function, got shape {M.shape}")
+            _check_spd(M, "mass")
+            self.mass_matrix_constant = M
+            for key in ("kinetic_grad", "kinetic_hessian", "momentum_jacobian"):
+                if funcs[key] is not None:
+                    raise ValueError(f"`{key}` must not be given with a constant mass matrix (it is zero)")
+        for key in ("potential", "potential_grad"):
+            if not callable(funcs[key]):
+                raise TypeError(f"`{key}` must be a function, got {funcs[key]!r}")
+        if self.m > 0:
+            for key in ("constraint", "constraint_jacobian"):
+                if not callable(funcs[key]):
+                    raise ValueError(f"`{key}` is required when m = {self.m} > 0")
+        else:
+            for key in ("constraint", "constraint_jacobian", "constraint_hessian"):
+                if funcs[key] is not None:
+                    raise ValueError(f"`{key}` was given but m = 0; pass the number of constraints `m`")
+        for key, fn in funcs.items():
+            if fn is not None and not callable(fn):
+                raise TypeError(f"`{key}` must be a function or None, got {fn!r}")
+        self._functions = {k: v for k, v in funcs.items() if v is not None}
+        self._compiled = None
+
+    # ------------------------------------------------------------------ compiled form
+    def _compile(self):
+        if self._compiled is None:
+            k = self.params.shape[0]
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", nb.NumbaExperimentalFeatureWarning)
+                cfs = tuple(
+                    _wrap(slot, self._functions[slot], self.n, self.m, k)
+                    if slot in self._functions
+                    else _absent
+                    for slot in SLOTS
+                )
+            flags = np.zeros(_F_EXACT + len(_SECOND), dtype=np.int64)
+            flags[_F_N] = self.n
+            flags[_F_M] = self.m
+            flags[_F_MASSFN] = int("mass" in self._functions)
+            for i, slot in enumerate(_SECOND):
+                flags[_F_EXACT + i] = int(slot in self._functions)
+            M = self.mass_matrix_constant
+            Mc = np.ascontiguousarray(M if M is not None else np.zeros((self.n, self.n)))
+            self._compiled = (cfs, flags, Mc)
+        return self._compiled
+
+    def kernel_arguments(self):
+        """``(callbacks, flags, constant_mass)``: what the kernels receive for this model.
+
+        ``callbacks`` is the tuple of cfuncs in :data:`SLOTS` order (absent ones are a
+        no-op that the kernels never call), ``flags`` an int64 vector
+        ``[n, m, has_mass_function, exact second derivatives...]``.
+        """
+        return self._compile()
+
+    @property
+    def has_exact_second_derivatives(self) -> dict[str, bool]:
+        """Which second derivatives are exact (the rest use finite differences)."""
+        return {s: s in self._functions for s in _SECOND}
+
+    # ------------------------------------------------------------------ evaluation from Python
+    def _eval(self, slot: str, q, v=None, params=None, shape=()):
+        cfs = self._compile()[0]
+        q = np.ascontiguousarray(q, dtype=np.float64)
+        v = q if v is None else np.ascontiguousarray(v, dtype=np.float64)
+        p = self.params if params is None else np.ascontiguousarray(params, dtype=np.float64)
+        out = np.zeros(shape if shape else (1,))
+        _call(cfs[SLOTS.index(slot)], q, v, p, out)
+        return out if shape else float(out[0])
+
+    def mass_matrix(self, q, params=None) -> np.ndarray:
+        """M(q), shape (n, n)."""
+        if self.mass_matrix_constant is not None:
+            return self.mass_matrix_constant.copy()
+        return self._eval("mass", q, params=params, shape=(self.n, self.n))
+
+    def potential_energy(self, q, params=None) -> float:
+        """V(q)."""
+        return self._eval("potential", q, params=params)
+
+    def constraint_value(self, q, params=None) -> np.ndarray:
+        """g(q), shape (m,)."""
+        if self.m == 0:
+            return np.zeros(0)
+        return self._eval("constraint", q, params=params, shape=(self.m,))
+
+    def constraint_jacobian_value(self, q, params=None) -> np.ndarray:
+        """G(q) = ∂g/∂q, shape (m, n)."""
+        if self.m == 0:
+            return np.zeros((0, self.n))
+        return self._eval("constraint_jacobian", q, params=params, shape=(self.m, self.n))
+
+    def energy(self, q, v, params=None) -> float:
+        """H = ½ vᵀ M(q) v + V(q)."""
+        v = np.asarray(v, dtype=np.float64)
+        return 0.5 * v @ self.mass_matrix(q, params) @ v + self.potential_energy(q, params)
+
+    def __repr__(self) -> str:
+        kind = "constant" if self.mass_matrix_constant is not None else "q-dependent"
+        return f"Model({self.name!r}, n={self.n}, m={self.m}, {kind} mass, k={self.params.shape[0]} params)"
+
+
+def _check_spd(M: np.ndarray, name: str) -> None:
+    if not np.all(np.isfinite(M)):
+        raise ValueError(f"`{name}` must be finite")
+    if not np.allclose(M, M.T, rtol=1e-12, atol=1e-14 * np.max(np.abs(M))):
+        raise ValueError(f"`{name}` must be symmetric")
+    try:
+        np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        raise ValueError(f"`{name}` must be positive definite") from None

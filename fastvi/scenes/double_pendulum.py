@@ -1,0 +1,105 @@
+r"""Planar double pendulum in Cartesian coordinates (paper B's first example).
+
+``q = (x1, y1, x2, y2)``; masses ``m1, m2`` on massless rods ``l1`` (origin to 1) and ``l2``
+(1 to 2); gravity ``−g ŷ``. ``M = diag(m1, m1, m2, m2)`` is constant, ``V = g (m1 y1 + m2 y2)``
+is linear, and the two constraints are
+
+    g1 = ½ (x1² + y1² − l1²),   g2 = ½ ((x2 − x1)² + (y2 − y1)² − l2²).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model import Model
+from ._common import attach, check_positive
+
+# params = (m1, m2, l1, l2, g)
+
+
+def _V(q, p):
+    return p[4] * (p[0] * q[1] + p[1] * q[3])
+
+
+def _dV(q, p, out):
+    out[0] = 0.0
+    out[1] = p[4] * p[0]
+    out[2] = 0.0
+    out[3] = p[4] * p[1]
+
+
+def _ddV(q, p, out):
+    out[:, :] = 0.0
+
+
+def _g(q, p, out):
+    dx = q[2] - q[0]
+    dy = q[3] - q[1]
+    out[0] = 0.5 * (q[0] * q[0] + q[1] * q[1] - p[2] * p[2])
+    out[1] = 0.5 * (dx * dx + dy * dy - p[3] * p[3])
+
+
+def _G(q, p, out):
+    dx = q[2] - q[0]
+    dy = q[3] - q[1]
+    out[0, 0] = q[0]
+    out[0, 1] = q[1]
+    out[0, 2] = 0.0
+    out[0, 3] = 0.0
+    out[1, 0] = -dx
+    out[1, 1] = -dy
+    out[1, 2] = dx
+    out[1, 3] = dy
+
+
+def _ddg(q, eta, p, out):
+    a = eta[0] + eta[1]
+    b = eta[1]
+    out[:, :] = 0.0
+    out[0, 0] = a
+    out[1, 1] = a
+    out[2, 2] = b
+    out[3, 3] = b
+    out[0, 2] = -b
+    out[2, 0] = -b
+    out[1, 3] = -b
+    out[3, 1] = -b
+
+
+def state_from_angles(theta1, theta2, omega1=0.0, omega2=0.0, l1=1.0, l2=1.0):
+    """Cartesian ``(q, v)`` from angles measured from the downward vertical."""
+    s1, c1, s2, c2 = np.sin(theta1), np.cos(theta1), np.sin(theta2), np.cos(theta2)
+    q = np.array([l1 * s1, -l1 * c1, l1 * s1 + l2 * s2, -l1 * c1 - l2 * c2])
+    v = np.array([l1 * c1 * omega1, l1 * s1 * omega1,
+                  l1 * c1 * omega1 + l2 * c2 * omega2, l1 * s1 * omega1 + l2 * s2 * omega2])
+    return q, v
+
+
+def angles(q):
+    """``(theta1, theta2)`` of configurations ``q`` (..., 4)."""
+    q = np.asarray(q)
+    t1 = np.arctan2(q[..., 0], -q[..., 1])
+    t2 = np.arctan2(q[..., 2] - q[..., 0], -(q[..., 3] - q[..., 1]))
+    return t1, t2
+
+
+def double_pendulum(m1: float = 1.0, m2: float = 1.0, l1: float = 1.0, l2: float = 1.0,
+                    g: float = 9.81) -> Model:
+    """Planar double pendulum (n = 4, m = 2) with exact second derivatives.
+
+    Defaults are paper B's parameters. The model has
+    ``initial_state(theta1, theta2, omega1=0, omega2=0) -> (q0, v0)`` and
+    ``angles(q) -> (theta1, theta2)``.
+    """
+    check_positive(m1=m1, m2=m2, l1=l1, l2=l2, g=g)
+    model = Model(
+        4, 2, params=(m1, m2, l1, l2, g), mass=np.diag([m1, m1, m2, m2]), potential=_V,
+        potential_grad=_dV, potential_hessian=_ddV, constraint=_g, constraint_jacobian=_G,
+        constraint_hessian=_ddg, name="double_pendulum",
+    )
+
+    def initial_state(theta1, theta2, omega1=0.0, omega2=0.0):
+        return state_from_angles(theta1, theta2, omega1, omega2, l1, l2)
+
+    return attach(model, "double_pendulum", dict(m1=m1, m2=m2, l1=l1, l2=l2, g=g),
+                  initial_state=initial_state, angles=angles)

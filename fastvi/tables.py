@@ -1,0 +1,372 @@
+"""Quadrature rules, control nodes, Lagrange basis tables and method names.
+
+Everything here is plain NumPy, computed once per method and memoised. The kernels only
+ever see the arrays of a :class:`Method`.
+
+Method names
+------------
+A name has the form ``P<s>L-Q<r><G|L>[-N<E|L|C>][-C<spec>]``:
+
+``P<s>L``
+    Lagrange polynomial of degree ``s`` on ``s + 1`` control points per step (paper B).
+``Q<r>G`` / ``Q<r>L``
+    ``r``-point Gauss–Legendre (``G``) or Gauss–Lobatto (``L``) quadrature of the
+    unconstrained action.
+``-NE`` / ``-NL`` / ``-NC``
+    control-node family: equidistant, Gauss–Lobatto (default), Chebyshev–Gauss–Lobatto.
+``-CE`` / ``-CN`` / ``-CL<k>`` / ``-CG<k>``
+    constraint points: step ends only (paper B), every control node (default), ``k``
+    Gauss–Lobatto points, or ``k`` Gauss points plus the two step ends (paper A).
+
+Paper B's names (``P1L-Q2G``, ``P2L-Q3G``, ...) are accepted as they are and mean fastvi's
+default combination for that degree and quadrature: Gauss–Lobatto control nodes with the
+constraint enforced at every control node (``-NL-CN``), which reaches order ``2s`` when
+``r >= s``. Paper B's own scheme, equidistant nodes with the constraint at the step ends
+only, is ``P<s>L-Q<r>G-NE-CE``; it is order 2 whatever ``s`` (see ``docs/method.md``).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+
+__all__ = [
+    "Method",
+    "method",
+    "gauss_legendre",
+    "gauss_lobatto",
+    "control_nodes",
+    "lagrange_basis",
+    "NODE_FAMILIES",
+    "CONSTRAINT_PLACEMENTS",
+]
+
+#: Control-node families by their one-letter code in a method name.
+NODE_FAMILIES = {"E": "equidistant", "L": "lobatto", "C": "chebyshev"}
+#: Constraint placements by their code in a method name (``L``/``G`` take a count).
+CONSTRAINT_PLACEMENTS = {"E": "ends", "N": "nodes", "L": "lobatto", "G": "gauss"}
+
+_MAX_POINTS = 40  # the root finders below are accurate well beyond the 12 promised
+
+_NAME_RE = re.compile(
+    r"^P(?P<s>\d+)L-Q(?P<r>\d+)(?P<q>[GL])(?:-N(?P<nodes>[ELC]))?(?:-C(?P<cons>[ENLG])(?P<k>\d+)?)?$"
+)
+
+
+# --------------------------------------------------------------------------- quadrature
+def _legendre_and_derivative(k: int, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """P_k(x) and P_k'(x) on [-1, 1] by the three-term recurrence."""
+    p0 = np.ones_like(x)
+    if k == 0:
+        return p0, np.zeros_like(x)
+    p1 = x.copy()
+    for j in range(2, k + 1):
+        p0, p1 = p1, ((2 * j - 1) * x * p1 - (j - 1) * p0) / j
+    with np.errstate(divide="ignore", invalid="ignore"):  # P' is unused at x = ±1
+        dp = k * (x * p1 - p0) / (x * x - 1.0)
+    return p1, dp
+
+
+def _check_count(r: int, least: int, what: str) -> int:
+    if not isinstance(r, (int, np.integer)) or isinstance(r, bool):
+        raise TypeError(f"`{what}` must be an integer, got {r!r}")
+    if not least <= r <= _MAX_POINTS:
+        raise ValueError(f"`{what}` must be between {least} and {_MAX_POINTS}, got {r}")
+    return int(r)
+
+
+@lru_cache(maxsize=None)
+def _gauss_legendre(r: int) -> tuple[np.ndarray, np.ndarray]:
+    x, w = np.polynomial.legendre.leggauss(r)
+    # one Newton polish of the roots in the recurrence keeps them at round-off for large r
+    p, dp = _legendre_and_derivative(r, x)
+    x = x - p / dp
+    _, dp = _legendre_and_derivative(r, x)
+    w = 2.0 / ((1.0 - x * x) * dp * dp)
+    c = 0.5 * (x + 1.0)
+    b = 0.5 * w
+    b = b / math.fsum(b)
+    c.setflags(write=False)
+    b.setflags(write=False)
+    return c, b
+
+
+def gauss_legendre(r: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss–Legendre rule with ``r`` points on [0, 1].
+
+    Exact for polynomials of degree ``2r - 1``:
+    ``∫_0^1 f(t) dt ≈ Σ_i b_i f(c_i)``.
+
+    Returns
+    -------
+    c, b : ndarray, shape (r,)
+        Nodes (increasing, interior) and positive weights summing to 1. Read-only.
+    """
+    return _gauss_legendre(_check_count(r, 1, "r"))
+
+
+@lru_cache(maxsize=None)
+def _gauss_lobatto(r: int) -> tuple[np.ndarray, np.ndarray]:
+    if r == 2:
+        x = np.array([-1.0, 1.0])
+    else:
+        # interior nodes: roots of P'_{r-1}, started from Chebyshev–Gauss–Lobatto points
+        k = r - 1
+        x = -np.cos(np.pi * np.arange(r) / k)
+        inner = x[1:-1].copy()
+        for _ in range(100):
+            p, dp = _legendre_and_derivative(k, inner)
+            # P'' from the Legendre ODE: (1 - x^2) P'' = 2x P' - k(k+1) P
+            d2p = (2 * inner * dp - k * (k + 1) * p) / (1 - inner * inner)
+            step = dp / d2p
+            inner = inner - step
+            if np.max(np.abs(step)) < 1e-16:
+                break
+        x = np.concatenate(([-1.0], np.sort(inner), [1.0]))
+        # symmetric by construction in exact arithmetic: enforce it in floating point
+        x = 0.5 * (x - x[::-1])
+    p, _ = _legendre_and_derivative(r - 1, x)
+    w = 2.0 / (r * (r - 1) * p * p)
+    c = 0.5 * (x + 1.0)
+    c[0], c[-1] = 0.0, 1.0
+    b = 0.5 * w
+    b = b / math.fsum(b)
+    c.setflags(write=False)
+    b.setflags(write=False)
+    return c, b
+
+
+def gauss_lobatto(r: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss–Lobatto rule with ``r >= 2`` points on [0, 1], both ends included.
+
+    Exact for polynomials of degree ``2r - 3``.
+
+    Returns
+    -------
+    c, b : ndarray, shape (r,)
+        Nodes with ``c[0] = 0``, ``c[-1] = 1``, and positive weights summing to 1. Read-only.
+    """
+    return _gauss_lobatto(_check_count(r, 2, "r"))
+
+
+def control_nodes(s: int, family: str = "lobatto") -> np.ndarray:
+    """The ``s + 1`` control points ``0 = τ_0 < … < τ_s = 1`` of a degree-``s`` step.
+
+    Parameters
+    ----------
+    s : int
+        Polynomial degree, ``s >= 1``.
+    family : {"equidistant", "lobatto", "chebyshev"}
+        Equidistant (paper B), Gauss–Lobatto, or Chebyshev–Gauss–Lobatto points.
+    """
+    s = _check_count(s, 1, "s")
+    if family == "equidistant":
+        tau = np.arange(s + 1) / s
+    elif family == "lobatto":
+        tau = np.array(gauss_lobatto(s + 1)[0])
+    elif family == "chebyshev":
+        tau = 0.5 * (1.0 - np.cos(np.pi * np.arange(s + 1) / s))
+        tau = 0.5 * (tau + (1.0 - tau[::-1]))  # exact symmetry
+    else:
+        raise ValueError(
+            f"`family` must be one of {sorted(NODE_FAMILIES.values())}, got {family!r}"
+        )
+    tau[0], tau[-1] = 0.0, 1.0
+    return tau
+
+
+# --------------------------------------------------------------------------- Lagrange basis
+def lagrange_basis(tau: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Values and derivatives of the Lagrange basis on nodes ``tau`` at points ``x``.
+
+    ``ℓ_ν(x) = Π_{μ≠ν} (x − τ_μ)/(τ_ν − τ_μ)`` and its derivative, evaluated by products
+    (no division by ``x − τ``) in extended precision, then rounded once. Where ``x``
+    coincides with a node the values are exactly ``δ``.
+
+    Returns
+    -------
+    ell, dell : ndarray, shape (len(tau), len(x))
+        ``ell[ν, i] = ℓ_ν(x_i)``, ``dell[ν, i] = ℓ'_ν(x_i)``.
+    """
+    t = np.asarray(tau, dtype=np.longdouble)
+    xs = np.asarray(x, dtype=np.longdouble)
+    k = len(t)
+    ell = np.zeros((k, len(xs)), dtype=np.longdouble)
+    dell = np.zeros_like(ell)
+    for nu in range(k):
+        others = [mu for mu in range(k) if mu != nu]
+        denom = np.prod([t[nu] - t[mu] for mu in others]) if others else np.longdouble(1)
+        val = np.ones(len(xs), dtype=np.longdouble)
+        for mu in others:
+            val = val * (xs - t[mu])
+        ell[nu] = val / denom
+        der = np.zeros(len(xs), dtype=np.longdouble)
+        for a in others:
+            term = np.ones(len(xs), dtype=np.longdouble)
+            for mu in others:
+                if mu != a:
+                    term = term * (xs - t[mu])
+            der = der + term
+        dell[nu] = der / denom
+    ell = ell.astype(np.float64)
+    dell = dell.astype(np.float64)
+    for i, xi in enumerate(np.asarray(x, dtype=np.float64)):
+        hit = np.nonzero(np.asarray(tau, dtype=np.float64) == xi)[0]
+        if hit.size:
+            ell[:, i] = 0.0
+            ell[hit[0], i] = 1.0
+    return ell, dell
+
+
+def _consistent(ell: np.ndarray, dell: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Make every column a partition of unity with derivatives summing to zero.
+
+    The step works with increments from ``q_k``; that silently assumes these identities.
+    Off by a few ulps, the scheme stops being exactly variational and energy drifts
+    linearly, so the ``ν = 0`` row is recomputed from the others with a correctly
+    rounded sum.
+    """
+    ell = ell.copy()
+    dell = dell.copy()
+    for i in range(ell.shape[1]):
+        ell[0, i] = 1.0 - math.fsum(ell[1:, i])
+        dell[0, i] = -math.fsum(dell[1:, i])
+    return ell, dell
+
+
+# --------------------------------------------------------------------------- Method
+@dataclass(frozen=True, eq=False)
+class Method:
+    """A Galerkin variational integrator, as the tables the kernels need.
+
+    Attributes
+    ----------
+    name : str
+        Canonical name, ``P<s>L-Q<r><G|L>-N<x>-C<y>``.
+    s, r, J : int
+        Degree, quadrature points, number of constraint intervals (``J + 1`` constraint
+        points including both step ends).
+    quadrature, nodes, constraints : str
+        ``"gauss"``/``"lobatto"``; control-node family; constraint placement.
+    tau : (s+1,) control points. c, b : (r,) quadrature nodes and weights.
+    d : (J+1,) constraint points, ``d[0] = 0``, ``d[J] = 1``.
+    L, Ld : (s+1, r) ``ℓ_ν(c_i)`` and ``ℓ'_ν(c_i)``.
+    Lc : (s+1, J+1) ``ℓ_ν(d_j)``.
+    E : (s+1, s+1) ``ℓ_μ(1 + τ_ν)``, the predictor that extrapolates the previous
+        step's polynomial onto this step's control points.
+    nominal_order : int
+        The order this combination is designed for (measured in ``docs/orders.md``).
+    """
+
+    name: str
+    s: int
+    r: int
+    J: int
+    quadrature: str
+    nodes: str
+    constraints: str
+    tau: np.ndarray = field(repr=False)
+    c: np.ndarray = field(repr=False)
+    b: np.ndarray = field(repr=False)
+    d: np.ndarray = field(repr=False)
+    L: np.ndarray = field(repr=False)
+    Ld: np.ndarray = field(repr=False)
+    Lc: np.ndarray = field(repr=False)
+    E: np.ndarray = field(repr=False)
+    nominal_order: int = 2
+
+    @property
+    def kernel_tables(self) -> tuple[np.ndarray, ...]:
+        """``(b, L, Ld, Lc, E, tau)``: the arrays the step kernel reads."""
+        return (self.b, self.L, self.Ld, self.Lc, self.E, self.tau)
+
+
+def _constraint_points(code: str, k: int | None, tau: np.ndarray) -> tuple[str, np.ndarray]:
+    if code == "E":
+        return "ends", np.array([0.0, 1.0])
+    if code == "N":
+        return "nodes", np.array(tau)
+    if k is None:
+        raise ValueError(f"constraint placement `C{code}` needs a point count, e.g. `C{code}3`")
+    if code == "L":
+        if k < 2:
+            raise ValueError(f"`CL<k>` needs k >= 2 Gauss–Lobatto points, got {k}")
+        return f"lobatto{k}", np.array(gauss_lobatto(k)[0])
+    if k < 1:
+        raise ValueError(f"`CG<k>` needs k >= 1 Gauss points, got {k}")
+    return f"gauss{k}", np.concatenate(([0.0], gauss_legendre(k)[0], [1.0]))
+
+
+def _nominal_order(s: int, r: int, quad: str, cons: str) -> int:
+    exact = 2 * r - 1 if quad == "G" else 2 * r - 3
+    order = min(2 * s, exact + 1)
+    return 2 if cons == "ends" else order
+
+
+def _canonical(name: str) -> str:
+    m = _NAME_RE.match(name.strip().upper())
+    if m is None:
+        raise ValueError(
+            f"`method` {name!r} is not a method name; expected 'P<s>L-Q<r><G|L>' with optional "
+            "'-N<E|L|C>' (control nodes) and '-C<E|N|L<k>|G<k>>' (constraint points), "
+            "e.g. 'P2L-Q3G' or paper B's variant 'P2L-Q3G-NE-CE'"
+        )
+    nodes = m["nodes"] or "L"
+    cons = m["cons"] or "N"
+    k = m["k"] or ""
+    if cons in "EN" and k:
+        raise ValueError(f"constraint placement `C{cons}` takes no count, got `C{cons}{k}`")
+    return f"P{m['s']}L-Q{m['r']}{m['q']}-N{nodes}-C{cons}{k}"
+
+
+@lru_cache(maxsize=None)
+def _build(canonical: str) -> Method:
+    m = _NAME_RE.match(canonical)
+    s, r, quad = int(m["s"]), int(m["r"]), m["q"]
+    _check_count(s, 1, "degree s")
+    _check_count(r, 1 if quad == "G" else 2, "quadrature points r")
+    tau = control_nodes(s, NODE_FAMILIES[m["nodes"]])
+    c, b = gauss_legendre(r) if quad == "G" else gauss_lobatto(r)
+    cons, d = _constraint_points(m["cons"], int(m["k"]) if m["k"] else None, tau)
+    L, Ld = _consistent(*lagrange_basis(tau, c))
+    Lc, _ = lagrange_basis(tau, d)
+    Lc, _ = _consistent(Lc, np.zeros_like(Lc))
+    E, _ = lagrange_basis(tau, 1.0 + tau)
+    E, _ = _consistent(E, np.zeros_like(E))
+    arrays = {}
+    for key, val in dict(tau=tau, c=c, b=b, d=d, L=L, Ld=Ld, Lc=Lc, E=E).items():
+        arr = np.ascontiguousarray(val, dtype=np.float64)
+        arr.setflags(write=False)
+        arrays[key] = arr
+    return Method(
+        name=canonical,
+        s=s,
+        r=r,
+        J=len(d) - 1,
+        quadrature="gauss" if quad == "G" else "lobatto",
+        nodes=NODE_FAMILIES[m["nodes"]],
+        constraints=cons,
+        nominal_order=_nominal_order(s, r, quad, cons),
+        **arrays,
+    )
+
+
+def method(name: str | Method) -> Method:
+    """The :class:`Method` for a name (memoised), or ``name`` itself if it is one.
+
+    Examples
+    --------
+    >>> method("P2L-Q3G").name
+    'P2L-Q3G-NL-CN'
+    >>> method("P2L-Q3G-NE-CE").constraints      # paper B's scheme
+    'ends'
+    """
+    if isinstance(name, Method):
+        return name
+    if not isinstance(name, str):
+        raise TypeError(f"`method` must be a method name (str) or a Method, got {type(name).__name__}")
+    return _build(_canonical(name))

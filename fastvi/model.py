@@ -264,6 +264,25 @@ class Model:
                 raise TypeError(f"`{key}` must be a function or None, got {fn!r}")
         self._functions = {k: v for k, v in funcs.items() if v is not None}
         self._compiled = None
+        self._mass_arg = mass
+
+    # ------------------------------------------------------------------ pickling as a recipe
+    def __reduce__(self):
+        # Compiled cfuncs cannot travel between processes; a model travels as the recipe
+        # that rebuilds it (scene name and arguments, or importable user functions) and is
+        # recompiled on arrival (the kernels themselves come from the on-disk cache).
+        if self._recipe is not None:
+            scene, kwargs = self._recipe
+            return (_scene_from_recipe, (scene, kwargs, self.params))
+        for key, fn in self._functions.items():
+            qual = getattr(fn, "__qualname__", "")
+            if "<locals>" in qual or "<lambda>" in qual:
+                raise TypeError(
+                    f"this Model cannot be pickled: `{key}` is {qual!r}, not a module-level "
+                    "function; define the model's functions at module level so workers can import them"
+                )
+        kwargs = dict(params=self.params, mass=self._mass_arg, name=self.name, **self._functions)
+        return (_model_from_kwargs, (self.n, self.m, kwargs))
 
     # ------------------------------------------------------------------ compiled form
     def _compile(self):
@@ -342,6 +361,18 @@ class Model:
     def __repr__(self) -> str:
         kind = "constant" if self.mass_matrix_constant is not None else "q-dependent"
         return f"Model({self.name!r}, n={self.n}, m={self.m}, {kind} mass, k={self.params.shape[0]} params)"
+
+
+def _model_from_kwargs(n, m, kwargs):
+    return Model(n, m, **kwargs)
+
+
+def _scene_from_recipe(scene, kwargs, params):
+    from .scenes import SCENES
+
+    model = SCENES[scene](**kwargs)
+    model.params = params
+    return model
 
 
 def _check_spd(M: np.ndarray, name: str) -> None:

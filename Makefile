@@ -1,0 +1,38 @@
+# Quick start: `make demo` and `make test` on a machine with only python3.
+PY ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test test-slow bench paper-b orders wpd clean
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PY) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e ".[test,plot]"
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/python -m fastvi demo
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+test-slow: $(STAMP)
+	$(BIN)/python -m pytest -q -m slow --run-slow
+
+bench: $(STAMP)
+	$(BIN)/python -m pytest bench -q --benchmark-only --benchmark-json=bench/results.json
+
+paper-b: $(STAMP)
+	$(BIN)/python -m fastvi paper-b
+
+orders: $(STAMP)
+	$(BIN)/python -m fastvi orders
+
+wpd: $(STAMP)
+	$(BIN)/python -m fastvi wpd
+
+clean:
+	rm -rf $(VENV) build *.egg-info .pytest_cache
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +

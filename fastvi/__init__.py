@@ -6,6 +6,7 @@ Public API: :class:`Model`, :func:`integrate`, :class:`Result`, :class:`Integrat
 
 from . import _numba  # noqa: F401  (numba settings first)
 from . import scenes
+from .check import ModelCheckError
 from .integrate import IntegrationError, Result, integrate
 from .model import CALLBACK_SIGNATURE, Model
 from .status import Status
@@ -18,6 +19,7 @@ __all__ = [
     "integrate",
     "Result",
     "IntegrationError",
+    "ModelCheckError",
     "Status",
     "Method",
     "method",

@@ -1,5 +1,6 @@
 """One place for numba settings: every kernel is compiled with these options."""
 
+import contextlib
 import warnings
 
 import numba as nb
@@ -18,3 +19,15 @@ def njit(fn=None, **extra):
     if fn is None:
         return lambda f: nb.njit(**opts)(f)
     return nb.njit(**opts)(fn)
+
+
+@contextlib.contextmanager
+def quiet():
+    """Context in which numba's first-class-function warning is silenced.
+
+    The module-level filter above is overridden by callers' own filters (``-W error``,
+    ``warnings.catch_warnings``); every kernel call from Python goes through this too.
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", nb.NumbaExperimentalFeatureWarning)
+        yield

@@ -146,17 +146,17 @@ def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray):
     G = model.constraint_jacobian_value(q0, prm)
     if not np.all(np.isfinite(G)):
         raise ValueError(f"callback `constraint_jacobian` returned non-finite values at `q0`: {G}")
-    sv = np.linalg.svd(G, compute_uv=False)
-    if sv.size < model.m or sv[-1] <= 1e-10 * max(sv[0], 1e-300):
-        raise ValueError(
-            f"the constraint Jacobian at `q0` must have full row rank {model.m}; "
-            f"its singular values are {sv}"
-        )
     gmax = float(np.max(np.abs(g)))
     if gmax > CONSISTENCY_TOL * scale:
         raise ValueError(
             f"`q0` violates the constraints: max|g(q0)| = {gmax:.3e} > {CONSISTENCY_TOL:.0e}·{scale:g}; "
             "start from a consistent state (the scenes' `initial_state` helpers give one)"
+        )
+    sv = np.linalg.svd(G, compute_uv=False)
+    if sv.size < model.m or sv[-1] <= 1e-10 * max(sv[0], 1e-300):
+        raise ValueError(
+            f"the constraint Jacobian at `q0` must have full row rank {model.m}; "
+            f"its singular values are {sv}"
         )
     q = q0.copy()
     for _ in range(20):
@@ -186,3 +186,57 @@ def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray):
         warnings.warn(f"`v0` was projected onto G(q0) v = 0 (max|G v0| was {gvmax:.2e}; "
                       f"v moved by {float(np.max(np.abs(v - v0))):.2e})", stacklevel=3)
     return q, v
+
+
+# ----------------------------------------------------------------------------- ensembles
+def member_vectors(x, name: str, n: int) -> np.ndarray:
+    """An (N, n) float64 array, N >= 1: one row per ensemble member, each row a :func:`vector`."""
+    try:
+        arr = np.asarray(x)
+    except Exception:  # noqa: BLE001 - anything numpy cannot read
+        raise TypeError(f"`{name}` must be an (N, {n}) array of floats, got {type(x).__name__}") from None
+    if arr.ndim != 2 or arr.shape[0] < 1 or arr.shape[1] != n:
+        raise ValueError(f"`{name}` must have shape (N, {n}) with one row per member (N >= 1), "
+                         f"got {arr.shape}")
+    out = np.empty(arr.shape, dtype=np.float64)
+    for i in range(arr.shape[0]):
+        out[i] = vector(arr[i], f"{name}[{i}]", n)
+    return out
+
+
+def member_params(p, model, N: int) -> np.ndarray:
+    """Parameters per member, (N, k): None (the model's), one (k,) vector for all, or (N, k)."""
+    k = model.params.shape[0]
+    if p is None:
+        return np.ascontiguousarray(np.broadcast_to(model.params, (N, k)), dtype=np.float64)
+    arr = np.asarray(p) if not isinstance(p, np.ndarray) else p
+    if arr.ndim == 1:
+        return np.ascontiguousarray(np.broadcast_to(params(arr, model), (N, k)))
+    if arr.ndim != 2 or arr.shape != (N, k):
+        raise ValueError(f"`params` must be None, shape ({k},) (shared) or ({N}, {k}) (one row per "
+                         f"member), got shape {arr.shape}")
+    return member_vectors(arr, "params", k)
+
+
+def ensemble_save(save):
+    """``"final"``, ``"diagnostics"`` or a positive integer stride."""
+    if isinstance(save, str):
+        if save in ("final", "diagnostics"):
+            return save
+        raise ValueError(f"`save` must be 'final', 'diagnostics' or a positive integer stride, got {save!r}")
+    return _count(save, "save", 1)
+
+
+def threads(t):
+    """None (numba's current setting) or a thread count in [1, NUMBA_NUM_THREADS]."""
+    if t is None:
+        return None
+    import numba
+
+    t = _count(t, "threads", 1)
+    if t > numba.config.NUMBA_NUM_THREADS:
+        raise ValueError(
+            f"`threads` must be <= {numba.config.NUMBA_NUM_THREADS} (numba's thread pool, set by the "
+            f"environment variable NUMBA_NUM_THREADS before numba starts), got {t}"
+        )
+    return t

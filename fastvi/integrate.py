@@ -8,7 +8,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import _validate
 from . import _validate as check
+from ._numba import quiet
 from .kernels import drive
 from .kernels.step import make_workspace, velocity_residual
 from .model import Model
@@ -159,6 +161,7 @@ def integrate(
     params=None,
     progress: bool = False,
     on_failure: str = "raise",
+    check: bool = True,
 ) -> Result:
     r"""Integrate a constrained mechanical system with a Galerkin variational integrator.
 
@@ -197,6 +200,11 @@ def integrate(
     on_failure : {"raise", "return"}
         On a failed step raise :class:`IntegrationError` (carrying the partial result), or
         return the partial :class:`Result` with its ``status`` set.
+    check : bool, default True
+        The first time a model is integrated, compare its derivative callbacks with finite
+        differences at ``q0`` and one nearby state (:func:`fastvi.check.check_model`, a few
+        milliseconds) and raise :class:`fastvi.ModelCheckError` naming a wrong one. Models
+        that passed once (or passed :meth:`Model.check`) are not checked again.
 
     Returns
     -------
@@ -209,6 +217,7 @@ def integrate(
     with constraints. Both in ``shared/seeds``; the method is written out in
     ``docs/method.md``.
     """
+    run_check, check = check, _validate  # the keyword shadows the module alias `check`
     if not isinstance(model, Model):
         raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
     if on_failure not in ("raise", "return"):
@@ -223,6 +232,8 @@ def integrate(
     tol = check.tolerance(tol)
     iters = check.max_iter(max_iter)
     meth = check.method(method)
+    if run_check and not model._checked:  # before the projection, which trusts G(q)
+        model.check(q0, v0, params=prm, n_random=1)
     q0, v0 = check.initial_state(model, q0, v0, prm)
 
     fns, flags, Mc = model.kernel_arguments()
@@ -247,8 +258,9 @@ def integrate(
     t0 = time.perf_counter()
     status = 0
     while info[drive.I_STEPS] < total:
-        status = drive.run(fns, flags, Mc, prm, tabs, h, tol, iters, state, ws, chunk, total,
-                           every, outs, info)
+        with quiet():
+            status = drive.run(fns, flags, Mc, prm, tabs, h, tol, iters, state, ws, chunk, total,
+                               every, outs, info)
         if progress:
             done = int(info[drive.I_STEPS])
             el = time.perf_counter() - t0

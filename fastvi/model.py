@@ -49,7 +49,7 @@ import numba as nb
 import numpy as np
 from numba import carray, types
 
-from ._numba import njit
+from ._numba import njit, quiet
 
 __all__ = ["Model", "CALLBACK_SIGNATURE", "SLOTS"]
 
@@ -265,6 +265,7 @@ class Model:
         self._functions = {k: v for k, v in funcs.items() if v is not None}
         self._compiled = None
         self._mass_arg = mass
+        self._checked = False  # set by fastvi.check once the derivatives passed (integrate skips it then)
 
     # ------------------------------------------------------------------ pickling as a recipe
     def __reduce__(self):
@@ -281,7 +282,8 @@ class Model:
                     f"this Model cannot be pickled: `{key}` is {qual!r}, not a module-level "
                     "function; define the model's functions at module level so workers can import them"
                 )
-        kwargs = dict(params=self.params, mass=self._mass_arg, name=self.name, **self._functions)
+        funcs = {k: v for k, v in self._functions.items() if k != "mass"}
+        kwargs = dict(params=self.params, mass=self._mass_arg, name=self.name, **funcs)
         return (_model_from_kwargs, (self.n, self.m, kwargs))
 
     # ------------------------------------------------------------------ compiled form
@@ -328,7 +330,8 @@ class Model:
         v = q if v is None else np.ascontiguousarray(v, dtype=np.float64)
         p = self.params if params is None else np.ascontiguousarray(params, dtype=np.float64)
         out = np.zeros(shape if shape else (1,))
-        _call(cfs[SLOTS.index(slot)], q, v, p, out)
+        with quiet():
+            _call(cfs[SLOTS.index(slot)], q, v, p, out)
         return out if shape else float(out[0])
 
     def mass_matrix(self, q, params=None) -> np.ndarray:
@@ -357,6 +360,36 @@ class Model:
         """H = ½ vᵀ M(q) v + V(q)."""
         v = np.asarray(v, dtype=np.float64)
         return 0.5 * v @ self.mass_matrix(q, params) @ v + self.potential_energy(q, params)
+
+    def check(self, q, v=None, **options):
+        """Compare every supplied derivative callback with finite differences.
+
+        Each first and second derivative is compared with central differences (Richardson
+        extrapolated) of the callback it differentiates, at ``(q, v)`` and at a few random
+        nearby states; see :func:`fastvi.check.check_model` for the options.
+
+        Parameters
+        ----------
+        q : array_like (n,)
+            Configuration (need not satisfy the constraints).
+        v : array_like (n,), optional
+            Velocity for the kinetic-energy derivatives (default: random).
+        **options
+            ``params``, ``n_random``, ``radius``, ``rtol``, ``seed``, ``raise_on_error``.
+
+        Returns
+        -------
+        fastvi.check.CheckReport
+            Printable table: one line per callback.
+
+        Raises
+        ------
+        fastvi.ModelCheckError
+            Naming the first callback that disagrees beyond tolerance.
+        """
+        from .check import check_model
+
+        return check_model(self, q, v, **options)
 
     def __repr__(self) -> str:
         kind = "constant" if self.mass_matrix_constant is not None else "q-dependent"

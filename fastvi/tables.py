@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
+from fractions import Fraction
 from functools import lru_cache
 
 import numpy as np
@@ -87,12 +88,22 @@ def _gauss_legendre(r: int) -> tuple[np.ndarray, np.ndarray]:
     x = x - p / dp
     _, dp = _legendre_and_derivative(r, x)
     w = 2.0 / ((1.0 - x * x) * dp * dp)
-    c = 0.5 * (x + 1.0)
-    b = 0.5 * w
-    b = b / math.fsum(b)
+    c, b = _symmetric(0.5 * (x + 1.0), 0.5 * w)
     c.setflags(write=False)
     b.setflags(write=False)
     return c, b
+
+
+def _symmetric(c: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Make a rule on [0, 1] symmetric in floating point: c[-1-i] = 1 − c[i], b[-1-i] = b[i]."""
+    k = len(c)
+    c = c.copy()
+    b = 0.5 * (b + b[::-1])
+    for i in range(k // 2):
+        c[k - 1 - i] = 1.0 - c[i]
+    if k % 2:
+        c[k // 2] = 0.5
+    return c, b / math.fsum(b)
 
 
 def gauss_legendre(r: int) -> tuple[np.ndarray, np.ndarray]:
@@ -131,10 +142,8 @@ def _gauss_lobatto(r: int) -> tuple[np.ndarray, np.ndarray]:
         x = 0.5 * (x - x[::-1])
     p, _ = _legendre_and_derivative(r - 1, x)
     w = 2.0 / (r * (r - 1) * p * p)
-    c = 0.5 * (x + 1.0)
+    c, b = _symmetric(0.5 * (x + 1.0), 0.5 * w)
     c[0], c[-1] = 0.0, 1.0
-    b = 0.5 * w
-    b = b / math.fsum(b)
     c.setflags(write=False)
     b.setflags(write=False)
     return c, b
@@ -222,19 +231,37 @@ def lagrange_basis(tau: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return ell, dell
 
 
+def _exact_sum(col: np.ndarray, target: float) -> None:
+    """Adjust ``col`` in place by at most an ulp or two so that its exact sum is ``target``.
+
+    First ``col[0]`` is recomputed from the others with a correctly rounded sum; if the
+    exact (rational) sum still misses, the entry with the finest ulp absorbs the rest:
+    every other term is a multiple of that ulp, so the corrected entry is representable.
+    """
+    target = Fraction(target)  # float − Fraction would be a float
+    col[0] = float(target - sum(Fraction(x) for x in col[1:]))
+    if sum(Fraction(x) for x in col) == target:
+        return
+    nonzero = [i for i in range(len(col)) if col[i] != 0.0]
+    k = min(nonzero, key=lambda i: np.spacing(abs(col[i])))
+    col[k] = float(target - sum(Fraction(x) for i, x in enumerate(col) if i != k))
+    if sum(Fraction(x) for x in col) != target:  # pragma: no cover - not seen for s <= 12
+        raise ArithmeticError("could not make a basis table consistent in floating point")
+
+
 def _consistent(ell: np.ndarray, dell: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Make every column a partition of unity with derivatives summing to zero.
+    """Make every column a partition of unity with derivatives summing to zero, exactly.
 
     The step works with increments from ``q_k``; that silently assumes these identities.
     Off by a few ulps, the scheme stops being exactly variational and energy drifts
-    linearly, so the ``ν = 0`` row is recomputed from the others with a correctly
-    rounded sum.
+    linearly (``docs/method.md``, section 9), so the tables are corrected until the exact
+    sum of every column of values is 1 and of derivatives is 0.
     """
     ell = ell.copy()
     dell = dell.copy()
     for i in range(ell.shape[1]):
-        ell[0, i] = 1.0 - math.fsum(ell[1:, i])
-        dell[0, i] = -math.fsum(dell[1:, i])
+        _exact_sum(ell[:, i], 1.0)
+        _exact_sum(dell[:, i], 0.0)
     return ell, dell
 
 

@@ -76,3 +76,129 @@ def run(fns, flags, Mc, prm, tabs, h, tol, max_iter, state, ws, n_chunk, n_total
             info[I_WIN_IT] = 0.0
             info[I_SLOT] = j + 1
     return 0
+
+
+# ----------------------------------------------------------------------------- ensembles
+# The prange driver: one workspace and one state per member, the same ``step`` in the same
+# order as ``run``, so member i of an ensemble equals ``fastvi.integrate`` of member i bit
+# for bit. A failing member stops only itself.
+from numba import prange  # noqa: E402  (kept beside the ensemble kernels it serves)
+
+from .step import make_workspace  # noqa: E402
+
+#: save modes of ``run_ensemble``
+SAVE_FINAL, SAVE_STRIDE, SAVE_DIAGNOSTICS = 0, 1, 2
+# columns of the per-member int64 rows ``ist``
+E_STATUS, E_STEPS, E_FAILED, E_SAVED = range(4)
+E_SIZE = 4
+# columns of the per-member float64 rows ``fst``: Newton iterations (total), residual of the
+# last step tried, max residual over good steps, max |H − H0|, max |g|, max |Gv|
+F_ITERS, F_RES, F_MAXRES, F_DH, F_G, F_GV = range(6)
+F_SIZE = 6
+
+
+@njit
+def run_member(fns, flags, Mc, prm, tabs, h, tol, max_iter, state, ws, n_total, mode, every, H0,
+               Qs, Vs, Ps, En, Gr, GVr, It, ist, fst):
+    """Advance one member (rows q, p, v, then scratch of ``state``) through ``n_total`` steps.
+
+    ``mode`` is ``SAVE_FINAL`` (the final state into slot 0 of ``Qs, Vs, Ps, En``),
+    ``SAVE_STRIDE`` (every ``every``-th step and the last into slots 1, 2, …, exactly as
+    ``run`` fills ``outs``; slot 0 is the caller's) or ``SAVE_DIAGNOSTICS`` (the final state,
+    and ``max |H − H0|``, ``max |g|``, ``max |Gv|`` over every step into ``fst``; the caller
+    seeds ``fst[F_G]``, ``fst[F_GV]`` with the initial residuals). Returns the status code,
+    also stored in ``ist[E_STATUS]``; a failed step's index goes to ``ist[E_FAILED]``.
+    """
+    q, p, v, q1, p1, v1 = state[0], state[1], state[2], state[3], state[4], state[5]
+    sout = np.zeros(4)
+    n = q.shape[0]
+    scratch = ws[9][0]
+    first = True
+    win_g = 0.0
+    win_gv = 0.0
+    win_it = 0.0
+    maxres = 0.0
+    iters = 0.0
+    dh = 0.0
+    gmax = fst[F_G]
+    gvmax = fst[F_GV]
+    slot = 1
+    status = 0
+    k = 0
+    ist[E_FAILED] = -1
+    while k < n_total:
+        status = step(fns, flags, Mc, prm, tabs, h, q, p, v, q1, p1, v1, ws, tol, max_iter,
+                      first, sout)
+        iters += sout[0]
+        fst[F_RES] = sout[3]
+        if status != 0:
+            ist[E_FAILED] = k
+            break
+        first = False
+        maxres = max(maxres, sout[3])
+        win_g = max(win_g, sout[1])
+        win_gv = max(win_gv, sout[2])
+        win_it += sout[0]
+        for a in range(n):
+            q[a] = q1[a]
+            p[a] = p1[a]
+            v[a] = v1[a]
+        k += 1
+        if mode == SAVE_DIAGNOSTICS:
+            e = energy(fns, prm, q, p, v, scratch)
+            dh = max(dh, abs(e - H0))
+            gmax = max(gmax, sout[1])
+            gvmax = max(gvmax, sout[2])
+        elif mode == SAVE_STRIDE and (k % every == 0 or k == n_total):
+            for a in range(n):
+                Qs[slot, a] = q[a]
+                Vs[slot, a] = v[a]
+                Ps[slot, a] = p[a]
+            En[slot] = energy(fns, prm, q, p, v, scratch)
+            Gr[slot] = win_g
+            GVr[slot] = win_gv
+            It[slot] = win_it
+            win_g = 0.0
+            win_gv = 0.0
+            win_it = 0.0
+            slot += 1
+    if mode != SAVE_STRIDE:
+        # the last good state (the final one unless the member failed)
+        for a in range(n):
+            Qs[0, a] = q[a]
+            Vs[0, a] = v[a]
+            Ps[0, a] = p[a]
+        En[0] = energy(fns, prm, q, p, v, scratch)
+        slot = 1
+    ist[E_STATUS] = status
+    ist[E_STEPS] = k
+    ist[E_SAVED] = slot
+    fst[F_ITERS] = iters
+    fst[F_MAXRES] = maxres
+    fst[F_DH] = dh
+    fst[F_G] = gmax
+    fst[F_GV] = gvmax
+    return status
+
+
+@njit(parallel=True)
+def run_ensemble(fns, flags, Mc, P, tabs, h, tol, max_iter, s, r, J, X0, n_total, mode, every, H0,
+                 Qs, Vs, Ps, En, Gr, GVr, It, ist, fst):
+    """``run_member`` for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in parallel.
+
+    ``P`` (N, k) holds each member's parameters; the outputs are indexed by member first
+    (``Qs`` (N, K, n), ``En`` (N, K), ``ist`` (N, E_SIZE), ``fst`` (N, F_SIZE)). Each member
+    gets its own workspace and state, allocated inside the loop body, so threads share
+    nothing but read-only model and method data.
+    """
+    n = flags[0]
+    m = flags[1]
+    for i in prange(X0.shape[0]):
+        ws = make_workspace(n, m, s, r, J)
+        state = np.zeros((6, n))
+        for a in range(n):
+            state[0, a] = X0[i, 0, a]
+            state[1, a] = X0[i, 1, a]
+            state[2, a] = X0[i, 2, a]
+        run_member(fns, flags, Mc, P[i], tabs, h, tol, max_iter, state, ws, n_total, mode, every,
+                   H0[i], Qs[i], Vs[i], Ps[i], En[i], Gr[i], GVr[i], It[i], ist[i], fst[i])

@@ -7,11 +7,18 @@ registered in :data:`SCENES` by name.
 
 from .double_pendulum import double_pendulum
 from .pendulum import pendulum
+from .rotary_rod_slider import rotary_rod_slider
+from .spherical_pendulum import spherical_pendulum
+from .triple_pendulum import triple_pendulum
 
 #: Scene constructors by name (used by the CLI, the docs and pickling of scene models).
 SCENES = {
     "pendulum": pendulum,
     "double_pendulum": double_pendulum,
+    "rotary_rod_slider": rotary_rod_slider,
+    "spherical_pendulum": spherical_pendulum,
+    "triple_pendulum": triple_pendulum,
 }
 
-__all__ = ["SCENES", "pendulum", "double_pendulum"]
+__all__ = ["SCENES", "pendulum", "double_pendulum", "rotary_rod_slider", "triple_pendulum",
+           "spherical_pendulum"]

@@ -1,0 +1,499 @@
+r"""Classical RK4 on the index-1 form of a constrained :class:`~fastvi.Model` (the yardstick).
+
+Paper B compares its variational integrators with a "traditional Runge–Kutta method". This
+is that method on the *same* model callbacks as the integrator, so a comparison is between
+discretisations, never between two codings of the physics. The index-3 DAE
+``d/dt(M v) − ∂T/∂q + ∇V + Gᵀλ = 0``, ``g(q) = 0`` is differentiated twice in time:
+
+    [ M(q)  G(q)ᵀ ] [ a ]   [ f(q, v)  ]        f = ∂T/∂q(q, v) − ∇V(q) − (∂(M v)/∂q) v,
+    [ G(q)   0    ] [ λ ] = [ −(Ġ v)   ]        (Ġ v)_c = vᵀ ∇²g_c(q) v,
+
+an ODE ``q̇ = v``, ``v̇ = a(q, v)`` integrated with the classical four-stage Runge–Kutta
+method (order 4). Its solution satisfies ``g(q) = 0`` only as far as the discretisation
+and round-off allow: the residuals drift (``|G v|`` linearly, ``|g|`` quadratically in
+time, at the size of the local error). With ``project=True`` each step ends with the
+orthogonal projection in the metric ``M`` onto ``g(q) = 0`` (simplified Newton) and then
+onto ``G(q) v = 0``, which removes the constraint drift but not the energy drift.
+
+The kernels take the model's cfunc tuple as an argument, like :mod:`fastvi.kernels.step`,
+so they compile once for every model. Second derivatives the model does not supply exactly
+(``∂(M v)/∂q`` and ``∇²g``) are replaced by a central difference along ``v``.
+
+References
+----------
+Paper B, section 5 (comparison with Runge–Kutta). E. Hairer, G. Wanner, *Solving Ordinary
+Differential Equations II*, section VII.2 (index reduction, projection methods).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import _validate as check
+from .._numba import njit
+from ..kernels.linalg import lu_factor, lu_solve
+from ..model import SLOTS, Model
+from ..status import MESSAGES, Status
+
+__all__ = ["rk4", "BaselineResult", "acceleration", "make_workspace"]
+
+_MASS = SLOTS.index("mass")
+_KGRAD = SLOTS.index("kinetic_grad")
+_POT = SLOTS.index("potential")
+_PGRAD = SLOTS.index("potential_grad")
+_CON = SLOTS.index("constraint")
+_CJAC = SLOTS.index("constraint_jacobian")
+_CHESS = SLOTS.index("constraint_hessian")
+_MJAC = SLOTS.index("momentum_jacobian")
+# flags layout of Model.kernel_arguments(): [n, m, has_mass_fn, exact P, C, K, Mv hessians]
+_F_MASSFN, _F_EXACT_CHESS, _F_EXACT_MJAC = 2, 4, 6
+
+_FD_REL = 6.0554544523933395e-06  # cbrt(machine epsilon): central differences' best step
+#: simplified-Newton sweeps of the position projection (it converges linearly, fast)
+PROJECTION_MAX_ITER = 20
+#: the position projection stops at this max|g|, relative to max(1, |q|)
+PROJECTION_TOL = 4e-16
+
+_OK = int(Status.SUCCESS)
+_SINGULAR = int(Status.SINGULAR_CONSTRAINTS)
+_NONFINITE = int(Status.NONFINITE)
+
+
+@dataclass
+class BaselineResult:
+    """Trajectory of a baseline integrator, with the fields of :class:`fastvi.Result` it shares.
+
+    Attributes
+    ----------
+    t : ndarray (K,)
+    q, v : ndarray (K, n)
+    energy : ndarray (K,)
+        ``H = ½ vᵀ M(q) v + V(q)``.
+    constraint_residual, velocity_residual : ndarray (K,)
+        ``max |g(q)|`` and ``max |G(q) v|`` (over the steps since the previous sample).
+    stats : dict
+        ``steps``, ``rhs_evaluations``, ``wall_time`` (s, excluding compilation).
+    status : Status
+    name : str
+        ``"RK4"``, ``"RK4+proj"`` or ``"SciPy <method>"``.
+    h : float
+        The fixed step, or ``nan`` for an adaptive SciPy run.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    energy: np.ndarray
+    constraint_residual: np.ndarray
+    velocity_residual: np.ndarray
+    stats: dict
+    status: Status
+    name: str
+    h: float
+    model_name: str = field(default="model")
+    failed_step: int | None = None
+
+    @property
+    def success(self) -> bool:
+        return self.status >= 0
+
+    @property
+    def energy_error(self) -> np.ndarray:
+        """``H(t) − H(0)``."""
+        return self.energy - self.energy[0]
+
+    def summary(self) -> str:
+        return (
+            f"{self.model_name}: {self.name}, h = {self.h:g}, steps = {self.stats['steps']}, "
+            f"wall time = {self.stats['wall_time']:.3f} s, "
+            f"max |ΔH| = {np.max(np.abs(self.energy_error)):.3e}, "
+            f"max |g| = {np.max(self.constraint_residual):.3e}, "
+            f"max |Gv| = {np.max(self.velocity_residual):.3e}"
+        )
+
+
+@njit
+def make_workspace(n, m):
+    """Scratch for one trajectory: the saddle-point system and stage vectors."""
+    N = n + m
+    mm = max(m, 1)
+    return (
+        np.zeros((N, N)),  # 0 K = [M Gᵀ; G 0], factored in place
+        np.zeros(N),  # 1 right-hand side, then (a, λ)
+        np.zeros(N, dtype=np.int64),  # 2 pivots
+        np.zeros((n, n)),  # 3 M(q)
+        np.zeros((2, n, n)),  # 4 ∂(Mv)/∂q, constraint Hessian
+        np.zeros((3, mm, n)),  # 5 G, and G at q ± ε v
+        np.zeros((6, n)),  # 6 ∇V, ∂T/∂q, q ± ε v, fd scratch
+        np.zeros((2, mm)),  # 7 g, unit vector for the Hessian contraction
+        np.zeros((10, n)),  # 8 RK stages: k1..k4 for q and v, stage q, stage v
+        np.zeros(1),  # 9 potential value
+    )
+
+
+@njit
+def _mass(fns, flags, Mc, prm, q, M):
+    n = q.shape[0]
+    if flags[_F_MASSFN] != 0:
+        fns[_MASS](q.ctypes, q.ctypes, prm.ctypes, M.ctypes)
+    else:
+        for a in range(n):
+            for c in range(n):
+                M[a, c] = Mc[a, c]
+
+
+@njit
+def _fd_step(q, v):
+    """Central-difference step along ``v``: relative to |q|, measured in units of |v|."""
+    qs = 1.0
+    vs = 0.0
+    for a in range(q.shape[0]):
+        qs = max(qs, abs(q[a]))
+        vs = max(vs, abs(v[a]))
+    if vs == 0.0:
+        return 0.0
+    return _FD_REL * qs / vs
+
+
+@njit
+def _saddle(M, G, n, m, K):
+    """K = [M Gᵀ; G 0]."""
+    for a in range(n):
+        for c in range(n):
+            K[a, c] = M[a, c]
+        for c in range(m):
+            K[a, n + c] = G[c, a]
+            K[n + c, a] = G[c, a]
+    for c in range(m):
+        for d in range(m):
+            K[n + c, n + d] = 0.0
+
+
+@njit
+def acceleration(fns, flags, Mc, prm, q, v, a, ws):
+    """Solve the index-1 system at ``(q, v)`` for the acceleration ``a`` (n,), in place.
+
+    Returns a status code (0, or ``SINGULAR_CONSTRAINTS`` if ``[M Gᵀ; G 0]`` is singular,
+    or ``NONFINITE``). The multipliers ``λ`` are left in ``ws[1][n:]``.
+    """
+    n = flags[0]
+    m = flags[1]
+    K, rhs, piv, M = ws[0], ws[1], ws[2], ws[3]
+    Cq, Hc = ws[4][0], ws[4][1]
+    G, Gp, Gm = ws[5][0], ws[5][1], ws[5][2]
+    dV, dT, qa, fa = ws[6][0], ws[6][1], ws[6][2], ws[6][3]
+    unit = ws[7][1]
+    _mass(fns, flags, Mc, prm, q, M)
+    fns[_PGRAD](q.ctypes, q.ctypes, prm.ctypes, dV.ctypes)
+    for i in range(n):
+        rhs[i] = -dV[i]
+    if flags[_F_MASSFN] != 0:
+        fns[_KGRAD](q.ctypes, v.ctypes, prm.ctypes, dT.ctypes)
+        for i in range(n):
+            rhs[i] += dT[i]
+        # − (∂(M v)/∂q) v: the part of d/dt (M v) that is not M a
+        if flags[_F_EXACT_MJAC] != 0:
+            fns[_MJAC](q.ctypes, v.ctypes, prm.ctypes, Cq.ctypes)
+            for i in range(n):
+                acc = 0.0
+                for c in range(n):
+                    acc += Cq[i, c] * v[c]
+                rhs[i] -= acc
+        else:
+            eps = _fd_step(q, v)
+            if eps > 0.0:
+                for sgn in (1.0, -1.0):
+                    for c in range(n):
+                        qa[c] = q[c] + sgn * eps * v[c]
+                    fns[_MASS](qa.ctypes, qa.ctypes, prm.ctypes, Hc.ctypes)
+                    for i in range(n):
+                        acc = 0.0
+                        for c in range(n):
+                            acc += Hc[i, c] * v[c]
+                        rhs[i] -= sgn * acc * (0.5 / eps)
+    if m > 0:
+        fns[_CJAC](q.ctypes, q.ctypes, prm.ctypes, G.ctypes)
+        # −(Ġ v)_c = −vᵀ ∇²g_c v
+        if flags[_F_EXACT_CHESS] != 0:
+            for c in range(m):
+                for d in range(m):
+                    unit[d] = 0.0
+                unit[c] = 1.0
+                fns[_CHESS](q.ctypes, unit.ctypes, prm.ctypes, Hc.ctypes)
+                acc = 0.0
+                for i in range(n):
+                    for j in range(n):
+                        acc += v[i] * Hc[i, j] * v[j]
+                rhs[n + c] = -acc
+        else:
+            eps = _fd_step(q, v)
+            for c in range(m):
+                rhs[n + c] = 0.0
+            if eps > 0.0:
+                for c in range(n):
+                    qa[c] = q[c] + eps * v[c]
+                fns[_CJAC](qa.ctypes, qa.ctypes, prm.ctypes, Gp.ctypes)
+                for c in range(n):
+                    qa[c] = q[c] - eps * v[c]
+                fns[_CJAC](qa.ctypes, qa.ctypes, prm.ctypes, Gm.ctypes)
+                for c in range(m):
+                    acc = 0.0
+                    for i in range(n):
+                        acc += (Gp[c, i] - Gm[c, i]) * v[i]
+                    rhs[n + c] = -acc * (0.5 / eps)
+    _saddle(M, G, n, m, K)
+    if lu_factor(K, piv, n + m) != 0:
+        return _SINGULAR
+    lu_solve(K, piv, rhs, n + m)
+    for i in range(n):
+        a[i] = rhs[i]
+        if not np.isfinite(a[i]):
+            return _NONFINITE
+    return _OK
+
+
+@njit
+def _project(fns, flags, Mc, prm, q, v, ws):
+    """M-orthogonal projection of q onto g = 0 (simplified Newton), then of v onto G v = 0.
+
+    Both corrections solve ``[M Gᵀ; G 0] [δ; μ] = [0; −r]`` (r = g, then G v), which gives
+    ``δ = −M⁻¹Gᵀ (G M⁻¹ Gᵀ)⁻¹ r``, the smallest correction in the kinetic-energy norm.
+    """
+    n = flags[0]
+    m = flags[1]
+    K, rhs, piv, M = ws[0], ws[1], ws[2], ws[3]
+    G = ws[5][0]
+    gv = ws[7][0]
+    qs = 1.0
+    for i in range(n):
+        qs = max(qs, abs(q[i]))
+    _mass(fns, flags, Mc, prm, q, M)
+    fns[_CJAC](q.ctypes, q.ctypes, prm.ctypes, G.ctypes)
+    _saddle(M, G, n, m, K)
+    if lu_factor(K, piv, n + m) != 0:
+        return _SINGULAR
+    for _ in range(PROJECTION_MAX_ITER):
+        fns[_CON](q.ctypes, q.ctypes, prm.ctypes, gv.ctypes)
+        gmax = 0.0
+        for c in range(m):
+            gmax = max(gmax, abs(gv[c]))
+        if not np.isfinite(gmax):
+            return _NONFINITE
+        if gmax <= PROJECTION_TOL * qs:
+            break
+        for i in range(n):
+            rhs[i] = 0.0
+        for c in range(m):
+            rhs[n + c] = -gv[c]
+        lu_solve(K, piv, rhs, n + m)
+        for i in range(n):
+            q[i] += rhs[i]
+    _mass(fns, flags, Mc, prm, q, M)
+    fns[_CJAC](q.ctypes, q.ctypes, prm.ctypes, G.ctypes)
+    _saddle(M, G, n, m, K)
+    if lu_factor(K, piv, n + m) != 0:
+        return _SINGULAR
+    for i in range(n):
+        rhs[i] = 0.0
+    for c in range(m):
+        acc = 0.0
+        for i in range(n):
+            acc += G[c, i] * v[i]
+        rhs[n + c] = -acc
+    lu_solve(K, piv, rhs, n + m)
+    for i in range(n):
+        v[i] += rhs[i]
+    return _OK
+
+
+@njit
+def rk4_step(fns, flags, Mc, prm, h, q, v, ws):
+    """One classical RK4 step of ``(q̇, v̇) = (v, a(q, v))``, in place."""
+    n = flags[0]
+    S = ws[8]
+    kq1, kq2, kq3, kq4, kv1, kv2, kv3, kv4, qs, vs = (S[0], S[1], S[2], S[3], S[4], S[5],
+                                                       S[6], S[7], S[8], S[9])
+    for i in range(n):
+        kq1[i] = v[i]
+    st = acceleration(fns, flags, Mc, prm, q, v, kv1, ws)
+    if st != _OK:
+        return st
+    for i in range(n):
+        qs[i] = q[i] + 0.5 * h * kq1[i]
+        vs[i] = v[i] + 0.5 * h * kv1[i]
+        kq2[i] = vs[i]
+    st = acceleration(fns, flags, Mc, prm, qs, vs, kv2, ws)
+    if st != _OK:
+        return st
+    for i in range(n):
+        qs[i] = q[i] + 0.5 * h * kq2[i]
+        vs[i] = v[i] + 0.5 * h * kv2[i]
+        kq3[i] = vs[i]
+    st = acceleration(fns, flags, Mc, prm, qs, vs, kv3, ws)
+    if st != _OK:
+        return st
+    for i in range(n):
+        qs[i] = q[i] + h * kq3[i]
+        vs[i] = v[i] + h * kv3[i]
+        kq4[i] = vs[i]
+    st = acceleration(fns, flags, Mc, prm, qs, vs, kv4, ws)
+    if st != _OK:
+        return st
+    h6 = h / 6.0
+    for i in range(n):
+        q[i] += h6 * (kq1[i] + 2.0 * kq2[i] + 2.0 * kq3[i] + kq4[i])
+        v[i] += h6 * (kv1[i] + 2.0 * kv2[i] + 2.0 * kv3[i] + kv4[i])
+    return _OK
+
+
+@njit
+def observe(fns, flags, Mc, prm, q, v, ws, out):
+    """``out[:3] = (H, max|g|, max|G v|)`` at ``(q, v)``."""
+    n = flags[0]
+    m = flags[1]
+    M, G, gv, pot = ws[3], ws[5][0], ws[7][0], ws[9]
+    _mass(fns, flags, Mc, prm, q, M)
+    fns[_POT](q.ctypes, q.ctypes, prm.ctypes, pot.ctypes)
+    e = pot[0]
+    for i in range(n):
+        acc = 0.0
+        for c in range(n):
+            acc += M[i, c] * v[c]
+        e += 0.5 * v[i] * acc
+    out[0] = e
+    out[1] = 0.0
+    out[2] = 0.0
+    if m > 0:
+        fns[_CON](q.ctypes, q.ctypes, prm.ctypes, gv.ctypes)
+        fns[_CJAC](q.ctypes, q.ctypes, prm.ctypes, G.ctypes)
+        for c in range(m):
+            out[1] = max(out[1], abs(gv[c]))
+            acc = 0.0
+            for i in range(n):
+                acc += G[c, i] * v[i]
+            out[2] = max(out[2], abs(acc))
+
+
+@njit
+def run(fns, flags, Mc, prm, h, q, v, n_total, save_every, project, outs, ws, info):
+    """Advance ``(q, v)`` by ``n_total`` RK4 steps, saving every ``save_every``-th (and the last).
+
+    ``outs = (t, q, v, energy, max|g|, max|Gv|)``; the residuals are maxima over the steps
+    since the previous sample. ``info`` receives ``[steps done, samples written]``.
+    Returns a status code.
+    """
+    T, Qs, Vs, En, Gr, GVr = outs
+    n = flags[0]
+    obs = np.zeros(3)
+    win_g = 0.0
+    win_gv = 0.0
+    j = 1
+    for k in range(n_total):
+        st = rk4_step(fns, flags, Mc, prm, h, q, v, ws)
+        if st == _OK and project and flags[1] > 0:
+            st = _project(fns, flags, Mc, prm, q, v, ws)
+        if st != _OK:
+            info[0] = k
+            info[1] = j
+            return st
+        observe(fns, flags, Mc, prm, q, v, ws, obs)
+        win_g = max(win_g, obs[1])
+        win_gv = max(win_gv, obs[2])
+        if (k + 1) % save_every == 0 or k + 1 == n_total:
+            T[j] = (k + 1) * h
+            for i in range(n):
+                Qs[j, i] = q[i]
+                Vs[j, i] = v[i]
+            En[j] = obs[0]
+            Gr[j] = win_g
+            GVr[j] = win_gv
+            win_g = 0.0
+            win_gv = 0.0
+            j += 1
+    info[0] = n_total
+    info[1] = j
+    return _OK
+
+
+def rk4(model: Model, q0, v0, *, h: float, t_end: float | None = None, n_steps: int | None = None,
+        project: bool = False, save_every: int = 1, params=None,
+        on_failure: str = "raise") -> BaselineResult:
+    r"""Integrate ``model`` with classical RK4 on its index-1 formulation.
+
+    Parameters
+    ----------
+    model : Model
+    q0, v0 : array_like (n,)
+        Initial state; projected onto ``g = 0``, ``G v = 0`` exactly as by
+        :func:`fastvi.integrate`, so both start from the same point.
+    h : float
+        Step size.
+    t_end, n_steps :
+        Exactly one (``t_end`` a whole number of steps).
+    project : bool, default False
+        Project ``q`` onto ``g(q) = 0`` and then ``v`` onto ``G(q) v = 0`` (in the ``M``
+        metric) after every step.
+    save_every : int, default 1
+        Keep every k-th step (and the last); residuals are maxima over the skipped steps.
+    params : array_like (k,), optional
+        Parameters for this run (default: the model's).
+    on_failure : {"raise", "return"}
+        On a singular ``[M Gᵀ; G 0]`` or a non-finite state raise ``RuntimeError``, or
+        return the partial result with its ``status`` set.
+
+    Returns
+    -------
+    BaselineResult
+        ``stats["rhs_evaluations"] = 4·steps``.
+
+    Notes
+    -----
+    Order 4 in ``q`` and ``v``; neither the energy nor (without projection) the constraints
+    are conserved: their errors grow with time, which is the contrast paper B draws.
+    """
+    if not isinstance(model, Model):
+        raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
+    if on_failure not in ("raise", "return"):
+        raise ValueError(f"`on_failure` must be 'raise' or 'return', got {on_failure!r}")
+    if not isinstance(project, (bool, np.bool_)):
+        raise TypeError(f"`project` must be True or False, got {project!r}")
+    n = model.n
+    q0 = check.vector(q0, "q0", n)
+    v0 = check.vector(v0, "v0", n)
+    prm = check.params(params, model)
+    h = check.step_size(h)
+    total = check.step_count(h, t_end, n_steps)
+    every = check.save_every(save_every)
+    q0, v0 = check.initial_state(model, q0, v0, prm)
+
+    fns, flags, Mc = model.kernel_arguments()
+    K = total // every + 1 + (1 if total % every else 0)
+    T, Qs, Vs = np.zeros(K), np.zeros((K, n)), np.zeros((K, n))
+    En, Gr, GVr = np.zeros(K), np.zeros(K), np.zeros(K)
+    ws = make_workspace(n, model.m)
+    q, v = q0.copy(), v0.copy()
+    obs = np.zeros(3)
+    observe(fns, flags, Mc, prm, q, v, ws, obs)
+    Qs[0], Vs[0], En[0], Gr[0], GVr[0] = q0, v0, obs[0], obs[1], obs[2]
+    info = np.zeros(2)
+    t0 = time.perf_counter()
+    status = run(fns, flags, Mc, prm, h, q, v, total, every, bool(project),
+                 (T, Qs, Vs, En, Gr, GVr), ws, info)
+    wall = time.perf_counter() - t0
+    steps, J = int(info[0]), int(info[1])
+    status = Status(status)
+    res = BaselineResult(
+        t=T[:J].copy(), q=Qs[:J].copy(), v=Vs[:J].copy(), energy=En[:J].copy(),
+        constraint_residual=Gr[:J].copy(), velocity_residual=GVr[:J].copy(),
+        stats=dict(steps=steps, rhs_evaluations=4 * steps, wall_time=wall),
+        status=status, name="RK4+proj" if project else "RK4", h=h, model_name=model.name,
+        failed_step=None if status == 0 else steps,
+    )
+    if status != 0 and on_failure == "raise":
+        raise RuntimeError(f"{MESSAGES[status]} (RK4 baseline, status {int(status)} "
+                           f"{status.name}, at step {steps}, t = {steps * h:.6g}, h = {h:g})")
+    return res
+

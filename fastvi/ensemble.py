@@ -1,0 +1,460 @@
+"""Ensembles: many members (initial states, parameter values) of one model at once.
+
+The Python side validates every member with the validators of :func:`fastvi.integrate`,
+projects each initial state, then calls one compiled ``numba.prange`` loop
+(:func:`fastvi.kernels.drive.run_ensemble`) in which each member has its own workspace and runs
+the same step kernel, in the same order, as the serial loop of ``integrate``: member ``i``
+of an ensemble equals ``integrate`` of member ``i`` bit for bit. A member whose Newton
+iteration fails stops alone; its status, failed step and last good state are recorded.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+
+from . import _validate as check
+from .integrate import Result
+from .kernels import drive
+from .kernels.step import velocity_residual
+from .model import Model
+from .status import MESSAGES, Status
+from .tables import Method
+
+__all__ = ["integrate_ensemble", "EnsembleResult"]
+
+#: members per dynamic-scheduling chunk are N / (CHUNKS_PER_THREAD · threads): members that
+#: fail early (or Newton-cheap ones) free their thread for the rest instead of idling it.
+CHUNKS_PER_THREAD = 8
+
+# numba's default (workqueue) threading layer must not be entered from two Python threads at
+# once, and the thread count is per calling thread: one ensemble at a time per process.
+_PARALLEL_LOCK = threading.Lock()
+
+_MEMBER_FIELDS = ("q", "v", "p", "energy", "constraint_residual", "velocity_residual",
+                  "newton_iterations", "max_energy_error", "max_constraint_residual",
+                  "max_velocity_residual", "iterations", "max_residual", "residual", "status",
+                  "failed_step", "steps", "n_saved")
+
+
+@dataclass
+class EnsembleResult:
+    """What :func:`integrate_ensemble` kept of its ``N`` members.
+
+    Member arrays are indexed by member first. Which of them are filled depends on ``save``:
+
+    ========================  ==========================  ===================  ==================
+    field                     ``save="final"``            ``save=k`` (stride)  ``"diagnostics"``
+    ========================  ==========================  ===================  ==================
+    ``t``                     None                        (K,)                 None
+    ``q, v, p``               (N, n) last good state      (N, K, n)            (N, n)
+    ``energy``                (N,) at the last state      (N, K)               (N,)
+    ``constraint_residual``,  None                        (N, K) as in         None
+    ``velocity_residual``,                                :class:`Result`
+    ``newton_iterations``
+    ``max_energy_error``,     None                        None                 (N,)
+    ``max_constraint_…``,
+    ``max_velocity_…``
+    ========================  ==========================  ===================  ==================
+
+    In stride mode the samples of a member that failed stop at ``n_saved[i]``; later slots
+    are NaN.
+
+    Attributes
+    ----------
+    t : ndarray (K,) or None
+        Sample times ``0, k h, 2k h, …`` and the final time (stride mode).
+    q, v, p, energy : ndarray
+        Positions, velocities ``v = M⁻¹p``, momenta, ``H = ½ vᵀp + V``.
+    constraint_residual, velocity_residual, newton_iterations : ndarray (N, K) or None
+        ``max |g|``, ``max |Gv|`` and Newton iterations since the previous sample.
+    max_energy_error : ndarray (N,) or None
+        ``max_k |H(q_k, p_k) − H(q_0, p_0)|`` over every step.
+    max_constraint_residual, max_velocity_residual : ndarray (N,) or None
+        ``max_k |g(q_k)|`` and ``max_k |G(q_k) v_k|`` over every step, ``k = 0`` included.
+    iterations : ndarray (N,) int
+        Newton iterations of each member in total (the failed step's included).
+    max_residual : ndarray (N,)
+        Largest final Newton residual over the member's successful steps.
+    residual : ndarray (N,)
+        Final Newton residual of the last step tried (of the failed step, for a failure).
+    status : ndarray (N,) int
+        :class:`fastvi.Status` code of each member (``>= 0`` success).
+    failed_step : ndarray (N,) int
+        Index of the failed step (the step from ``t = failed_step · h``), ``-1`` if none.
+    steps : ndarray (N,) int
+        Steps completed.
+    n_saved : ndarray (N,) int
+        Samples written per member (stride mode; 1 otherwise).
+    method : Method
+    h : float
+    n_steps : int
+        Steps asked of every member.
+    save : str or int
+    stats : dict
+        ``members``, ``member_steps`` (completed, all members), ``newton_iterations``,
+        ``wall_time`` (s, the compiled loop), ``setup_time`` (s, validation and projection),
+        ``threads``.
+    """
+
+    t: np.ndarray | None
+    q: np.ndarray
+    v: np.ndarray
+    p: np.ndarray
+    energy: np.ndarray
+    constraint_residual: np.ndarray | None
+    velocity_residual: np.ndarray | None
+    newton_iterations: np.ndarray | None
+    max_energy_error: np.ndarray | None
+    max_constraint_residual: np.ndarray | None
+    max_velocity_residual: np.ndarray | None
+    iterations: np.ndarray
+    max_residual: np.ndarray
+    residual: np.ndarray
+    status: np.ndarray
+    failed_step: np.ndarray
+    steps: np.ndarray
+    n_saved: np.ndarray
+    method: Method
+    h: float
+    n_steps: int
+    save: str | int
+    stats: dict
+    model_name: str = field(default="model")
+
+    def __len__(self) -> int:
+        return int(self.status.shape[0])
+
+    @property
+    def success(self) -> np.ndarray:
+        """(N,) bool: the member reached the final time."""
+        return self.status >= 0
+
+    @property
+    def failed(self) -> np.ndarray:
+        """Indices of the members that stopped early."""
+        return np.flatnonzero(self.status < 0)
+
+    @property
+    def t_final(self) -> np.ndarray:
+        """(N,) time of each member's last good state (``steps · h``)."""
+        return self.steps * self.h
+
+    def failures(self) -> list[dict]:
+        """One dict per failed member: ``member, status, step, time, residual, message``."""
+        return [
+            dict(member=int(i), status=Status(int(self.status[i])), step=int(self.failed_step[i]),
+                 time=float(self.failed_step[i] * self.h), residual=float(self.residual[i]),
+                 message=MESSAGES[Status(int(self.status[i]))])
+            for i in self.failed
+        ]
+
+    def summary(self) -> str:
+        """One paragraph: sizes, speed, failures by cause."""
+        N = len(self)
+        st = self.stats
+        rate = st["member_steps"] / max(st["wall_time"], 1e-12)
+        lines = [
+            f"{self.model_name}: {N} members × {self.n_steps} steps, method {self.method.name}, "
+            f"h = {self.h:g}, save = {self.save!r}, {st['threads']} thread(s), "
+            f"wall time = {st['wall_time']:.3f} s (+ {st['setup_time']:.3f} s setup), "
+            f"{rate:.3g} member-steps/s, "
+            f"Newton iterations/step = {st['newton_iterations'] / max(1, st['member_steps']):.2f}",
+        ]
+        if self.max_energy_error is not None:
+            lines.append(f"max |ΔH| = {np.max(self.max_energy_error):.3e}, "
+                         f"max |g| = {np.max(self.max_constraint_residual):.3e}, "
+                         f"max |Gv| = {np.max(self.max_velocity_residual):.3e}")
+        failed = self.failed
+        if failed.size == 0:
+            lines.append("all members reached the final time")
+        else:
+            codes, counts = np.unique(self.status[failed], return_counts=True)
+            causes = ", ".join(f"{c} × {Status(int(s)).name}" for s, c in zip(codes, counts))
+            lines.append(f"{failed.size} of {N} members failed ({causes}); first: member "
+                         f"{failed[0]} at step {self.failed_step[failed[0]]}")
+        return "\n".join(lines)
+
+    def member(self, i: int) -> Result:
+        """Member ``i`` as a :class:`fastvi.Result` (stride mode only).
+
+        Equal, array for array, to ``integrate(..., save_every=k, on_failure="return")`` of
+        that member (``stats["wall_time"]`` is NaN: members share the clock).
+        """
+        if self.t is None:
+            raise ValueError(f"member trajectories need `save` = an integer stride; this ensemble "
+                             f"was run with save={self.save!r}")
+        i = int(i)
+        J = int(self.n_saved[i])
+        status = Status(int(self.status[i]))
+        return Result(
+            t=self.t[:J].copy(), q=self.q[i, :J].copy(), v=self.v[i, :J].copy(), p=self.p[i, :J].copy(),
+            energy=self.energy[i, :J].copy(), constraint_residual=self.constraint_residual[i, :J].copy(),
+            velocity_residual=self.velocity_residual[i, :J].copy(),
+            newton_iterations=self.newton_iterations[i, :J].copy(),
+            stats=dict(steps=int(self.steps[i]), newton_iterations=int(self.iterations[i]),
+                       wall_time=float("nan"), max_residual=float(self.max_residual[i])),
+            status=status, method=self.method, h=self.h, model_name=self.model_name,
+            failed_step=None if status >= 0 else int(self.failed_step[i]),
+        )
+
+    def save_npz(self, path) -> None:
+        """Write the member arrays and stats to a ``.npz`` file (``numpy.load`` reads it)."""
+        arrays = {k: getattr(self, k) for k in _MEMBER_FIELDS if getattr(self, k) is not None}
+        if self.t is not None:
+            arrays["t"] = self.t
+        np.savez_compressed(path, h=self.h, n_steps=self.n_steps, method=self.method.name,
+                            save=str(self.save), **arrays,
+                            **{f"stats_{k}": v for k, v in self.stats.items()})
+
+    @classmethod
+    def concatenate(cls, parts) -> "EnsembleResult":
+        """Join ensembles of the same run split by members (in order), e.g. Dask chunks."""
+        parts = list(parts)
+        if not parts:
+            raise ValueError("`parts` must hold at least one EnsembleResult")
+        first = parts[0]
+        for other in parts[1:]:
+            if (other.h, other.n_steps, other.save, other.method.name) != (
+                    first.h, first.n_steps, first.save, first.method.name):
+                raise ValueError("`parts` must come from one run (same h, n_steps, save, method)")
+        joined = {k: (None if getattr(first, k) is None
+                      else np.concatenate([getattr(p, k) for p in parts], axis=0))
+                  for k in _MEMBER_FIELDS}
+        stats = dict(
+            members=sum(p.stats["members"] for p in parts),
+            member_steps=sum(p.stats["member_steps"] for p in parts),
+            newton_iterations=sum(p.stats["newton_iterations"] for p in parts),
+            wall_time=sum(p.stats["wall_time"] for p in parts),
+            setup_time=sum(p.stats["setup_time"] for p in parts),
+            threads=max(p.stats["threads"] for p in parts),
+        )
+        return cls(t=first.t, method=first.method, h=first.h, n_steps=first.n_steps,
+                   save=first.save, stats=stats, model_name=first.model_name, **joined)
+
+
+def integrate_ensemble(
+    model: Model,
+    Q0,
+    V0,
+    *,
+    h: float,
+    t_end: float | None = None,
+    n_steps: int | None = None,
+    method: str | Method = "P2L-Q3G",
+    params=None,
+    save="final",
+    threads: int | None = None,
+    tol: float = check.DEFAULT_TOL,
+    max_iter: int = check.DEFAULT_MAX_ITER,
+    check: bool = True,
+) -> EnsembleResult:
+    r"""Integrate ``N`` members (initial states and/or parameters) of one model in parallel.
+
+    Every member is advanced by the integrator of :func:`fastvi.integrate` — the discrete
+    Euler–Lagrange equations of the Galerkin action solved by Newton, the momentum
+    projected onto ``G(q) M⁻¹ p = 0`` — inside one compiled ``numba.prange`` loop over
+    members, each with its own workspace. Member ``i`` equals
+    ``integrate(model, Q0[i], V0[i], params=params[i], ...)`` bit for bit, whatever the
+    number of threads.
+
+    Parameters
+    ----------
+    model : Model
+    Q0, V0 : array_like (N, n)
+        Initial configurations and velocities, one row per member; each is checked and
+        projected as in :func:`fastvi.integrate` (members projected beyond round-off are
+        reported in one warning).
+    h : float
+        Step size (shared).
+    t_end, n_steps :
+        Exactly one: final time (a whole number of steps) or number of steps.
+    method : str or Method, default "P2L-Q3G"
+    params : array_like (N, k) or (k,), optional
+        Parameters per member (rows), one vector for all, or None for the model's.
+    save : {"final", "diagnostics"} or int, default "final"
+        ``"final"``: the last state of each member, memory ``O(N n)``. An integer ``k``: every
+        k-th step and the last, memory ``O(N n n_steps / k)``. ``"diagnostics"``: the last
+        state plus, per member, ``max |H − H₀|``, ``max |g|``, ``max |Gv|`` over every step
+        and the Newton iterations, with no trajectory (the energy is evaluated every step).
+    threads : int, optional
+        Numba threads for this call (``1 … NUMBA_NUM_THREADS``); the previous setting is
+        restored afterwards. Default: numba's current setting.
+    tol, max_iter :
+        Newton tolerance and iteration limit per step, as in :func:`fastvi.integrate`.
+    check : bool, default True
+        As in :func:`fastvi.integrate`: compare the model's derivative callbacks with finite
+        differences (at the first member's state) the first time the model is used.
+
+    Returns
+    -------
+    EnsembleResult
+        Never raises for a member that fails during the integration: see ``status``,
+        ``failed_step``, :meth:`EnsembleResult.failures`.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Bad arguments, naming the argument (and the member, e.g. ``Q0[17]``).
+
+    Notes
+    -----
+    The members are scheduled dynamically in chunks of ``N / (8 · threads)``. Validation and
+    projection of the initial states run in Python before the compiled loop (a few hundred
+    microseconds per member; ``stats["setup_time"]``). Only one ensemble runs at a time per
+    process (numba's default threading layer is not re-entrant); for more than one machine
+    see :func:`fastvi.distributed.integrate_ensemble`.
+
+    Examples
+    --------
+    >>> dp = fastvi.scenes.double_pendulum()
+    >>> states = [dp.initial_state(a, b) for a, b in angles]
+    >>> Q0, V0 = np.array([s[0] for s in states]), np.array([s[1] for s in states])
+    >>> ens = fastvi.integrate_ensemble(dp, Q0, V0, h=0.01, n_steps=1000)
+    >>> ens.q.shape, ens.success.all()
+    """
+    run_check = check
+    if not isinstance(model, Model):
+        raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
+    opts = _options(h, t_end, n_steps, method, save, tol, max_iter)
+    threads = _validate_threads(threads)
+    return _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0)
+
+
+# ------------------------------------------------------------------ pieces shared with distributed
+def _validate_threads(threads):
+    return check.threads(threads)
+
+
+def _options(h, t_end, n_steps, method, save, tol, max_iter) -> dict:
+    """The validated scalar options of a run (cheap: the client of a Dask run calls it too)."""
+    h = check.step_size(h)
+    return dict(h=h, total=check.step_count(h, t_end, n_steps), method=check.method(method),
+                save=check.ensemble_save(save), tol=check.tolerance(tol), max_iter=check.max_iter(max_iter))
+
+
+def _members(model: Model, Q0, V0, params):
+    """Validated member arrays ``Q0, V0`` (N, n) and ``P`` (N, k)."""
+    Q0 = check.member_vectors(Q0, "Q0", model.n)
+    V0 = check.member_vectors(V0, "V0", model.n)
+    if V0.shape[0] != Q0.shape[0]:
+        raise ValueError(f"`Q0` and `V0` must have one row per member each, got {Q0.shape[0]} and "
+                         f"{V0.shape[0]} rows")
+    return Q0, V0, check.member_params(params, model, Q0.shape[0])
+
+
+def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -> EnsembleResult:
+    t_setup = time.perf_counter()
+    Q0, V0, P = _members(model, Q0, V0, params)
+    if run_check and not getattr(model, "_checked", True):  # as integrate: before the projection
+        model.check(Q0[0], V0[0], params=P[0], n_random=1)
+    X0, H0, g0, gv0 = _initial_states(model, Q0, V0, P, first_member)
+    setup = time.perf_counter() - t_setup
+
+    N, n = Q0.shape
+    h, total, meth, save = opts["h"], opts["total"], opts["method"], opts["save"]
+    if save == "final":
+        mode, every, K = drive.SAVE_FINAL, total, 1
+    elif save == "diagnostics":
+        mode, every, K = drive.SAVE_DIAGNOSTICS, total, 1
+    else:
+        mode, every = drive.SAVE_STRIDE, save
+        K = total // every + 1 + (1 if total % every else 0)
+    fill = np.nan if mode == drive.SAVE_STRIDE else 0.0
+    Qs, Vs, Ps = (np.full((N, K, n), fill) for _ in range(3))
+    En, Gr, GVr, It = (np.full((N, K), fill) for _ in range(4))
+    if mode == drive.SAVE_STRIDE:  # slot 0 is the initial state, exactly as in integrate
+        Qs[:, 0], Ps[:, 0], Vs[:, 0] = X0[:, 0], X0[:, 1], X0[:, 2]
+        En[:, 0], Gr[:, 0], GVr[:, 0], It[:, 0] = H0, g0, gv0, 0.0
+    ist = np.zeros((N, drive.E_SIZE), dtype=np.int64)
+    fst = np.zeros((N, drive.F_SIZE))
+    fst[:, drive.F_G], fst[:, drive.F_GV] = g0, gv0
+
+    fns, flags, Mc = model.kernel_arguments()
+    with _PARALLEL_LOCK:
+        prev_threads = numba.get_num_threads()
+        prev_chunk = numba.get_parallel_chunksize()
+        try:
+            if threads is not None:
+                numba.set_num_threads(threads)
+            used = numba.get_num_threads()
+            numba.set_parallel_chunksize(max(1, N // (CHUNKS_PER_THREAD * used)))
+            t0 = time.perf_counter()
+            drive.run_ensemble(fns, flags, Mc, P, meth.kernel_tables, h, opts["tol"], opts["max_iter"],
+                               meth.s, meth.r, meth.J, X0, total, mode, every, H0,
+                               Qs, Vs, Ps, En, Gr, GVr, It, ist, fst)
+            wall = time.perf_counter() - t0
+        finally:
+            numba.set_parallel_chunksize(prev_chunk)
+            numba.set_num_threads(prev_threads)
+
+    steps = ist[:, drive.E_STEPS].copy()
+    iterations = fst[:, drive.F_ITERS].astype(np.int64)
+    stats = dict(members=N, member_steps=int(steps.sum()), newton_iterations=int(iterations.sum()),
+                 wall_time=wall, setup_time=setup, threads=used)
+    diag = mode == drive.SAVE_DIAGNOSTICS
+    stride = mode == drive.SAVE_STRIDE
+    if stride:
+        ks = np.arange(every, total + 1, every)
+        if total % every:
+            ks = np.append(ks, total)
+        t = np.concatenate(([0.0], ks * h))
+        q, v, p, energy = Qs, Vs, Ps, En
+    else:
+        t = None
+        q, v, p, energy = Qs[:, 0], Vs[:, 0], Ps[:, 0], En[:, 0]
+    return EnsembleResult(
+        t=t, q=q, v=v, p=p, energy=energy,
+        constraint_residual=Gr if stride else None, velocity_residual=GVr if stride else None,
+        newton_iterations=It if stride else None,
+        max_energy_error=fst[:, drive.F_DH].copy() if diag else None,
+        max_constraint_residual=fst[:, drive.F_G].copy() if diag else None,
+        max_velocity_residual=fst[:, drive.F_GV].copy() if diag else None,
+        iterations=iterations, max_residual=fst[:, drive.F_MAXRES].copy(),
+        residual=fst[:, drive.F_RES].copy(), status=ist[:, drive.E_STATUS].copy(),
+        failed_step=ist[:, drive.E_FAILED].copy(), steps=steps, n_saved=ist[:, drive.E_SAVED].copy(),
+        method=meth, h=h, n_steps=total, save=save, stats=stats, model_name=model.name,
+    )
+
+
+def _initial_states(model: Model, Q0, V0, P, first_member: int):
+    """Projected ``(q0, p0, v0)`` per member, with ``H0``, ``max|g(q0)|``, ``max|G v0|``.
+
+    The same operations as :func:`fastvi.integrate`, so the compiled loop starts from the
+    same bits.
+    """
+    N, n = Q0.shape
+    m = model.m
+    X0 = np.empty((N, 3, n))
+    H0 = np.empty(N)
+    g0 = np.zeros(N)
+    gv0 = np.zeros(N)
+    projected = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for i in range(N):
+            prm = P[i]
+            seen = len(caught)
+            try:
+                q0, v0 = check.initial_state(model, Q0[i], V0[i], prm)
+            except ValueError as exc:
+                j = first_member + i
+                raise ValueError(f"member {j} (`Q0[{j}]`, `V0[{j}]`): {exc}") from None
+            if len(caught) > seen:
+                projected.append((first_member + i, str(caught[-1].message)))
+            p0 = model.mass_matrix(q0, prm) @ v0
+            X0[i, 0], X0[i, 1], X0[i, 2] = q0, p0, v0
+            H0[i] = 0.5 * v0 @ p0 + model.potential_energy(q0, prm)
+            if m:
+                g0[i] = np.max(np.abs(model.constraint_value(q0, prm)))
+                gv0[i] = velocity_residual(model.constraint_jacobian_value(q0, prm), v0, n, m)
+    if projected:
+        j, msg = projected[0]
+        warnings.warn(f"{len(projected)} of {N} members' initial states were projected onto the "
+                      f"constraints; first, member {j}: {msg}", stacklevel=4)
+    return X0, H0, g0, gv0

@@ -1,0 +1,344 @@
+"""Model.check: every supplied derivative is compared with finite differences.
+
+Two small models carry every kind of callback: a pendulum on a spring-loaded cart in
+coordinates q = (x, θ) (q-dependent mass: kinetic_grad, kinetic_hessian, momentum_jacobian)
+and a point on the curve where a sphere meets the saddle z = c·x·y (two nonlinear
+constraints with a nontrivial constraint Hessian, nonlinear potential). Each test that
+plants a mistake uses the kind of error people make: a sign, a factor, a transposed or
+swapped index, a forgotten term or constraint.
+"""
+
+import time
+
+import numpy as np
+import pytest
+
+import fastvi
+from fastvi.check import CheckReport, check_model
+from fastvi.scenes import SCENES
+
+# ----------------------------------------------------------------------------- cart pendulum
+# params = (M, m, l, g, k): cart mass, bob mass, rod length, gravity, cart spring stiffness
+# T = ½(M+m)ẋ² + m l cosθ ẋθ̇ + ½ m l² θ̇²,  V = ½ k x² − m g l cosθ
+
+
+def cart_mass(q, p, out):
+    c = np.cos(q[1])
+    out[0, 0] = p[0] + p[1]
+    out[0, 1] = p[1] * p[2] * c
+    out[1, 0] = p[1] * p[2] * c
+    out[1, 1] = p[1] * p[2] * p[2]
+
+
+def cart_kinetic_grad(q, v, p, out):
+    out[0] = 0.0
+    out[1] = -p[1] * p[2] * np.sin(q[1]) * v[0] * v[1]
+
+
+def cart_kinetic_hessian(q, v, p, out):
+    out[:, :] = 0.0
+    out[1, 1] = -p[1] * p[2] * np.cos(q[1]) * v[0] * v[1]
+
+
+def cart_momentum_jacobian(q, v, p, out):
+    s = np.sin(q[1])
+    out[:, :] = 0.0
+    out[0, 1] = -p[1] * p[2] * s * v[1]
+    out[1, 1] = -p[1] * p[2] * s * v[0]
+
+
+def cart_potential(q, p):
+    return 0.5 * p[4] * q[0] * q[0] - p[1] * p[3] * p[2] * np.cos(q[1])
+
+
+def cart_potential_grad(q, p, out):
+    out[0] = p[4] * q[0]
+    out[1] = p[1] * p[3] * p[2] * np.sin(q[1])
+
+
+def cart_potential_hessian(q, p, out):
+    out[:, :] = 0.0
+    out[0, 0] = p[4]
+    out[1, 1] = p[1] * p[3] * p[2] * np.cos(q[1])
+
+
+# planted mistakes
+def bad_mass_not_symmetric(q, p, out):  # forgot the lower triangle
+    out[0, 0] = p[0] + p[1]
+    out[0, 1] = p[1] * p[2] * np.cos(q[1])
+    out[1, 0] = 0.0
+    out[1, 1] = p[1] * p[2] * p[2]
+
+
+def bad_kinetic_grad_sign(q, v, p, out):  # d(cos)/dθ = +sin
+    out[0] = 0.0
+    out[1] = p[1] * p[2] * np.sin(q[1]) * v[0] * v[1]
+
+
+def bad_kinetic_hessian_sign(q, v, p, out):
+    out[:, :] = 0.0
+    out[1, 1] = p[1] * p[2] * np.cos(q[1]) * v[0] * v[1]
+
+
+def bad_momentum_jacobian_transposed(q, v, p, out):  # [b, a] instead of [a, b]
+    s = np.sin(q[1])
+    out[:, :] = 0.0
+    out[1, 0] = -p[1] * p[2] * s * v[1]
+    out[1, 1] = -p[1] * p[2] * s * v[0]
+
+
+def bad_potential_grad_missing_term(q, p, out):  # forgot the spring
+    out[0] = 0.0
+    out[1] = p[1] * p[3] * p[2] * np.sin(q[1])
+
+
+def bad_potential_grad_spring_sign(q, p, out):  # wrong only where x != 0
+    out[0] = -p[4] * q[0]
+    out[1] = p[1] * p[3] * p[2] * np.sin(q[1])
+
+
+def bad_potential_hessian_factor(q, p, out):  # d²(½kx²)/dx² "= 2k"
+    out[:, :] = 0.0
+    out[0, 0] = 2.0 * p[4]
+    out[1, 1] = p[1] * p[3] * p[2] * np.cos(q[1])
+
+
+CART = dict(mass=cart_mass, kinetic_grad=cart_kinetic_grad, kinetic_hessian=cart_kinetic_hessian,
+            momentum_jacobian=cart_momentum_jacobian, potential=cart_potential,
+            potential_grad=cart_potential_grad, potential_hessian=cart_potential_hessian)
+CART_PARAMS = (2.0, 1.0, 0.8, 9.81, 3.0)
+CART_Q, CART_V = np.array([0.3, 1.1]), np.array([0.7, -1.3])
+
+
+def cart(**wrong):
+    return fastvi.Model(2, 0, params=CART_PARAMS, name="cart", **{**CART, **wrong})
+
+
+# ----------------------------------------------------------------------------- sphere ∩ saddle
+# params = (mass, l, c, g); g1 = ½(x²+y²+z²−l²), g2 = z − c x y;  V = mass g z + x² y²
+
+
+def curve_potential(q, p):
+    return p[0] * p[3] * q[2] + q[0] * q[0] * q[1] * q[1]
+
+
+def curve_potential_grad(q, p, out):
+    out[0] = 2.0 * q[0] * q[1] * q[1]
+    out[1] = 2.0 * q[0] * q[0] * q[1]
+    out[2] = p[0] * p[3]
+
+
+def curve_potential_hessian(q, p, out):
+    out[:, :] = 0.0
+    out[0, 0] = 2.0 * q[1] * q[1]
+    out[1, 1] = 2.0 * q[0] * q[0]
+    out[0, 1] = 4.0 * q[0] * q[1]
+    out[1, 0] = 4.0 * q[0] * q[1]
+
+
+def curve_constraint(q, p, out):
+    out[0] = 0.5 * (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] - p[1] * p[1])
+    out[1] = q[2] - p[2] * q[0] * q[1]
+
+
+def curve_constraint_jacobian(q, p, out):
+    out[0, 0] = q[0]
+    out[0, 1] = q[1]
+    out[0, 2] = q[2]
+    out[1, 0] = -p[2] * q[1]
+    out[1, 1] = -p[2] * q[0]
+    out[1, 2] = 1.0
+
+
+def curve_constraint_hessian(q, eta, p, out):
+    out[:, :] = 0.0
+    out[0, 0] = eta[0]
+    out[1, 1] = eta[0]
+    out[2, 2] = eta[0]
+    out[0, 1] = -p[2] * eta[1]
+    out[1, 0] = -p[2] * eta[1]
+
+
+def bad_potential_hessian_offdiag(q, p, out):  # 2xy instead of 4xy
+    out[:, :] = 0.0
+    out[0, 0] = 2.0 * q[1] * q[1]
+    out[1, 1] = 2.0 * q[0] * q[0]
+    out[0, 1] = 2.0 * q[0] * q[1]
+    out[1, 0] = 2.0 * q[0] * q[1]
+
+
+def bad_constraint_jacobian_swapped(q, p, out):  # ∂(cxy)/∂x written as c x
+    out[0, 0] = q[0]
+    out[0, 1] = q[1]
+    out[0, 2] = q[2]
+    out[1, 0] = -p[2] * q[0]
+    out[1, 1] = -p[2] * q[1]
+    out[1, 2] = 1.0
+
+
+def bad_constraint_hessian_forgets_second(q, eta, p, out):  # only η₀ ∇²g₁
+    out[:, :] = 0.0
+    out[0, 0] = eta[0]
+    out[1, 1] = eta[0]
+    out[2, 2] = eta[0]
+
+
+CURVE = dict(potential=curve_potential, potential_grad=curve_potential_grad,
+             potential_hessian=curve_potential_hessian, constraint=curve_constraint,
+             constraint_jacobian=curve_constraint_jacobian, constraint_hessian=curve_constraint_hessian)
+CURVE_PARAMS = (1.5, 1.0, 0.7, 9.81)
+CURVE_Q = np.array([0.6, -0.5, -0.21])  # near (not on) the curve: the check does not need g = 0
+
+
+def curve(**wrong):
+    return fastvi.Model(3, 2, params=CURVE_PARAMS, mass=1.5 * np.eye(3), name="curve", **{**CURVE, **wrong})
+
+
+# ----------------------------------------------------------------------------- correct models pass
+def test_correct_cart_model_passes_every_derivative_check():
+    model = cart()
+    report = model.check(CART_Q, CART_V)
+    assert isinstance(report, CheckReport) and report.ok
+    assert report.checked == ["mass", "kinetic_grad", "momentum_jacobian", "potential_grad",
+                              "kinetic_hessian", "potential_hessian"]
+    worst = max(r.relative_error for r in report.rows)
+    assert worst < 1e-10  # measured 7e-13: Richardson-extrapolated differences are this accurate
+    assert len(report.states) == 4 and model._checked
+
+
+def test_correct_constrained_model_passes_every_derivative_check():
+    report = curve().check(CURVE_Q)
+    assert report.ok
+    assert report.checked == ["potential_grad", "constraint_jacobian", "potential_hessian",
+                              "constraint_hessian"]
+    # the constraint Hessian is compared for η = e_0, e_1 and a random η at every state
+    assert sum(r.callback == "constraint_hessian" for r in report.rows) == 3 * 4
+    assert max(r.relative_error for r in report.rows) < 1e-10  # measured 4e-13
+
+
+def test_report_prints_one_line_per_callback_with_verdict():
+    text = str(cart().check(CART_Q, CART_V))
+    for cb in fastvi.model.SLOTS:
+        if cb in CART and cb not in ("potential",):
+            assert cb in text
+    assert "FD of kinetic_grad" in text and text.count(" ok") == 6
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_shipped_scene_passes_the_check_at_random_states(name):
+    model = SCENES[name]()
+    rng = np.random.default_rng(7)
+    for _ in range(2):
+        q = rng.uniform(-1.0, 1.0, model.n)
+        report = model.check(q, rng.standard_normal(model.n), seed=int(rng.integers(100)))
+        assert report.ok, str(report)
+
+
+# ----------------------------------------------------------------------------- wrong ones are named
+WRONG = [
+    (cart, "kinetic_grad", bad_kinetic_grad_sign),
+    (cart, "kinetic_hessian", bad_kinetic_hessian_sign),
+    (cart, "momentum_jacobian", bad_momentum_jacobian_transposed),
+    (cart, "potential_grad", bad_potential_grad_missing_term),
+    (cart, "potential_hessian", bad_potential_hessian_factor),
+    (curve, "potential_hessian", bad_potential_hessian_offdiag),
+    (curve, "constraint_jacobian", bad_constraint_jacobian_swapped),
+    (curve, "constraint_hessian", bad_constraint_hessian_forgets_second),
+]
+
+
+@pytest.mark.parametrize("build, slot, bad", WRONG, ids=[f"{b.__name__}-{f.__name__}" for b, _, f in WRONG])
+def test_check_names_the_one_wrong_derivative(build, slot, bad):
+    model = build(**{slot: bad})
+    q, v = (CART_Q, CART_V) if build is cart else (CURVE_Q, None)
+    with pytest.raises(fastvi.ModelCheckError, match=f"callback `{slot}` disagrees") as err:
+        model.check(q, v)
+    assert err.value.callback == slot
+    assert err.value.callbacks == [slot]  # second derivatives of a wrong first one are skipped
+    worst = err.value.report.worst(slot)
+    assert worst.relative_error > 1e-2  # measured: 0.5 to 2 (a genuine mistake is O(1))
+    assert not model._checked
+
+
+def test_wrong_second_derivative_of_a_wrong_first_one_is_skipped_not_blamed():
+    model = cart(potential_grad=bad_potential_grad_missing_term)
+    report = model.check(CART_Q, CART_V, raise_on_error=False)
+    assert not report.ok and report.failures == ["potential_grad"]
+    assert report.worst("potential_hessian").status == "skipped"
+
+
+def test_constraint_hessian_error_names_the_constraint():
+    with pytest.raises(fastvi.ModelCheckError, match="η = e_1"):
+        curve(constraint_hessian=bad_constraint_hessian_forgets_second).check(CURVE_Q)
+
+
+def test_asymmetric_mass_matrix_is_caught():
+    with pytest.raises(fastvi.ModelCheckError) as err:
+        cart(mass=bad_mass_not_symmetric).check(CART_Q, CART_V)
+    assert err.value.callback == "mass"
+
+
+def test_random_nearby_states_catch_a_mistake_invisible_at_the_given_state():
+    model = cart(potential_grad=bad_potential_grad_spring_sign)
+    q0 = np.array([0.0, 1.1])  # x = 0: the wrong spring sign gives the right value here
+    assert model.check(q0, CART_V, n_random=0).ok
+    model._checked = False
+    with pytest.raises(fastvi.ModelCheckError, match="potential_grad"):
+        model.check(q0, CART_V, n_random=1)
+
+
+def test_check_rejects_bad_arguments_by_name():
+    model = curve()
+    with pytest.raises(ValueError, match="`q` must have shape"):
+        model.check([1.0, 2.0])
+    with pytest.raises(ValueError, match="`rtol`"):
+        model.check(CURVE_Q, rtol=0.0)
+    with pytest.raises(ValueError, match="`n_random`"):
+        model.check(CURVE_Q, n_random=-1)
+    with pytest.raises(TypeError, match="`model`"):
+        check_model("not a model", CURVE_Q)
+
+
+# ----------------------------------------------------------------------------- integrate
+def test_integrate_runs_the_check_before_the_first_step():
+    model = cart(kinetic_grad=bad_kinetic_grad_sign)
+    with pytest.raises(fastvi.ModelCheckError, match="kinetic_grad.*check=False"):
+        fastvi.integrate(model, CART_Q, CART_V, h=0.01, n_steps=10)
+    # the check is skippable (the run then integrates the wrong model silently)
+    res = fastvi.integrate(model, CART_Q, CART_V, h=0.01, n_steps=10, check=False)
+    assert res.success
+
+
+def test_integrate_checks_a_constraint_derivative_before_projecting():
+    model = curve(constraint_jacobian=bad_constraint_jacobian_swapped)
+    with pytest.raises(fastvi.ModelCheckError, match="constraint_jacobian"):
+        fastvi.integrate(model, CURVE_Q, np.zeros(3), h=0.01, n_steps=10)
+
+
+def test_integrate_checks_a_model_only_once(monkeypatch):
+    import fastvi.check
+
+    calls = []
+    original = fastvi.check.check_model
+    monkeypatch.setattr(fastvi.check, "check_model", lambda *a, **k: calls.append(1) or original(*a, **k))
+    model = fastvi.scenes.pendulum()
+    q0, v0 = model.initial_state(0.5)
+    fastvi.integrate(model, q0, v0, h=0.01, n_steps=5)
+    fastvi.integrate(model, q0, v0, h=0.01, n_steps=5)
+    assert len(calls) == 1 and model._checked
+    fresh = fastvi.scenes.pendulum()
+    fastvi.integrate(fresh, q0, v0, h=0.01, n_steps=5, check=False)
+    assert len(calls) == 1 and not fresh._checked
+
+
+def test_automatic_check_costs_a_fraction_of_the_model_setup():
+    cart().check(CART_Q, CART_V, n_random=1)  # warm the Python-side evaluator
+    model = cart()
+    t0 = time.perf_counter()
+    model.kernel_arguments()  # compiling the callbacks: the set-up every new model pays
+    setup = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    report = model.check(CART_Q, CART_V, n_random=1)  # what integrate runs
+    cost = time.perf_counter() - t0
+    assert report.ok
+    assert cost < 0.1 * setup, (cost, setup)  # measured 0.010 s vs 1.2 s (ratio 0.008)

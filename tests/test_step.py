@@ -1,0 +1,106 @@
+"""The step kernel computes exactly the equations of docs/method.md, and their derivative.
+
+Differential tests against the NumPy twin in tests/reference.py (absolute form, raw tables)
+and against finite differences of the kernel's own residual.
+"""
+
+import numpy as np
+import pytest
+
+import fastvi
+from fastvi.kernels.step import assemble, make_workspace
+
+from . import models, reference
+
+METHODS = ["P1L-Q2G", "P2L-Q3G", "P3L-Q4G", "P2L-Q3G-NE-CE", "P3L-Q3L-NC-CG2", "P4L-Q5G-NE-CL3"]
+
+
+def _models():
+    dp = fastvi.scenes.double_pendulum(m1=1.3, l2=0.7)
+    q, v = dp.initial_state(0.9, -0.4, 0.3, 1.1)
+    pp = models.polar_pendulum()
+    sp = models.polar_pendulum(spring=50.0)
+    qu = models.quartic()
+    return [
+        ("double_pendulum", dp, q, v),
+        ("polar_pendulum", pp, np.array([1.0, 0.7]), np.array([0.0, 1.3])),
+        ("spring_pendulum", sp, np.array([1.1, 0.7]), np.array([0.4, 1.3])),
+        ("quartic", qu, np.array([0.8, -0.3]), np.array([0.2, 0.5])),
+    ]
+
+
+MODELS = _models()
+
+
+def _kernel(model, meth, h, qk, pk, X, jac=True):
+    fns, flags, Mc = model.kernel_arguments()
+    ws = make_workspace(model.n, model.m, meth.s, meth.r, meth.J)
+    ws[0][:] = X
+    if model.m:
+        ws[5][0][:, :] = model.constraint_jacobian_value(qk)
+    st = assemble(fns, flags, Mc, model.params, meth.kernel_tables, h, qk, pk, ws, jac)
+    assert st == 0
+    return ws[1].copy(), ws[2].copy()
+
+
+def _random_unknowns(model, meth, h, v, seed):
+    rng = np.random.default_rng(seed)
+    s, n = meth.s, model.n
+    dQ = np.outer(meth.tau[1:], v) * h + 1e-3 * rng.normal(size=(s, n))
+    eta = 0.1 * rng.normal(size=meth.J * model.m)
+    return np.concatenate([dQ.ravel(), eta])
+
+
+@pytest.mark.parametrize("name", METHODS)
+@pytest.mark.parametrize("label,model,q,v", MODELS, ids=[m[0] for m in MODELS])
+def test_kernel_residual_equals_the_numpy_twin(label, model, q, v, name):
+    meth = fastvi.method(name)
+    h = 0.05
+    pk = model.mass_matrix(q) @ v
+    X = _random_unknowns(model, meth, h, v, 1)
+    R, _ = _kernel(model, meth, h, q, pk, X, jac=False)
+    Rt = reference.residual(model, meth, h, q, pk, X)
+    scale = max(1.0, np.abs(Rt).max())
+    assert np.abs(R - Rt).max() <= 1e-13 * scale  # measured ≤ 4e-15
+
+
+@pytest.mark.parametrize("name", METHODS)
+@pytest.mark.parametrize("label,model,q,v", MODELS, ids=[m[0] for m in MODELS])
+def test_kernel_jacobian_is_the_derivative_of_its_residual(label, model, q, v, name):
+    meth = fastvi.method(name)
+    h = 0.05
+    pk = model.mass_matrix(q) @ v
+    X = _random_unknowns(model, meth, h, v, 2)
+    _, A = _kernel(model, meth, h, q, pk, X)
+    N = X.size
+    Afd = np.zeros((N, N))
+    for k in range(N):
+        d = 1e-6 * max(1.0, abs(X[k]))
+        Xp, Xm = X.copy(), X.copy()
+        Xp[k] += d
+        Xm[k] -= d
+        Afd[:, k] = (_kernel(model, meth, h, q, pk, Xp, False)[0] - _kernel(model, meth, h, q, pk, Xm, False)[0]) / (2 * d)
+    assert np.abs(A - Afd).max() <= 1e-6 * max(1.0, np.abs(A).max())  # measured ~1e-9
+
+
+def test_finite_difference_second_derivatives_match_the_exact_ones():
+    """A model without second derivatives gets the same Newton matrix up to FD error."""
+    exact = models.polar_pendulum(exact=True)
+    fd = models.polar_pendulum(exact=False)
+    assert not any(fd.has_exact_second_derivatives.values())
+    meth = fastvi.method("P3L-Q4G")
+    q, v, h = np.array([1.0, 0.7]), np.array([0.0, 1.3]), 0.05
+    pk = exact.mass_matrix(q) @ v
+    X = _random_unknowns(exact, meth, h, v, 3)
+    Re, Ae = _kernel(exact, meth, h, q, pk, X)
+    Rf, Af = _kernel(fd, meth, h, q, pk, X)
+    np.testing.assert_array_equal(Re, Rf)  # the residual never uses second derivatives
+    assert np.abs(Ae - Af).max() <= 1e-8 * np.abs(Ae).max()  # measured 3e-11
+
+
+def test_exact_and_fd_models_give_the_same_trajectory():
+    """Second derivatives only steer Newton: the solution agrees to Newton tolerance."""
+    q, v = np.array([1.0, 2.0]), np.array([0.0, 0.0])
+    r1 = fastvi.integrate(models.polar_pendulum(exact=True), q, v, h=0.02, n_steps=300)
+    r2 = fastvi.integrate(models.polar_pendulum(exact=False), q, v, h=0.02, n_steps=300)
+    assert np.abs(r1.q - r2.q).max() < 1e-12  # measured ~1e-14

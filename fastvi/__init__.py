@@ -8,6 +8,7 @@ from . import _numba  # noqa: F401  (numba settings first)
 from . import scenes
 from .check import ModelCheckError
 from .integrate import IntegrationError, Result, integrate
+from .ensemble import EnsembleResult, integrate_ensemble
 from .model import CALLBACK_SIGNATURE, Model
 from .status import Status
 from .tables import Method, method
@@ -19,6 +20,8 @@ __all__ = [
     "integrate",
     "Result",
     "IntegrationError",
+    "integrate_ensemble",
+    "EnsembleResult",
     "ModelCheckError",
     "Status",
     "Method",

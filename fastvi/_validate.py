@@ -108,6 +108,14 @@ def max_iter(k) -> int:
     return _count(k, "max_iter", 1)
 
 
+def recover(k) -> int:
+    """Number of halvings for the opt-in failed-step recovery (0 = off, at most 10)."""
+    k = _count(k, "recover", 0)
+    if k > 10:
+        raise ValueError(f"`recover` must be at most 10 halvings (1024 substeps), got {k}")
+    return k
+
+
 def method(name) -> Method:
     try:
         return _method(name)
@@ -117,6 +125,12 @@ def method(name) -> Method:
             if close:
                 raise ValueError(f"{exc}. Did you mean: {', '.join(close)}?") from None
         raise
+
+
+def _min_norm_solve(S: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Least-squares solve of the symmetric ``S y = b``: near a singular position of the
+    constraints ``G M⁻¹ Gᵀ`` is ill-conditioned and a plain solve would refuse or blow up."""
+    return np.linalg.lstsq(S, b, rcond=1e-15)[0]
 
 
 def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray):
@@ -153,7 +167,7 @@ def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray):
             "start from a consistent state (the scenes' `initial_state` helpers give one)"
         )
     sv = np.linalg.svd(G, compute_uv=False)
-    if sv.size < model.m or sv[-1] <= 1e-10 * max(sv[0], 1e-300):
+    if sv.size < model.m or sv[-1] <= 1e-14 * max(sv[0], 1e-300):
         raise ValueError(
             f"the constraint Jacobian at `q0` must have full row rank {model.m}; "
             f"its singular values are {sv}"
@@ -161,7 +175,7 @@ def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray):
     q = q0.copy()
     for _ in range(20):
         Minv_Gt = np.linalg.solve(M, G.T)
-        q = q - Minv_Gt @ np.linalg.solve(G @ Minv_Gt, g)
+        q = q - Minv_Gt @ _min_norm_solve(G @ Minv_Gt, g)
         g = model.constraint_value(q, prm)
         G = model.constraint_jacobian_value(q, prm)
         if model.mass_matrix_constant is None:
@@ -181,7 +195,7 @@ def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray):
             f"`v0` violates the hidden constraint G(q0) v0 = 0: max|G v0| = {gvmax:.3e}; "
             "start from a consistent state"
         )
-    v = v0 - Minv_Gt @ np.linalg.solve(G @ Minv_Gt, G @ v0)
+    v = v0 - Minv_Gt @ _min_norm_solve(G @ Minv_Gt, G @ v0)
     if gvmax > SILENT_PROJECTION * vscale * max(1.0, scale):
         warnings.warn(f"`v0` was projected onto G(q0) v = 0 (max|G v0| was {gvmax:.2e}; "
                       f"v moved by {float(np.max(np.abs(v - v0))):.2e})", stacklevel=3)
@@ -208,10 +222,10 @@ def member_params(p, model, N: int) -> np.ndarray:
     """Parameters per member, (N, k): None (the model's), one (k,) vector for all, or (N, k)."""
     k = model.params.shape[0]
     if p is None:
-        return np.ascontiguousarray(np.broadcast_to(model.params, (N, k)), dtype=np.float64)
-    arr = np.asarray(p) if not isinstance(p, np.ndarray) else p
+        return np.tile(model.params, (N, 1))  # a fresh writable array: kernels see one array type
+    arr = np.asarray(p)
     if arr.ndim == 1:
-        return np.ascontiguousarray(np.broadcast_to(params(arr, model), (N, k)))
+        return np.tile(params(arr, model), (N, 1))
     if arr.ndim != 2 or arr.shape != (N, k):
         raise ValueError(f"`params` must be None, shape ({k},) (shared) or ({N}, {k}) (one row per "
                          f"member), got shape {arr.shape}")

@@ -8,8 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _validate
-from . import _validate as check
+from . import _validate as valid
 from ._numba import quiet
 from .kernels import drive
 from .kernels.step import make_workspace, velocity_residual
@@ -133,11 +132,14 @@ class IntegrationError(RuntimeError):
         The trajectory up to the last good step.
     """
 
-    def __init__(self, status: Status, step: int, time: float, residual: float, result: Result):
+    def __init__(self, status: Status, step: int, time: float, residual: float, result: Result,
+                 detail: str | None = None):
         self.status, self.step, self.time, self.residual, self.result = status, step, time, residual, result
+        self.detail = detail
         super().__init__(
             f"{MESSAGES[status]} (status {int(status)} {status.name}, at step {step}, t = {time:.6g}, "
             f"residual {residual:.3e}, method {result.method.name}, h = {result.h:g})"
+            + (f": {detail}" if detail else "")
         )
 
 
@@ -156,11 +158,12 @@ def integrate(
     n_steps: int | None = None,
     method: str | Method = "P2L-Q3G",
     save_every: int = 1,
-    tol: float = check.DEFAULT_TOL,
-    max_iter: int = check.DEFAULT_MAX_ITER,
+    tol: float = valid.DEFAULT_TOL,
+    max_iter: int = valid.DEFAULT_MAX_ITER,
     params=None,
     progress: bool = False,
     on_failure: str = "raise",
+    recover: int = 0,
     check: bool = True,
 ) -> Result:
     r"""Integrate a constrained mechanical system with a Galerkin variational integrator.
@@ -200,6 +203,13 @@ def integrate(
     on_failure : {"raise", "return"}
         On a failed step raise :class:`IntegrationError` (carrying the partial result), or
         return the partial :class:`Result` with its ``status`` set.
+    recover : int, default 0
+        Opt-in recovery: a step whose Newton iteration fails is retaken as 2, 4, …,
+        ``2**recover`` substeps of ``h/2**j`` before giving up. The saved time grid stays
+        ``k·h``; the map over a recovered step is a composition of variational steps (still
+        symplectic and constraint-preserving) but of a different method than its
+        neighbours, so the modified energy may jump slightly there. Recovered steps are
+        listed in ``stats["recovered_steps"]`` as (step, substeps).
     check : bool, default True
         The first time a model is integrated, compare its derivative callbacks with finite
         differences at ``q0`` and one nearby state (:func:`fastvi.check.check_model`, a few
@@ -217,24 +227,24 @@ def integrate(
     with constraints. Both in ``shared/seeds``; the method is written out in
     ``docs/method.md``.
     """
-    run_check, check = check, _validate  # the keyword shadows the module alias `check`
     if not isinstance(model, Model):
         raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
     if on_failure not in ("raise", "return"):
         raise ValueError(f"`on_failure` must be 'raise' or 'return', got {on_failure!r}")
     n = model.n
-    q0 = check.vector(q0, "q0", n)
-    v0 = check.vector(v0, "v0", n)
-    prm = check.params(params, model)
-    h = check.step_size(h)
-    total = check.step_count(h, t_end, n_steps)
-    every = check.save_every(save_every)
-    tol = check.tolerance(tol)
-    iters = check.max_iter(max_iter)
-    meth = check.method(method)
-    if run_check and not model._checked:  # before the projection, which trusts G(q)
+    q0 = valid.vector(q0, "q0", n)
+    v0 = valid.vector(v0, "v0", n)
+    prm = valid.params(params, model)
+    h = valid.step_size(h)
+    total = valid.step_count(h, t_end, n_steps)
+    every = valid.save_every(save_every)
+    tol = valid.tolerance(tol)
+    iters = valid.max_iter(max_iter)
+    recover = valid.recover(recover)
+    meth = valid.method(method)
+    if check and not model._checked:  # before the projection, which trusts G(q)
         model.check(q0, v0, params=prm, n_random=1)
-    q0, v0 = check.initial_state(model, q0, v0, prm)
+    q0, v0 = valid.initial_state(model, q0, v0, prm)
 
     fns, flags, Mc = model.kernel_arguments()
     M0 = model.mass_matrix(q0, prm)
@@ -257,10 +267,18 @@ def integrate(
     chunk = total if not progress else max(1, total // _PROGRESS_CHUNKS)
     t0 = time.perf_counter()
     status = 0
+    recovered = []
     while info[drive.I_STEPS] < total:
         with quiet():
             status = drive.run(fns, flags, Mc, prm, tabs, h, tol, iters, state, ws, chunk, total,
                                every, outs, info)
+        if status != 0 and recover:
+            sub = _retry_in_substeps(model, meth, h, tol, iters, prm, state, recover, total, every,
+                                     outs, info, ws)
+            if sub:
+                recovered.append((int(info[drive.I_STEPS]) - 1, sub))
+                status = 0
+                continue
         if progress:
             done = int(info[drive.I_STEPS])
             el = time.perf_counter() - t0
@@ -276,11 +294,56 @@ def integrate(
         constraint_residual=Gr[:J].copy(), velocity_residual=GVr[:J].copy(),
         newton_iterations=It[:J].copy(),
         stats=dict(steps=int(info[drive.I_STEPS]), newton_iterations=int(info[drive.I_ITERS]),
-                   wall_time=wall, max_residual=float(info[drive.I_MAXRES])),
+                   wall_time=wall, max_residual=float(info[drive.I_MAXRES]),
+                   recovered_steps=recovered),
         status=status, method=meth, h=h, model_name=model.name,
         failed_step=None if status == 0 else int(info[drive.I_FAILED]),
     )
     if status != 0 and on_failure == "raise":
         k = int(info[drive.I_FAILED])
-        raise IntegrationError(status, k, k * h, float(info[drive.I_RES]), result)
+        culprit = _nonfinite_callback(model, prm, state, ws) if status == Status.NONFINITE else None
+        raise IntegrationError(status, k, k * h, float(info[drive.I_RES]), result, culprit)
     return result
+
+
+def _retry_in_substeps(model, meth, h, tol, iters, prm, state, levels, total, every, outs, info, ws):
+    """Retake the failed step (state rows 0–2 still hold its start) as 2, 4, … substeps.
+
+    Returns the number of substeps that succeeded (the step is then accepted and booked as
+    one step of the main grid), or 0 if all ``levels`` halvings failed.
+    """
+    fns, flags, Mc = model.kernel_arguments()
+    tabs = meth.kernel_tables
+    for level in range(1, levels + 1):
+        sub = 2**level
+        trial = state.copy()
+        ws_sub = make_workspace(model.n, model.m, meth.s, meth.r, meth.J)
+        outs_sub = _alloc(1, model.n)
+        info_sub = np.zeros(drive.INFO_SIZE)
+        info_sub[drive.I_FIRST] = 1
+        with quiet():
+            st = drive.run(fns, flags, Mc, prm, tabs, h / sub, tol, iters, trial, ws_sub, sub, sub, sub,
+                           outs_sub, info_sub)
+        if st == 0:
+            state[:3] = trial[:3]
+            info[drive.I_ITERS] += info_sub[drive.I_ITERS]
+            info[drive.I_FIRST] = 1  # the last polynomial belongs to h/sub: no extrapolation
+            with quiet():
+                drive.accept(fns, prm, h, state, ws, total, every, outs, info, info_sub[drive.I_ITERS],
+                             outs_sub[5][0], outs_sub[6][0], info_sub[drive.I_MAXRES])
+            return sub
+    return 0
+
+
+def _nonfinite_callback(model, prm, state, ws):
+    """Name the callback that returns NaN/inf at the failing step's start or last iterate."""
+    n, m = model.n, model.m
+    shapes = {"potential": (), "potential_grad": (n,), "mass": (n, n), "kinetic_grad": (n,),
+              "constraint": (m,), "constraint_jacobian": (m, n)}
+    for q, v in ((state[0], state[2]), (ws[6][0], ws[6][1])):
+        for slot, shape in shapes.items():
+            if slot in model._functions:
+                val = model._eval(slot, q, v, params=prm, shape=shape)
+                if not np.all(np.isfinite(val)):
+                    return f"callback `{slot}` returned {val} at q = {np.array2string(np.asarray(q), precision=6)}"
+    return None

@@ -4,17 +4,20 @@ References are SciPy DOP853 at rtol = atol = 1e-13 on equations of motion writte
 minimal coordinates, never the baselines' own output.
 """
 
+import importlib
+
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp as scipy_solve_ivp
 
 import fastvi
 from fastvi.baselines import rk4, solve_ivp
-from fastvi.baselines import rk4 as rk4_module
 from fastvi.studies.convergence import drift_slope, observed_order
 from fastvi.studies.reference import chain_cartesian, chain_pendulum_reference
 
 REF_TOL = 1e-13
+# the package exports the function `rk4`, which shadows the submodule of the same name
+rk4_module = importlib.import_module("fastvi.baselines.rk4")
 
 # ---------------------------------------------------------------- unconstrained test models
 # Plane pendulum in its angle (n = 1, m = 0, constant mass): params = (m, l, g).
@@ -129,7 +132,7 @@ def test_rk4_order_is_4_on_constrained_double_pendulum(double_pendulum, dp_start
         errs.append(np.max(np.abs(np.concatenate((res.q[-1] - qref[0], res.v[-1] - vref[0])))))
     order, used = observed_order(hs, errs)
     assert used.sum() == 3
-    assert abs(order - 4.0) < 0.3  # measured 4.05
+    assert abs(order - 4.0) < 0.2  # measured 3.99
 
 
 def test_rk4_without_projection_drifts_off_the_constraints(double_pendulum, dp_start):
@@ -151,12 +154,21 @@ def test_variational_energy_error_stays_bounded_while_rk4_grows(double_pendulum,
     rk = rk4(double_pendulum, q0, v0, h=0.01, n_steps=10_000)
     vi_slope, vi_win = drift_slope(vi.t, vi.energy_error)
     rk_slope, rk_win = drift_slope(rk.t, rk.energy_error)
-    # bounded: no trend in the per-window maxima, last window like the first
-    assert abs(vi_slope) * 100.0 < 0.5 * vi_win.max()  # measured 0.08
-    assert vi_win[-1] < 10 * vi_win[0]  # measured 0.4
-    # RK4: the per-window maxima rise (steadily), by orders of magnitude
-    assert rk_slope * 100.0 > 0.5 * rk_win.max()  # measured 1.1
-    assert rk_win[-1] > 100 * rk_win[0]  # measured 1.4e3
+    half = len(vi.t) // 2
+
+    def late_over_early(err):
+        return np.abs(err[half:]).max() / np.abs(err[:half]).max()
+
+    # bounded: the fitted trend of the per-window maxima is small against their size, and the
+    # second half of the run reaches no higher than the first (the chaotic motion makes the
+    # window maxima fluctuate, so a first-window comparison would be meaningless)
+    assert abs(vi_slope) * 100.0 < 0.25 * vi_win.max()  # measured 0.053
+    assert late_over_early(vi.energy_error) < 2.0  # measured 1.11
+    # RK4: the per-window maxima rise in every window, and by orders of magnitude
+    assert rk_slope * 100.0 > 0.5 * rk_win.max()  # measured 0.99
+    assert np.all(np.diff(rk_win) > 0)  # measured: strictly increasing
+    assert rk_win[-1] > 100 * rk_win[0]  # measured 4.0e3
+    assert late_over_early(rk.energy_error) > 3.0  # measured 7.4
     assert rk_win.max() > 1000 * vi_win.max()  # measured 7.8e4
 
 
@@ -166,7 +178,7 @@ def test_rk4_and_variational_agree_with_each_other_on_the_slider():
     q0, v0 = model.initial_state()
     a = rk4(model, q0, v0, h=0.001, t_end=1.0)
     b = fastvi.integrate(model, q0, v0, h=0.001, t_end=1.0, method="P2L-Q3G")
-    assert np.max(np.abs(a.q[-1] - b.q[-1])) < 1e-9  # measured 1.3e-11
+    assert np.max(np.abs(a.q[-1] - b.q[-1])) < 1e-9  # measured 2.4e-11
 
 
 def test_scipy_wrapper_matches_minimal_coordinate_reference(double_pendulum, dp_start):
@@ -175,9 +187,9 @@ def test_scipy_wrapper_matches_minimal_coordinate_reference(double_pendulum, dp_
     th, om = chain_pendulum_reference([np.pi / 2] * 2, [0.0, 0.0], res.t, [1.0, 1.0], [1.0, 1.0])
     qref, vref = chain_cartesian(th, om, [1.0, 1.0])
     assert res.success
-    assert np.max(np.abs(res.q - qref)) < 1e-9  # measured 6e-12
-    assert np.max(np.abs(res.v - vref)) < 1e-9  # measured 2e-11
-    assert np.max(np.abs(res.energy_error)) < 1e-9  # measured 7e-12
+    assert np.max(np.abs(res.q - qref)) < 1e-10  # measured 4.7e-13
+    assert np.max(np.abs(res.v - vref)) < 1e-10  # measured 3.0e-12
+    assert np.max(np.abs(res.energy_error)) < 1e-9  # measured 3.0e-11
 
 
 def test_rk4_kernels_compile_once_for_different_models(double_pendulum, dp_start, angle_pendulum):
@@ -186,7 +198,7 @@ def test_rk4_kernels_compile_once_for_different_models(double_pendulum, dp_start
     rk4(fastvi.scenes.rotary_rod_slider(), *fastvi.scenes.rotary_rod_slider().initial_state(),
         h=0.01, n_steps=3)
     assert len(rk4_module.run.signatures) == 1
-    assert len(rk4_module.acceleration.signatures) == 1
+    assert len(rk4_module.observe.signatures) == 1  # the other entry point called from Python
 
 
 def test_rk4_result_records_every_step_and_stats(double_pendulum, dp_start):

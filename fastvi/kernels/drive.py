@@ -25,6 +25,35 @@ def energy(fns, prm, q, p, v, scratch):
 
 
 @njit
+def accept(fns, prm, h, state, ws, n_total, save_every, outs, info, iters, gmax, gvmax, res):
+    """Book-keeping after a step has been taken (state rows 0–2 already hold the new state):
+    counters, residual windows, and the sample when one is due."""
+    T, Qs, Vs, Ps, En, Gr, GVr, It = outs
+    q, p, v = state[0], state[1], state[2]
+    info[I_MAXRES] = max(info[I_MAXRES], res)
+    info[I_WIN_G] = max(info[I_WIN_G], gmax)
+    info[I_WIN_GV] = max(info[I_WIN_GV], gvmax)
+    info[I_WIN_IT] += iters
+    k = int(info[I_STEPS]) + 1
+    info[I_STEPS] = k
+    if k % save_every == 0 or k == n_total:
+        j = int(info[I_SLOT])
+        T[j] = k * h
+        for a in range(q.shape[0]):
+            Qs[j, a] = q[a]
+            Vs[j, a] = v[a]
+            Ps[j, a] = p[a]
+        En[j] = energy(fns, prm, q, p, v, ws[9][0])
+        Gr[j] = info[I_WIN_G]
+        GVr[j] = info[I_WIN_GV]
+        It[j] = info[I_WIN_IT]
+        info[I_WIN_G] = 0.0
+        info[I_WIN_GV] = 0.0
+        info[I_WIN_IT] = 0.0
+        info[I_SLOT] = j + 1
+
+
+@njit
 def run(fns, flags, Mc, prm, tabs, h, tol, max_iter, state, ws, n_chunk, n_total, save_every, outs, info):
     """Advance ``state`` (rows q, p, v, then scratch) by up to ``n_chunk`` steps.
 
@@ -33,11 +62,9 @@ def run(fns, flags, Mc, prm, tabs, h, tol, max_iter, state, ws, n_chunk, n_total
     being the maxima/sums over the steps since the previous sample. Returns a status code;
     on failure ``info[I_FAILED]`` holds the index of the step that failed.
     """
-    T, Qs, Vs, Ps, En, Gr, GVr, It = outs
     q, p, v, q1, p1, v1 = state[0], state[1], state[2], state[3], state[4], state[5]
     sout = np.zeros(4)  # once per chunk, not per step
     n = q.shape[0]
-    scratch = ws[9][0]
     for _ in range(n_chunk):
         k = int(info[I_STEPS])
         if k >= n_total:
@@ -50,31 +77,11 @@ def run(fns, flags, Mc, prm, tabs, h, tol, max_iter, state, ws, n_chunk, n_total
             info[I_FAILED] = k
             return status
         info[I_FIRST] = 0.0
-        info[I_MAXRES] = max(info[I_MAXRES], sout[3])
-        info[I_WIN_G] = max(info[I_WIN_G], sout[1])
-        info[I_WIN_GV] = max(info[I_WIN_GV], sout[2])
-        info[I_WIN_IT] += sout[0]
         for a in range(n):
             q[a] = q1[a]
             p[a] = p1[a]
             v[a] = v1[a]
-        k += 1
-        info[I_STEPS] = k
-        if k % save_every == 0 or k == n_total:
-            j = int(info[I_SLOT])
-            T[j] = k * h
-            for a in range(n):
-                Qs[j, a] = q[a]
-                Vs[j, a] = v[a]
-                Ps[j, a] = p[a]
-            En[j] = energy(fns, prm, q, p, v, scratch)
-            Gr[j] = info[I_WIN_G]
-            GVr[j] = info[I_WIN_GV]
-            It[j] = info[I_WIN_IT]
-            info[I_WIN_G] = 0.0
-            info[I_WIN_GV] = 0.0
-            info[I_WIN_IT] = 0.0
-            info[I_SLOT] = j + 1
+        accept(fns, prm, h, state, ws, n_total, save_every, outs, info, sout[0], sout[1], sout[2], sout[3])
     return 0
 
 

@@ -6,6 +6,7 @@ registered in :data:`SCENES` by name.
 """
 
 from .double_pendulum import double_pendulum
+from .four_bar import four_bar
 from .pendulum import pendulum
 from .rotary_rod_slider import rotary_rod_slider
 from .spherical_pendulum import spherical_pendulum
@@ -18,7 +19,8 @@ SCENES = {
     "rotary_rod_slider": rotary_rod_slider,
     "spherical_pendulum": spherical_pendulum,
     "triple_pendulum": triple_pendulum,
+    "four_bar": four_bar,
 }
 
 __all__ = ["SCENES", "pendulum", "double_pendulum", "rotary_rod_slider", "triple_pendulum",
-           "spherical_pendulum"]
+           "spherical_pendulum", "four_bar"]

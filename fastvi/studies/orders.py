@@ -2,30 +2,32 @@ r"""``python -m fastvi orders``: the measured order of every combination → ``d
 
 Paper A studies how the control points, the quadrature rule of the unconstrained action and
 the constraint points change the accuracy; its tables did not survive, so this study
-produces ours. For every degree ``s = 1 … 5`` and every combination
+produces ours. For every degree ``s = 1 … 5`` and every combination of
 
-* quadrature ``Q<s>G``, ``Q<s+1>G`` (paper B's choice), ``Q<s+1>L``,
+* quadrature ``Q<s>G``, ``Q<s+1>G`` (paper B's choice), ``Q<s+1>L`` (all exact to degree
+  ``>= 2s − 1``, so all designed for order ``2s``),
 * control nodes ``-NE`` / ``-NL`` / ``-NC``,
-* constraint points ``-CE``, ``-CN``, ``-CL<k>`` (``3 <= k <= s+1``), ``-CG<k>`` (``1 <= k <= s-1``)
+* constraint points ``-CE``, ``-CN``, ``-CL<k>`` (``3 <= k <= s+1``), ``-CG<k>``
+  (``1 <= k <= s-1``): every placement with at most ``s + 1`` constraint points (more make
+  the step ill-posed; :func:`run_study` checks a few of those separately),
 
-(every placement with at most ``s + 1`` constraint points; more make the step
-over-determined, which the study checks separately), it integrates the planar double and
-triple pendulum from ``θ_i = π/2`` at rest up to ``T = 1`` with ``h = T/N`` for
-``N = 2, 3, 4, 5, 6, 7, 8, 10, 11, 13, 16, … , 512`` (ratio ``2^{1/4}``) and measures at the
-grid points ``t_k = k h``
+it integrates the planar double and triple pendulum from ``θ_i = π/2`` at rest up to
+``T = 1`` with ``h = T/N``, ``N`` from :data:`N_SEQUENCE` (ratio ``2^{1/4}``), and measures
+at the grid points ``t_k = k h``
 
     e_q(h) = max_k |q_k − q(t_k)|_∞,   e_p(h) = max_k |p_k − M v(t_k)|_∞,   e_H(h) = max_k |H_k − H_0|
 
 against SciPy's DOP853 (``rtol = atol = 1e-13``) in angle coordinates
 (:func:`fastvi.studies.reference.chain_pendulum_reference`). The observed order is the
 least-squares log–log slope (:func:`fastvi.studies.convergence.observed_order`) over the
-``WINDOW`` smallest step sizes whose error is above the floor (``FLOORS``: the reference's
-own error and round-off) and still decreasing; at least ``MIN_POINTS`` step sizes. The
-error constant is ``e_q`` at the fixed ``h = 1/N_FIX[s]``, with the mean Newton iterations
-per step there.
+``WINDOW`` smallest step sizes whose error is above the floor (:data:`FLOORS`: the
+reference's own error and round-off) and still decreasing, at least ``MIN_POINTS`` of them.
+The error constant is ``e_q`` at the fixed ``h = 1/N_FIX[s]``, reported with the mean Newton
+iterations per step there.
 
-Writes ``docs/orders.md`` (or ``--out``). ``--quick`` measures a handful of combinations
-on a short ``h`` range (the test suite runs it).
+Writes ``docs/orders.md`` (or ``--out``). ``--quick`` measures two combinations for
+``s = 1, 2`` on a short ``h`` range (seconds; the test suite runs it). The full study takes
+a few minutes on two cores.
 """
 
 from __future__ import annotations
@@ -44,18 +46,23 @@ from .reference import REF_TOL, chain_cartesian, chain_pendulum_reference
 
 T_END = 1.0
 THETA0 = math.pi / 2
-#: step counts over [0, T]: h = T/N, ratio 2^(1/4)
+#: step counts over [0, T]: h = T/N, ratio 2^(1/4), N = 2 … 512
 N_SEQUENCE = tuple(sorted({int(round(2 * 2 ** (k / 4))) for k in range(33)}))
-#: errors below these are the reference's own error (~2e-13 in q, ~5e-12 in p) or round-off
-FLOORS = {"q": 1e-11, "p": 1e-10, "H": 1e-11}
+#: errors below these are not discretisation error: the reference differs from a 1e-14 run
+#: by ~2e-13 in q and ~3e-12 in p, and fastvi's own round-off plateau sits near 5e-13
+FLOORS = {"q": 2e-12, "p": 3e-11, "H": 2e-12}
 #: the fit uses the WINDOW smallest h above the floor, and needs at least MIN_POINTS of them
-WINDOW = 8
+WINDOW = 6
 MIN_POINTS = 5
+#: a fit whose slope has a standard error above this is shown with its ± (not settled)
+SETTLED = 0.05
 #: the error constant and Newton iterations are reported at h = 1/N_FIX[s]
-N_FIX = {1: 64, 2: 32, 3: 16, 4: 16, 5: 11}
+N_FIX = {1: 64, 2: 32, 3: 16, 4: 16, 5: 16}
 DEGREES = (1, 2, 3, 4, 5)
 QUICK_DEGREES = (1, 2)
 QUICK_SEQUENCE = tuple(n for n in N_SEQUENCE if 16 <= n <= 64)
+#: step counts at which the over-determined placements (J > s) are tried
+OVER_N = (16, 32, 64, 128)
 DEFAULT_OUT = Path(__file__).resolve().parents[2] / "docs" / "orders.md"
 COMMAND = "python -m fastvi orders"
 
@@ -78,28 +85,44 @@ class Setup:
         return scenes.SCENES[self.scene]()
 
     def start(self):
+        """``(θ0, ω0)`` in angles."""
         return np.full(self.bodies, THETA0), np.zeros(self.bodies)
+
+    def initial_state(self, model):
+        th0, om0 = self.start()
+        return model.initial_state(*th0, *om0)
 
 
 SETUPS = (Setup("double_pendulum", 2), Setup("triple_pendulum", 3))
 
 
 def combinations(s: int, quick: bool = False) -> list[str]:
-    """Method names measured for degree ``s``, quadrature-major."""
+    """Method names measured for degree ``s``: quadrature, then placement, then nodes."""
     if quick:
         return [f"P{s}L-Q{s + 1}G-NL-CN", f"P{s}L-Q{s + 1}G-NE-CE"]
     cons = ["CE", "CN"] + [f"CL{k}" for k in range(3, s + 2)] + [f"CG{k}" for k in range(1, s)]
-    names = []
-    for quad in (f"Q{s}G", f"Q{s + 1}G", f"Q{s + 1}L"):
-        for c in cons:
-            for nodes in "LEC":
-                names.append(f"P{s}L-{quad}-N{nodes}-{c}")
-    return names
+    return [f"P{s}L-{quad}-N{nodes}-{c}"
+            for quad in (f"Q{s}G", f"Q{s + 1}G", f"Q{s + 1}L") for c in cons for nodes in "LEC"]
 
 
 def overdetermined(s: int) -> list[str]:
-    """Placements with more than ``s + 1`` constraint points (J > s)."""
+    """Placements with more than ``s + 1`` constraint points (``J > s``)."""
     return [f"P{s}L-Q{s + 1}G-NL-CL{s + 2}", f"P{s}L-Q{s + 1}G-NL-CG{s}"]
+
+
+def equivalent_pairs(degrees) -> list[tuple[str, str, str]]:
+    """Pairs of combinations that coincide on these scenes, with the reason (checked)."""
+    pairs = []
+    for s in degrees:
+        if s >= 2:
+            pairs.append((f"P{s}L-Q{s + 1}G-NE-CE", "P1L-Q2G-NL-CN",
+                          "ends only: every degree is RATTLE"))
+        if s >= 3:
+            pairs.append((f"P{s}L-Q{s + 1}G-NE-CL{s}", f"P{s - 1}L-Q{s}G-NL-CN",
+                          f"{s} Lobatto points: degree {s} = degree {s - 1}"))
+        pairs.append((f"P{s}L-Q{s}G-NL-CN", f"P{s}L-Q{s + 1}L-NL-CN",
+                      "quadrature: the action is integrated exactly"))
+    return pairs
 
 
 class References:
@@ -122,48 +145,33 @@ class References:
 
 # --------------------------------------------------------------------------- measurement
 @dataclass
-class Measurement:
-    """Errors of one combination on one set-up, per step count."""
+class Fit:
+    """An observed order: slope, its standard error, and how many step sizes entered."""
 
-    name: str
-    setup: Setup
-    N: list = field(default_factory=list)
-    err: dict = field(default_factory=lambda: {"q": [], "p": [], "H": []})
-    its: list = field(default_factory=list)
-    status: list = field(default_factory=list)
+    order: float
+    stderr: float
+    points: int
 
     @property
-    def h(self) -> np.ndarray:
-        return T_END / np.asarray(self.N, float)
+    def ok(self) -> bool:
+        return bool(np.isfinite(self.order))
 
-    def order(self, key: str) -> tuple[float, int]:
-        """``(slope, points used)`` of ``err[key]`` (nan, 0 when too few points)."""
-        return fit_order(self.h, self.err[key], FLOORS[key])
-
-    def at(self, N: int, key: str = "q") -> float:
-        return self.err[key][self.N.index(N)] if N in self.N else float("nan")
-
-    def its_at(self, N: int) -> float:
-        return self.its[self.N.index(N)] if N in self.N else float("nan")
-
-    @property
-    def failed(self) -> list:
-        return [N for N, st in zip(self.N, self.status) if st != "SUCCESS"]
+    def __str__(self) -> str:
+        if not self.ok:
+            return "–"
+        if self.stderr < SETTLED:
+            return f"{self.order:.2f}"
+        return f"{self.order:.1f}±{self.stderr:.1f}"
 
 
-def fit_order(hs, errs, floor: float, window: int = WINDOW, min_points: int = MIN_POINTS):
+def fit_order(hs, errs, floor: float, window: int = WINDOW, min_points: int = MIN_POINTS) -> Fit:
     """Observed order over the ``window`` smallest ``h`` above ``floor``.
 
     Points are scanned from the largest ``h`` down; failed runs (nan) are skipped and the
     first error below ``floor`` starts the plateau. Of what remains, the ``window`` smallest
-    ``h`` are fitted with :func:`observed_order`; if the error does not decrease
-    monotonically over them, the window shrinks from its large-``h`` end (never below
-    ``min_points``).
-
-    Returns
-    -------
-    order : float (nan if no monotone run of ``min_points`` points exists)
-    used : int, the number of points fitted
+    ``h`` are fitted with :func:`observed_order` (large ``h`` are pre-asymptotic); if the
+    error does not decrease monotonically over them, the window shrinks from its large-``h``
+    end, never below ``min_points``.
     """
     hs = np.asarray(hs, float)
     errs = np.asarray(errs, float)
@@ -178,21 +186,53 @@ def fit_order(hs, errs, floor: float, window: int = WINDOW, min_points: int = MI
         idx = keep[-w:]
         order, used = observed_order(hs[idx], errs[idx], plateau=floor, min_points=min_points)
         if used.all():
-            return order, w
-    return float("nan"), 0
+            x, y = np.log(hs[idx]), np.log(errs[idx])
+            resid = y - np.polyval(np.polyfit(x, y, 1), x)
+            se = math.sqrt(float(resid @ resid) / (w - 2) / float(((x - x.mean()) ** 2).sum()))
+            return Fit(order, se, w)
+    return Fit(float("nan"), float("nan"), 0)
+
+
+@dataclass
+class Measurement:
+    """Errors of one combination on one set-up, per step count."""
+
+    name: str
+    setup: Setup
+    N: list = field(default_factory=list)
+    err: dict = field(default_factory=lambda: {"q": [], "p": [], "H": []})
+    its: list = field(default_factory=list)
+    status: list = field(default_factory=list)
+
+    @property
+    def h(self) -> np.ndarray:
+        return T_END / np.asarray(self.N, float)
+
+    def order(self, key: str) -> Fit:
+        return fit_order(self.h, self.err[key], FLOORS[key])
+
+    def at(self, N: int, key: str = "q") -> float:
+        """The error at ``h = T/N`` (nan if that run failed or was not made)."""
+        return self.err[key][self.N.index(N)] if N in self.N else float("nan")
+
+    def its_at(self, N: int) -> float:
+        return self.its[self.N.index(N)] if N in self.N else float("nan")
+
+    @property
+    def failed(self) -> list:
+        return [N for N, st in zip(self.N, self.status) if st != "SUCCESS"]
 
 
 def measure(setup: Setup, model, name: str, refs: References, sequence=N_SEQUENCE,
             n_fix: int | None = None) -> Measurement:
-    """Integrate ``name`` for every ``N`` in ``sequence`` until all errors are under the floors.
+    """Integrate ``name`` for each ``N`` in ``sequence`` until all errors are under the floors.
 
-    The run goes on to at least ``n_fix`` steps. Newton failures (large ``h``) are recorded
+    Always goes on to at least ``n_fix`` steps. Newton failures (large ``h``) are recorded
     with nan errors.
     """
     import fastvi
 
-    th0, om0 = setup.start()
-    q0, v0 = model.initial_state(*th0, *om0)
+    q0, v0 = setup.initial_state(model)
     out = Measurement(name, setup)
     for N in sequence:
         res = fastvi.integrate(model, q0, v0, h=T_END / N, n_steps=N, method=name,
@@ -220,36 +260,42 @@ def run_study(degrees=DEGREES, quick: bool = False, log=None) -> dict:
 
     Returns
     -------
-    dict with ``rows`` {(s, name): {setup label: Measurement}}, ``overdetermined``
-    [(name, {label: status})] and ``reference_check`` {label: max |Δq|, |Δp| between the
-    reference at 1e-13 and 1e-14}.
+    dict with ``rows`` {(s, name): {set-up label: Measurement}}, ``n_fix`` {s: N},
+    ``overdetermined`` [(name, J, {label: [(N, status, e_q)]})], ``equivalent``
+    [(a, b, reason, max |q_a − q_b|)], ``reference_check`` {label: (Δq, Δp)} between the
+    reference at 1e-13 and at 1e-14, ``quick``, ``degrees``, ``sequence``.
     """
+    import fastvi
+
     refs = References()
     models = {st: st.model() for st in SETUPS}
     sequence = QUICK_SEQUENCE if quick else N_SEQUENCE
-    rows = {}
+    rows, n_fixes = {}, {}
     for s in degrees:
         t0 = time.perf_counter()
-        n_fix = min(N_FIX[s], sequence[-1]) if not quick else sequence[len(sequence) // 2]
+        n_fix = sequence[len(sequence) // 2] if quick else N_FIX[s]
+        n_fixes[s] = n_fix
         for name in combinations(s, quick):
             rows[(s, name)] = {st.label: measure(st, models[st], name, refs, sequence, n_fix)
                                for st in SETUPS}
         if log:
             log(f"s = {s}: {len(combinations(s, quick))} combinations in "
                 f"{time.perf_counter() - t0:.1f} s")
-    over = []
+    over, equiv = [], []
     if not quick:
-        import fastvi
-
-        for s in degrees[:3]:
+        for s in [d for d in degrees if d <= 3]:
             for name in overdetermined(s):
                 stat = {}
                 for st in SETUPS:
-                    q0, v0 = models[st].initial_state(*st.start()[0], *st.start()[1])
-                    res = fastvi.integrate(models[st], q0, v0, h=1 / 32, n_steps=32, method=name,
-                                           on_failure="return")
-                    stat[st.label] = (res.status.name, res.failed_step)
-                over.append((name, stat))
+                    m = measure(st, models[st], name, refs, OVER_N, OVER_N[-1])
+                    stat[st.label] = list(zip(m.N, m.status, m.err["q"]))
+                over.append((name, fastvi.method(name).J, stat))
+        tp = SETUPS[1]
+        q0, v0 = tp.initial_state(models[tp])
+        for a, b, why in equivalent_pairs(degrees):
+            ra, rb = (fastvi.integrate(models[tp], q0, v0, h=1 / 32, n_steps=32, method=x)
+                      for x in (a, b))
+            equiv.append((a, b, why, float(np.max(np.abs(ra.q - rb.q)))))
     check = {}
     for st in SETUPS:
         th0, om0 = st.start()
@@ -258,67 +304,73 @@ def run_study(degrees=DEGREES, quick: bool = False, log=None) -> dict:
         a = chain_cartesian(*chain_pendulum_reference(th0, om0, t, ones, ones, tol=REF_TOL), ones)
         b = chain_cartesian(*chain_pendulum_reference(th0, om0, t, ones, ones, tol=1e-14), ones)
         check[st.label] = (float(np.max(np.abs(a[0] - b[0]))), float(np.max(np.abs(a[1] - b[1]))))
-    return dict(rows=rows, overdetermined=over, reference_check=check, quick=quick,
-                degrees=tuple(degrees), sequence=sequence)
+    return dict(rows=rows, n_fix=n_fixes, overdetermined=over, equivalent=equiv,
+                reference_check=check, quick=quick, degrees=tuple(degrees), sequence=sequence)
 
 
 # --------------------------------------------------------------------------- analysis
-def _suffix(name: str) -> str:
-    return name.split("-", 2)[2]
-
-
 def _base(name: str) -> str:
+    """``P<s>L-Q<r><G|L>`` of a canonical name."""
     return "-".join(name.split("-")[:2])
 
 
+def _suffix(name: str) -> str:
+    return "-" + name.split("-", 2)[2]
+
+
 def order_class(meas: dict) -> float:
-    """The smallest q-order over the set-ups, rounded to an integer (nan if unmeasured)."""
-    vals = [m.order("q")[0] for m in meas.values()]
-    if any(not np.isfinite(v) for v in vals):
+    """The even integer nearest the mean q and p order over the set-ups (nan if unmeasured).
+
+    Every combination here is symmetric (symmetric node and point sets), so its order is
+    even; averaging q and p over both pendulums damps a single unsettled fit.
+    """
+    vals = [m.order(k).order for m in meas.values() for k in ("q", "p")]
+    vals = [v for v in vals if np.isfinite(v)]
+    if len(vals) < 2:
         return float("nan")
-    return float(round(min(vals)))
+    return float(2 * round(np.mean(vals) / 2))
 
 
 def recommend(rows: dict, s: int, base: str, n_fix: int) -> dict:
     """Pick the default suffix for the name ``base`` (``P<s>L-Q<r><G|L>``) from the table.
 
-    Highest order class first; among equal orders the current default ``-NL-CN`` is kept
-    unless another combination's error constant is smaller by more than ``1.5×`` on every
-    set-up (smaller differences are not worth a change of meaning of the name); then fewer
-    Newton iterations.
+    The highest order class wins. Among combinations of that order the current default
+    ``-NL-CN`` is kept unless another one's error constant ``e_q(1/n_fix)`` is smaller by
+    more than 1.5× on both pendulums (a smaller gain is not worth changing what a name
+    means); otherwise the smallest error constant on the triple pendulum.
     """
-    cands = {name: meas for (ss, name), meas in rows.items() if ss == s and _base(name) == base}
+    cands = {nm: meas for (ss, nm), meas in rows.items() if ss == s and _base(nm) == base}
     current = f"{base}-NL-CN"
-    best_order = max((order_class(m) for m in cands.values() if np.isfinite(order_class(m))),
-                     default=float("nan"))
-    top = {nm: m for nm, m in cands.items() if order_class(m) == best_order}
+    classes = {nm: order_class(m) for nm, m in cands.items()}
+    best = max((c for c in classes.values() if np.isfinite(c)), default=float("nan"))
+    top = sorted(nm for nm, c in classes.items() if c == best)
 
     def const(nm):
         return {lab: m.at(n_fix) for lab, m in cands[nm].items()}
 
-    pick = current if current in top else None
-    reason = "keeps the highest measured order"
-    if pick is None:
-        pick = min(top, key=lambda nm: (const(nm)["triple"], np.nanmean([m.its_at(n_fix) for m in cands[nm].values()])))
-        reason = "the current default does not reach the highest order"
-    else:
+    if current in top:
         cur = const(current)
-        better = [nm for nm in top
-                  if all(const(nm)[lab] * 1.5 < cur[lab] for lab in cur)]
+        better = [nm for nm in top if all(const(nm)[lab] * 1.5 < cur[lab] for lab in cur)]
         if better:
             pick = min(better, key=lambda nm: const(nm)["triple"])
             reason = "same order, error constant smaller by more than 1.5× on both pendulums"
-    return dict(pick=pick, current=current, order=best_order, top=sorted(top), reason=reason,
-                const=const(pick), current_const=const(current))
+        else:
+            pick = current
+            same = [nm for nm in top if nm != current and all(
+                np.isclose(const(nm)[lab], cur[lab], rtol=1e-3) for lab in cur)]
+            others = len(top) - 1
+            reason = (f"highest order ({best:.0f}); " + (
+                "no other combination reaches it" if not others else
+                f"{others} other(s) reach it, {len(same)} of them with the same error "
+                "constant (to 0.1 %), none smaller by 1.5×"))
+    else:
+        pick = min(top, key=lambda nm: const(nm)["triple"])
+        reason = f"the current default does not reach the highest order ({best:.0f})"
+    return dict(pick=pick, current=current, order=best, top=top, reason=reason)
 
 
 def node_family_spread(rows: dict, s: int, n_fix: int) -> float:
-    """Largest relative spread of ``e_q(1/n_fix)`` over the node families, placements ≠ CN.
-
-    In exact arithmetic the node family only changes the basis of the same polynomial
-    space, so unless the constraint points are the nodes, the three families are the same
-    method: this measures how far round-off takes them apart.
-    """
+    """Largest relative spread of ``e_q(1/n_fix)`` over the node families, placements ≠ CN."""
     groups = {}
     for (ss, name), meas in rows.items():
         if ss != s or name.endswith("-CN"):
@@ -326,31 +378,75 @@ def node_family_spread(rows: dict, s: int, n_fix: int) -> float:
         key = name.replace("-NE-", "-N?-").replace("-NL-", "-N?-").replace("-NC-", "-N?-")
         for lab, m in meas.items():
             groups.setdefault((key, lab), []).append(m.at(n_fix))
+    return _spread(groups.values())
+
+
+def quadrature_spread(rows: dict, s: int, n_fix: int) -> float:
+    """Largest relative spread of ``e_q(1/n_fix)`` over the three quadrature rules."""
+    groups = {}
+    for (ss, name), meas in rows.items():
+        if ss != s:
+            continue
+        key = _suffix(name)
+        for lab, m in meas.items():
+            groups.setdefault((key, lab), []).append(m.at(n_fix))
+    return _spread(groups.values())
+
+
+def _spread(groups) -> float:
     spread = 0.0
-    for vals in groups.values():
+    for vals in groups:
         v = np.asarray(vals)
-        if np.all(np.isfinite(v)) and len(v) > 1 and np.min(v) > 0:
+        if len(v) > 1 and np.all(np.isfinite(v)) and np.min(v) > 0:
             spread = max(spread, float((np.max(v) - np.min(v)) / np.min(v)))
     return spread
 
 
+def all_converge_below(rows: dict, s: int) -> int:
+    """Smallest ``N`` such that every combination of degree ``s`` converged for all ``N' >= N``."""
+    worst = 0
+    for (ss, _), meas in rows.items():
+        if ss == s:
+            for m in meas.values():
+                worst = max([worst] + m.failed)
+    later = [n for n in N_SEQUENCE if n > worst]
+    return later[0] if later else 0
+
+
 # --------------------------------------------------------------------------- report
-def _fmt_order(meas: Measurement, key: str) -> str:
-    order, used = meas.order(key)
-    return "–" if not np.isfinite(order) else f"{order:.2f}"
-
-
 def _fmt_e(x: float) -> str:
     return "fail" if not np.isfinite(x) else f"{x:.1e}"
 
 
+def _fmt_its(x: float) -> str:
+    return "–" if not np.isfinite(x) else f"{x:.1f}"
+
+
+def _orders3(m: Measurement) -> str:
+    return " / ".join(str(m.order(k)) for k in ("q", "p", "H"))
+
+
 def _failed(meas: dict) -> str:
-    parts = []
-    for lab, m in meas.items():
-        if m.failed:
-            parts.append(f"{lab[0].upper()}: h ≥ 1/{max(m.failed)}" if max(m.failed) < 64
-                         else f"{lab[0].upper()}: {len(m.failed)} h")
-    return "; ".join(parts)
+    return "; ".join(f"{lab[0].upper()}: N = {', '.join(map(str, m.failed))}"
+                     for lab, m in meas.items() if m.failed)
+
+
+def _base_key(base: str):
+    q = base.split("-")[1]
+    return (q[-1] != "G", int(q[1:-1]))
+
+
+PLACEMENTS = (
+    ("ends only `-CE` (paper B)", lambda s: f"P{s}L-Q{s + 1}G-NL-CE"),
+    ("every Lobatto node `-NL-CN` (= `-CL<s+1>`)", lambda s: f"P{s}L-Q{s + 1}G-NL-CN"),
+    ("every equidistant node `-NE-CN`", lambda s: f"P{s}L-Q{s + 1}G-NE-CN"),
+    ("every Chebyshev node `-NC-CN`", lambda s: f"P{s}L-Q{s + 1}G-NC-CN"),
+    ("s − 1 Gauss points + ends `-CG<s−1>` (paper A)",
+     lambda s: f"P{s}L-Q{s + 1}G-NL-CG{s - 1}" if s >= 2 else None),
+    ("s Lobatto points `-CL<s>`", lambda s: f"P{s}L-Q{s + 1}G-NL-CL{s}" if s >= 3 else None),
+    ("s − 1 Lobatto points `-CL<s−1>`",
+     lambda s: f"P{s}L-Q{s + 1}G-NL-CL{s - 1}" if s >= 4 else None),
+)
 
 
 def render(study: dict) -> str:
@@ -360,98 +456,131 @@ def render(study: dict) -> str:
     rows = study["rows"]
     quick = study["quick"]
     seq = study["sequence"]
+    degrees = study["degrees"]
+    n_fix = study["n_fix"]
     L = []
     w = L.append
+    cmd = COMMAND + (" --quick" if quick else "")
     w("# Observed orders of every combination (paper A's study)")
     w("")
-    cmd = COMMAND + (" --quick" if quick else "")
-    w(f"Generated by `{cmd}` (`fastvi/studies/orders.py`); do not edit by hand.")
+    w(f"Generated by `{cmd}` (`fastvi/studies/orders.py`); do not edit by hand. "
+      "Method names are explained in `fastvi/tables.py`: `P<s>L-Q<r><G|L>-N<E|L|C>-C<E|N|L<k>|G<k>>`.")
     w("")
+    # ---------------------------------------------------------------- set-up
     w("## Set-up")
     w("")
-    w(f"* Scenes: `double_pendulum()` and `triple_pendulum()` (unit masses and lengths, "
-      f"g = 9.81, Cartesian coordinates), started from θ_i = π/2 at rest, integrated to "
-      f"T = {T_END:g}: the nonlinear regime (the bobs fall through the bottom with "
-      f"|ω| up to 6–8 rad/s).")
-    w(f"* Step sizes h = T/N for N = {', '.join(map(str, seq))} (ratio 2^(1/4)); a combination "
-      f"stops refining once all three errors are below their floors.")
+    w(f"* Scenes: `fastvi.scenes.double_pendulum()` and `fastvi.scenes.triple_pendulum()` "
+      f"(unit masses and lengths, g = 9.81, Cartesian coordinates), started from θ_i = π/2 "
+      f"at rest and integrated to T = {T_END:g}: the nonlinear regime (the bobs fall "
+      f"through the bottom, |ω| up to 6–8 rad/s).")
+    w(f"* Step sizes h = T/N, N = {', '.join(map(str, seq))} (ratio 2^(1/4)); a combination "
+      "stops refining once all three errors are below their floors.")
     w("* Errors at the grid points t_k = kh: e_q = max_k |q_k − q(t_k)|_∞, "
       "e_p = max_k |p_k − M v(t_k)|_∞, e_H = max_k |H_k − H_0|, against SciPy DOP853 "
       f"(rtol = atol = {REF_TOL:g}) in angle coordinates "
       "(`fastvi.studies.reference.chain_pendulum_reference`), mapped to Cartesian.")
     chk = study["reference_check"]
-    w("* Reference accuracy: DOP853 at 1e-13 against 1e-14 differs by "
-      + ", ".join(f"{lab} {dq:.0e} in q and {dp:.0e} in p" for lab, (dq, dp) in chk.items())
-      + ". Errors below the floors "
+    w("* The reference at 1e-13 differs from one at 1e-14 by "
+      + ", ".join(f"{dq:.0e} in q and {dp:.0e} in p ({lab})" for lab, (dq, dp) in chk.items())
+      + "; errors below the floors "
       + ", ".join(f"{FLOORS[k]:g} ({k})" for k in ("q", "p", "H"))
-      + " are therefore dropped (the round-off plateau).")
+      + " are not discretisation error and are dropped (the round-off plateau).")
     w(f"* Order = least-squares log–log slope (`fastvi.studies.convergence.observed_order`) "
-      f"over the {WINDOW} smallest h whose error is above the floor and decreasing "
-      f"(at least {MIN_POINTS}; fewer usable points gives '–'). Using the smallest h keeps "
-      "the pre-asymptotic large-h points out of the fit.")
-    w("* Error constant: e_q at h = 1/N_fix (the same h for every combination of a degree, "
-      "so equal-order combinations can be ranked); Newton iterations per step (Newton "
-      "tolerance 1e-14, the default) at the same h. 'fail' = Newton did not converge "
-      "(30 iterations) at that h.")
-    w("* Nominal = `fastvi.method(name).nominal_order`, the order the combination is "
-      "designed for (2 for `-CE`, else min(2s, quadrature exactness + 1)).")
+      f"over the {WINDOW} smallest h whose error is above the floor and still decreasing "
+      f"(at least {MIN_POINTS} h, else '–'). The largest h are pre-asymptotic on this "
+      "chaotic problem and stay out of the fit. A slope whose standard error exceeds "
+      f"{SETTLED} is printed with it (`9.8±0.6`): the asymptotic regime is barely reached "
+      "before the floor (orders 8 and 10 span only a factor 2–3 in h there).")
+    w("* Error constant: e_q at one h = 1/N_fix per degree (the same for every combination of "
+      "that degree, so equal-order combinations can be ranked), with the mean Newton "
+      "iterations per step there (tolerance 1e-14, the default). 'fail': Newton did not "
+      "converge in 30 iterations at that h.")
+    w("* Nominal = `fastvi.method(name).nominal_order`, the order the combination is designed "
+      "for.")
     w("")
 
-    degrees = study["degrees"]
-    # ---------------------------------------------------------------- summary
-    w("## Summary and defaults")
-    w("")
+    # ---------------------------------------------------------------- findings
     if not quick:
-        w(_summary_text(study))
+        w("## What the table shows")
         w("")
-    w("| name | default now | orders q / p / H (double) | orders q / p / H (triple) | "
-      "e_q(1/N_fix) triple | recommended | why |")
+        w(_findings(study))
+        w("")
+        w("### Order by constraint placement")
+        w("")
+        w("Observed order of q, triple / double pendulum, quadrature `Q<s+1>G` "
+          "(the quadrature makes no difference here, see above):")
+        w("")
+        w("| constraint points | " + " | ".join(f"s = {s}" for s in degrees) + " |")
+        w("|---|" + "---|" * len(degrees))
+        for label, fn in PLACEMENTS:
+            cells = []
+            for s in degrees:
+                nm = fn(s)
+                if nm is None or (s, get_method(nm).name) not in rows:
+                    cells.append("")
+                    continue
+                r = rows[(s, get_method(nm).name)]
+                cells.append(f"{r['triple'].order('q')} / {r['double'].order('q')}")
+            w(f"| {label} | " + " | ".join(cells) + " |")
+        w("")
+
+    # ---------------------------------------------------------------- defaults
+    w("## Defaults")
+    w("")
+    w("A name without suffixes (`P<s>L-Q<r><G|L>`, paper B's names) means `-NL-CN` today. "
+      "For each name measured, the default's orders and what the table recommends "
+      "(highest order class first, then the error constant; `-NL-CN` is kept unless another "
+      "combination of the same order is better by more than 1.5× on both pendulums):")
+    w("")
+    w("| name | orders q / p / H, double | orders q / p / H, triple | e_q(1/N_fix) D / T "
+      "| Newton/step D / T | recommended | why |")
     w("|---|---|---|---|---|---|---|")
-    recs = {}
     for s in degrees:
-        n_fix = _n_fix(study, s)
         bases = sorted({_base(nm) for (ss, nm) in rows if ss == s}, key=_base_key)
         for base in bases:
-            rec = recommend(rows, s, base, n_fix)
-            recs[base] = rec
+            rec = recommend(rows, s, base, n_fix[s])
             cur = rows.get((s, rec["current"]))
             if cur is None:
                 continue
-            w(f"| `{base}` | `-NL-CN` | {_orders3(cur['double'])} | {_orders3(cur['triple'])} | "
-              f"{_fmt_e(cur['triple'].at(n_fix))} | `{_suffix(rec['pick'])}` | {rec['reason']} |")
+            d, t = cur["double"], cur["triple"]
+            w(f"| `{base}` | {_orders3(d)} | {_orders3(t)} | "
+              f"{_fmt_e(d.at(n_fix[s]))} / {_fmt_e(t.at(n_fix[s]))} | "
+              f"{_fmt_its(d.its_at(n_fix[s]))} / {_fmt_its(t.its_at(n_fix[s]))} | "
+              f"`{_suffix(rec['pick'])}` | {rec['reason']} |")
     w("")
-    # paper B's own variant
-    w("Paper B's own scheme (`-NE-CE`, equidistant nodes, constraints at the step ends), "
-      "for comparison:")
+    if not quick:
+        w(_defaults_text(study))
+        w("")
+    w("Paper B's own scheme (`-NE-CE`: equidistant nodes, constraints at the step ends only):")
     w("")
-    w("| name | orders q / p / H (double) | orders q / p / H (triple) | e_q(1/N_fix) triple |")
+    w("| name | orders q / p / H, double | orders q / p / H, triple | e_q(1/N_fix) D / T |")
     w("|---|---|---|---|")
     for s in degrees:
-        n_fix = _n_fix(study, s)
         nm = f"P{s}L-Q{s + 1}G-NE-CE"
         if (s, nm) in rows:
-            r = rows[(s, nm)]
-            w(f"| `{nm}` | {_orders3(r['double'])} | {_orders3(r['triple'])} | "
-              f"{_fmt_e(r['triple'].at(n_fix))} |")
+            d, t = rows[(s, nm)]["double"], rows[(s, nm)]["triple"]
+            w(f"| `{nm}` | {_orders3(d)} | {_orders3(t)} | "
+              f"{_fmt_e(d.at(n_fix[s]))} / {_fmt_e(t.at(n_fix[s]))} |")
     w("")
 
     # ---------------------------------------------------------------- full tables
     w("## Full tables")
     w("")
-    w("Columns: observed orders of q, p, H on the double (D) and triple (T) pendulum; "
-      "e_q at h = 1/N_fix; Newton iterations per step there (D / T); nominal order; "
-      "step sizes where Newton failed (always the largest ones).")
+    w("Observed orders of q, p, H on the double (D) and triple (T) pendulum; e_q at "
+      "h = 1/N_fix; Newton iterations per step there; nominal order; the step counts N "
+      "(h = 1/N) at which Newton failed (always among the smallest N).")
     w("")
     for s in degrees:
-        n_fix = _n_fix(study, s)
-        w(f"### s = {s} (N_fix = {n_fix}, h = {1 / n_fix:.4g})")
+        nf = n_fix[s]
+        w(f"### s = {s} (N_fix = {nf}, h = {1 / nf:.4g})")
         w("")
         if not quick:
-            spread = node_family_spread(rows, s, n_fix)
-            w(f"Node families: for every placement other than `-CN` the three families are "
-              f"the same method in exact arithmetic (the same polynomial space, the same "
-              f"constraint points); their e_q at h = 1/{n_fix} agree to a relative "
-              f"{spread:.0e}.")
+            w(f"Node families: for every placement other than `-CN` the three families give the "
+              f"same method in exact arithmetic (same polynomial space, same constraint points); "
+              f"their e_q at h = 1/{nf} agree to a relative {node_family_spread(rows, s, nf):.0e}. "
+              f"Quadratures: for the same suffix, `Q{s}G`, `Q{s + 1}G` and `Q{s + 1}L` agree to a "
+              f"relative {quadrature_spread(rows, s, nf):.0e}. Every combination converged at "
+              f"every h ≤ 1/{all_converge_below(rows, s)}.")
             w("")
         w("| combination | D q | D p | D H | T q | T p | T H | e_q D | e_q T | Newton D / T "
           "| nominal | Newton failed |")
@@ -460,72 +589,150 @@ def render(study: dict) -> str:
             if ss != s:
                 continue
             d, t = meas["double"], meas["triple"]
-            w(f"| `{nm}` | {_fmt_order(d, 'q')} | {_fmt_order(d, 'p')} | {_fmt_order(d, 'H')} | "
-              f"{_fmt_order(t, 'q')} | {_fmt_order(t, 'p')} | {_fmt_order(t, 'H')} | "
-              f"{_fmt_e(d.at(n_fix))} | {_fmt_e(t.at(n_fix))} | "
-              f"{_fmt_its(d.its_at(n_fix))} / {_fmt_its(t.its_at(n_fix))} | "
+            w(f"| `{nm}` | {d.order('q')} | {d.order('p')} | {d.order('H')} | "
+              f"{t.order('q')} | {t.order('p')} | {t.order('H')} | "
+              f"{_fmt_e(d.at(nf))} | {_fmt_e(t.at(nf))} | "
+              f"{_fmt_its(d.its_at(nf))} / {_fmt_its(t.its_at(nf))} | "
               f"{get_method(nm).nominal_order} | {_failed(meas)} |")
         w("")
 
     if study["overdetermined"]:
         w("## More than s + 1 constraint points")
         w("")
-        w("With J > s constraint intervals the polynomial of degree s cannot meet the "
-          "constraints at all J + 1 points (e.g. s = 1: a chord of constant length through "
-          "a midpoint on the circle is a zero step). The study runs them once, h = 1/32:")
+        w("With J > s constraint intervals the step has as many equations as unknowns, but "
+          "as h → 0 every G(q(d_j)) tends to G(q_k) and the J·m constraint rows only see the "
+          "s·m normal components of the increments: the Newton matrix tends to a singular one "
+          "(for s = 1 it is singular at once). `fastvi.tables` accepts these names; the study "
+          "tries them at h = " + ", ".join(f"1/{n}" for n in OVER_N) + " (e_q, or the failure):")
         w("")
         w("| combination | J | double | triple |")
         w("|---|---|---|---|")
-        for nm, stat in study["overdetermined"]:
-            cells = [f"{st} at step {k}" if k is not None else st for st, k in stat.values()]
-            w(f"| `{nm}` | {get_method(nm).J} | {cells[0]} | {cells[1]} |")
+        for nm, J, stat in study["overdetermined"]:
+            cells = []
+            for lab in ("double", "triple"):
+                cells.append(", ".join(_fmt_e(e) if st == "SUCCESS" else st.lower().replace("_", " ")
+                                       for _, st, e in stat[lab]))
+            w(f"| `{nm}` | {J} | {cells[0]} | {cells[1]} |")
         w("")
     return "\n".join(L) + "\n"
 
 
-def _base_key(base: str):
-    q = base.split("-")[1]
-    return (q[-1] != "G", int(q[1:-1]))
+def _findings(study: dict) -> str:
+    """The numbered findings, each with the numbers it rests on."""
+    from ..tables import method as get_method
+
+    rows, degrees, n_fix = study["rows"], study["degrees"], study["n_fix"]
+
+    def q_orders(fn, lab="triple"):
+        out = []
+        for s in degrees:
+            nm = fn(s)
+            if nm is not None and (s, get_method(nm).name) in rows:
+                out.append(f"{rows[(s, get_method(nm).name)][lab].order('q')} (s = {s})")
+        return ", ".join(out)
+
+    default = q_orders(lambda s: f"P{s}L-Q{s + 1}G-NL-CN")
+    ends = q_orders(lambda s: f"P{s}L-Q{s + 1}G-NE-CE")
+    gauss = q_orders(lambda s: f"P{s}L-Q{s + 1}G-NL-CG{s - 1}" if s >= 3 else None)
+    equi = q_orders(lambda s: f"P{s}L-Q{s + 1}G-NE-CN" if s >= 3 else None)
+    cheb = q_orders(lambda s: f"P{s}L-Q{s + 1}G-NC-CN" if s >= 3 else None)
+    qspread = max(quadrature_spread(rows, s, n_fix[s]) for s in degrees)
+    nspread = max(node_family_spread(rows, s, n_fix[s]) for s in degrees)
+    eq = study["equivalent"]
+    eq_max = max((d for *_, d in eq), default=float("nan"))
+    its = ", ".join(f"{_fmt_its(rows[(s, f'P{s}L-Q{s + 1}G-NL-CN')]['triple'].its_at(n_fix[s]))} "
+                    f"(s = {s}, h = 1/{n_fix[s]})" for s in degrees)
+    conv = ", ".join(f"h ≤ 1/{all_converge_below(rows, s)} (s = {s})" for s in degrees)
+    lines = [
+        "1. **The constraint points decide the order.** With the constraint at the s + 1 "
+        "Gauss–Lobatto points (`-NL-CN`, the same points as `-CL<s+1>` with any node family) "
+        f"the triple pendulum shows q-orders {default}: order 2s. With the constraint at the "
+        f"step ends only (paper B's `-NE-CE`) it is {ends}: order 2 whatever s, as the "
+        "trap in `shared/method.md` §7 predicts for these scenes. Interior points other than "
+        f"Lobatto's lose order: s − 1 Gauss points plus the ends (paper A's `-CG<s−1>`) give "
+        f"{gauss}, i.e. 2s − 2; constraints at equidistant nodes (`-NE-CN`) {equi}; at "
+        f"Chebyshev nodes (`-NC-CN`) {cheb}. The momentum and the energy error follow the "
+        "same orders (full tables).",
+        "2. **The quadrature makes no difference on these scenes.** The Lagrangian of a chain "
+        "pendulum in Cartesian coordinates is quadratic in v with constant M and linear in q, "
+        "so every rule exact to degree 2s − 2 integrates the unconstrained action exactly: "
+        f"`Q<s>G`, `Q<s+1>G` and `Q<s+1>L` agree to a relative {qspread:.0e} in e_q at "
+        "N_fix. Ranking quadratures needs a nonlinear potential or a configuration-dependent "
+        "mass matrix (the rod–slider of paper B); it is not measured here.",
+        "3. **The node family matters only through `-CN`.** For any other placement the three "
+        "families span the same polynomial space with the same constraint points: one method, "
+        f"whose e_q agree to a relative {nspread:.0e} (round-off through the conditioning).",
+        "4. **A degree above the number of constraint intervals buys nothing here.** These "
+        "pairs give the same trajectory on the triple pendulum (h = 1/32, max |Δq|):",
+    ]
+    text = "\n".join(lines) + "\n\n"
+    text += "   | combination | same as | why | max abs Δq |\n   |---|---|---|---|\n"
+    for a, b, why, d in eq:
+        text += f"   | `{get_method(a).name}` | `{get_method(b).name}` | {why} | {d:.0e} |\n"
+    text += (
+        f"\n   All differences are at most {eq_max:.0e} (round-off). With k Lobatto constraint "
+        "points, degree k − 1 is the best one can do: degree k reproduces it, degree k + 1 "
+        "loses order (see `-CL<s−1>` in the placement table).\n"
+        "5. **More than s + 1 constraint points is ill-posed** (last section): Newton fails or "
+        "the Newton matrix is singular as h → 0.\n"
+        f"6. **Newton.** The default takes {its} iterations per step on the triple pendulum, "
+        "from the polynomial predictor. At large h Newton fails for some combinations (the "
+        "bobs whip through the bottom within a few steps); every combination with J ≤ s "
+        f"converged at {conv}."
+    )
+    return text
 
 
-def _n_fix(study, s):
-    seq = study["sequence"]
-    return min(N_FIX[s], seq[-1]) if not study["quick"] else seq[len(seq) // 2]
-
-
-def _orders3(m: Measurement) -> str:
-    return " / ".join(_fmt_order(m, k) for k in ("q", "p", "H"))
-
-
-def _fmt_its(x: float) -> str:
-    return "–" if not np.isfinite(x) else f"{x:.1f}"
-
-
-def _summary_text(study: dict) -> str:
-    """Placeholder, replaced below once the numbers are known."""
-    return ""
+def _defaults_text(study: dict) -> str:
+    rows, degrees, n_fix = study["rows"], study["degrees"], study["n_fix"]
+    keep, change = [], []
+    for s in degrees:
+        for base in sorted({_base(nm) for (ss, nm) in rows if ss == s}, key=_base_key):
+            rec = recommend(rows, s, base, n_fix[s])
+            (keep if rec["pick"] == rec["current"] else change).append((base, rec))
+    if not change:
+        head = ("**Recommendation: keep `-NL-CN` as the default of every name.** It reaches "
+                "order 2s for every s measured, which no other placement does for s ≥ 3 "
+                "(finding 1); the combinations of the same order are the same points under "
+                "another name (`-CL<s+1>`, with any node family) and give the same error to "
+                "0.1 %; and it needs no more Newton iterations than the others.")
+    else:
+        head = ("**Recommendation: the evidence favours a different default for "
+                + ", ".join(f"`{b}` (`{_suffix(r['pick'])}`: {r['reason']})" for b, r in change)
+                + "; keep `-NL-CN` for the others.**")
+    return head + (
+        " The quadrature of a name does not change the measured numbers on these scenes "
+        "(finding 2), so `P<s>L-Q<s>G` and `P<s>L-Q<s+1>G` are equally good here; paper B's "
+        "`Q<s+1>G` remains the documented choice.")
 
 
 # --------------------------------------------------------------------------- CLI
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog=f"{COMMAND}", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog=COMMAND, description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true",
                         help="two combinations for s = 1, 2 on a short h range (seconds)")
     parser.add_argument("--out", default=str(DEFAULT_OUT), help="markdown file to write")
     parser.add_argument("--degrees", default=None,
                         help="comma-separated degrees (default 1,2,3,4,5; quick: 1,2)")
     args = parser.parse_args(argv)
-    degrees = (tuple(int(x) for x in args.degrees.split(",")) if args.degrees
-               else (QUICK_DEGREES if args.quick else DEGREES))
+    try:
+        degrees = (tuple(int(x) for x in args.degrees.split(",")) if args.degrees
+                   else (QUICK_DEGREES if args.quick else DEGREES))
+    except ValueError:
+        parser.error(f"`--degrees` must be comma-separated integers, got {args.degrees!r}")
     for s in degrees:
         if s not in N_FIX:
             parser.error(f"`--degrees` must be among {sorted(N_FIX)}, got {s}")
     t0 = time.perf_counter()
-    study = run_study(degrees, quick=args.quick,
-                      log=lambda msg: print(f"orders: {msg}", file=sys.stderr, flush=True))
-    text = render(study)
+    import warnings
+
+    with warnings.catch_warnings():
+        # SciPy clips rtol = 1e-14 (the reference self-check) to 2.2e-14 and says so
+        warnings.filterwarnings("ignore", message="At least one element of `rtol` is too small")
+        study = run_study(degrees, quick=args.quick,
+                          log=lambda msg: print(f"orders: {msg}", file=sys.stderr, flush=True))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(text, encoding="utf-8")
+    out.write_text(render(study), encoding="utf-8")
     print(f"orders: wrote {out} ({time.perf_counter() - t0:.1f} s)", file=sys.stderr)
     return 0

@@ -1,0 +1,106 @@
+r"""Planar four-bar linkage, parallelogram form, in redundant Cartesian coordinates.
+
+Ground pivots ``A = (0, 0)`` and ``D = (L, 0)``; crank ``AB`` and rocker ``DC`` of length
+``a``, coupler ``BC`` of length ``L`` (equal to the ground link: a parallelogram). Point masses
+``mB`` at B and ``mC`` at C, gravity ``−g ŷ``. ``q = (xB, yB, xC, yC)``, three constraints
+
+    g1 = ½ (|B|² − a²),   g2 = ½ (|C − B|² − L²),   g3 = ½ (|C − D|² − a²),
+
+one degree of freedom. When the bars are aligned (crank angle 0 or π) the constraint
+Jacobian loses rank: the parallelogram and anti-parallelogram branches cross there, and a
+crank with enough energy passes through that singular position twice per turn.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model import Model
+from ._common import attach, check_positive
+
+# params = (mB, mC, a, L, g)
+
+
+def _V(q, p):
+    return p[4] * (p[0] * q[1] + p[1] * q[3])
+
+
+def _dV(q, p, out):
+    out[0] = 0.0
+    out[1] = p[4] * p[0]
+    out[2] = 0.0
+    out[3] = p[4] * p[1]
+
+
+def _ddV(q, p, out):
+    out[:, :] = 0.0
+
+
+def _g(q, p, out):
+    dx = q[2] - q[0]
+    dy = q[3] - q[1]
+    ex = q[2] - p[3]
+    out[0] = 0.5 * (q[0] * q[0] + q[1] * q[1] - p[2] * p[2])
+    out[1] = 0.5 * (dx * dx + dy * dy - p[3] * p[3])
+    out[2] = 0.5 * (ex * ex + q[3] * q[3] - p[2] * p[2])
+
+
+def _G(q, p, out):
+    dx = q[2] - q[0]
+    dy = q[3] - q[1]
+    out[:, :] = 0.0
+    out[0, 0] = q[0]
+    out[0, 1] = q[1]
+    out[1, 0] = -dx
+    out[1, 1] = -dy
+    out[1, 2] = dx
+    out[1, 3] = dy
+    out[2, 2] = q[2] - p[3]
+    out[2, 3] = q[3]
+
+
+def _ddg(q, eta, p, out):
+    a = eta[0] + eta[1]
+    b = eta[1]
+    c = eta[1] + eta[2]
+    out[:, :] = 0.0
+    out[0, 0] = a
+    out[1, 1] = a
+    out[2, 2] = c
+    out[3, 3] = c
+    out[0, 2] = -b
+    out[2, 0] = -b
+    out[1, 3] = -b
+    out[3, 1] = -b
+
+
+def four_bar(mB: float = 1.0, mC: float = 1.0, a: float = 1.0, L: float = 2.0, g: float = 9.81) -> Model:
+    """Parallelogram four-bar linkage (n = 4, m = 3) with exact second derivatives.
+
+    The model has ``initial_state(theta, omega=0.0) -> (q0, v0)`` on the parallelogram
+    branch (crank angle ``theta`` from the ground line, coupler parallel to the ground),
+    ``crank_angle(q)`` and ``coupler_tilt(q)`` (the coupler's angle to the ground: 0 on the
+    parallelogram branch).
+    """
+    check_positive(mB=mB, mC=mC, a=a, L=L, g=g)
+    model = Model(
+        4, 3, params=(mB, mC, a, L, g), mass=np.diag([mB, mB, mC, mC]), potential=_V,
+        potential_grad=_dV, potential_hessian=_ddV, constraint=_g, constraint_jacobian=_G,
+        constraint_hessian=_ddg, name="four_bar",
+    )
+
+    def initial_state(theta: float, omega: float = 0.0):
+        B = a * np.array([np.cos(theta), np.sin(theta)])
+        vB = a * omega * np.array([-np.sin(theta), np.cos(theta)])
+        return np.r_[B, B + [L, 0.0]], np.r_[vB, vB]
+
+    def crank_angle(q):
+        q = np.asarray(q)
+        return np.arctan2(q[..., 1], q[..., 0])
+
+    def coupler_tilt(q):
+        q = np.asarray(q)
+        return np.arctan2(q[..., 3] - q[..., 1], q[..., 2] - q[..., 0])
+
+    return attach(model, "four_bar", dict(mB=mB, mC=mC, a=a, L=L, g=g), initial_state=initial_state,
+                  crank_angle=crank_angle, coupler_tilt=coupler_tilt)

@@ -72,8 +72,8 @@ def test_diagnostics_equal_the_maxima_of_integrate(double_pendulum, dp_members, 
         assert ens.max_velocity_residual[i] == np.max(r.velocity_residual)
         assert np.array_equal(ens.q[i], r.q[-1])
     # and they are what a variational integrator should give (not only self-consistent)
-    assert ens.max_constraint_residual.max() <= 1e-13  # measured 4e-16
-    assert 0 < ens.max_energy_error.max() <= 1e-3  # measured 2e-5
+    assert ens.max_constraint_residual.max() <= 1e-13  # measured 3e-16
+    assert 0 < ens.max_energy_error.max() <= 2e-3  # measured 4e-4 (tumbling members, h = 0.01)
 
 
 def test_q_dependent_mass_model_members_equal_integrate():
@@ -154,7 +154,7 @@ def test_per_member_length_sets_the_pendulum_period(pendulum):
         period = (tc[-1] - tc[0]) / (tc.size - 1)
         exact = 4 * np.sqrt(l / g) * ellipk(np.sin(theta0 / 2) ** 2)
         small = 2 * np.pi * np.sqrt(l / g)
-        assert abs(period / exact - 1) <= 1e-6  # measured ≤ 3e-8
+        assert abs(period / exact - 1) <= 1e-7  # measured ≤ 8e-9
         assert abs(period / small - 1) <= 1e-4  # measured 2.5e-5: the amplitude correction θ0²/16
 
 
@@ -181,7 +181,7 @@ def test_projection_of_members_is_reported_in_one_warning(pendulum):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         fastvi.integrate_ensemble(pendulum, Q0, V0, h=H, n_steps=2)
-    msgs = [str(w.message) for w in caught]
+    msgs = [str(w.message) for w in caught if not issubclass(w.category, numba.NumbaExperimentalFeatureWarning)]
     assert len(msgs) == 1 and "2 of 3 members" in msgs[0] and "member 1" in msgs[0]
 
 

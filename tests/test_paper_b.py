@@ -52,7 +52,8 @@ def test_claim_verdicts_disagree_when_the_numbers_contradict_the_claims():
 def test_growth_is_one_for_bounded_and_ten_for_linear_drift():
     t = np.linspace(0.0, 100.0, 100_001)
     assert paper_b._growth(np.sin(7 * t)) == pytest.approx(1.0, abs=1e-6)
-    assert paper_b._growth(1e-3 * t * np.abs(np.sin(7 * t))) == pytest.approx(10.0, rel=0.01)
+    # the first tenth's peak falls a little short of t = 10, hence not exactly 10
+    assert paper_b._growth(1e-3 * t * np.abs(np.sin(7 * t))) == pytest.approx(10.0, rel=0.05)  # 10.3
 
 
 def test_quick_study_writes_tables_figures_and_page(tmp_path, capsys):
@@ -64,7 +65,7 @@ def test_quick_study_writes_tables_figures_and_page(tmp_path, capsys):
         assert heading in page
     # 2 systems × 2 step sizes × (3 methods × 2 variants + 2 RK4 rows)
     assert page.count("(paper B) |") == 12 and page.count("(fastvi default) |") == 12
-    assert page.count("| RK4 + projection |") == 4
+    assert page.count("| RK4 + projection |") == 4 + 1  # and a row of the order table
     figs = sorted(os.listdir(tmp_path / "figures"))
     assert len(figs) == 6 and all(f.startswith("paper-b-") and f.endswith(".png") for f in figs)
     for f in figs:

@@ -328,6 +328,67 @@ def predict(tabs, n, m, s, J, h, vk, ws, first):
 
 
 @njit
+def newton(fns, flags, Mc, prm, tabs, h, qk, pk, ws, tol, max_iter, out):
+    """Newton's method on the step equations from the unknowns in ``ws[0]``.
+
+    Stops on the increment of the control points, scaled by ``max(1, |q_k|)``: converged
+    when it is below ``tol``, when the contraction estimate ``θ/(1−θ)·|δ|`` predicts the
+    remaining error below ``tol``, or at a round-off plateau (``θ ≥ ½`` with ``|δ| ≤ 100
+    tol``). A residual test on the momentum rows would leave an error ~tol/h per step.
+    Gives up early when the increments grow twice in a row (divergence).
+    """
+    b, L, Ld, Lc, E, tau = tabs
+    X, R, A, piv = ws[0], ws[1], ws[2], ws[3]
+    n = flags[0]
+    m = flags[1]
+    s = L.shape[0] - 1
+    J = Lc.shape[1] - 1
+    sn = s * n
+    N = sn + J * m
+    qscale = 1.0
+    for a in range(n):
+        qscale = max(qscale, abs(qk[a]))
+    dprev = np.inf
+    grew = 0
+    it = 0
+    while it < max_iter:
+        it += 1
+        out[0] = it
+        st = assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, True)
+        if st != _OK:
+            return st
+        if lu_factor(A, piv, N) != 0:
+            return _SINGULAR
+        lu_solve(A, piv, R, N)
+        dn = 0.0
+        for k in range(N):
+            X[k] -= R[k]
+        for k in range(sn):
+            dn = max(dn, abs(R[k]))
+        dn /= qscale
+        if not np.isfinite(dn):
+            return _NONFINITE
+        if dn <= tol:
+            return _OK
+        if it >= 2:
+            theta = dn / dprev
+            if theta < 1.0 and theta / (1.0 - theta) * dn <= tol:
+                return _OK
+            if theta >= 0.5 and dn <= 100.0 * tol:
+                return _OK  # round-off plateau
+            grew = grew + 1 if theta > 1.0 else 0
+            if grew >= 2:
+                break
+        dprev = dn
+    assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, False)
+    res = 0.0
+    for k in range(N):
+        res = max(res, abs(R[k]))
+    out[3] = res
+    return _NEWTON
+
+
+@njit
 def step(fns, flags, Mc, prm, tabs, h, qk, pk, vk, q1, p1, v1, ws, tol, max_iter, first, out):
     """Advance (q_k, p_k) by one step into (q1, p1, v1).
 
@@ -348,52 +409,16 @@ def step(fns, flags, Mc, prm, tabs, h, qk, pk, vk, q1, p1, v1, ws, tol, max_iter
         G0 = G[0]
         fns[_CJAC](qk.ctypes, qk.ctypes, prm.ctypes, G0.ctypes)
     predict(tabs, n, m, s, J, h, vk, ws, first)
-
-    qscale = 1.0
-    for a in range(n):
-        qscale = max(qscale, abs(qk[a]))
-    dprev = np.inf
-    converged = False
-    it = 0
-    while it < max_iter:
-        it += 1
-        st = assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, True)
-        if st != _OK:
-            out[0] = it
-            return st
-        if lu_factor(A, piv, N) != 0:
-            out[0] = it
-            return _SINGULAR
-        lu_solve(A, piv, R, N)
-        dn = 0.0
-        for k in range(N):
-            X[k] -= R[k]
-        for k in range(sn):
-            dn = max(dn, abs(R[k]))
-        dn /= qscale
-        if not np.isfinite(dn):
-            out[0] = it
-            return _NONFINITE
-        if dn <= tol:
-            converged = True
-            break
-        if it >= 2:
-            theta = dn / dprev
-            if theta < 1.0 and theta / (1.0 - theta) * dn <= tol:
-                converged = True
-                break
-            if theta >= 0.5 and dn <= 100.0 * tol:
-                converged = True  # round-off plateau
-                break
-        dprev = dn
-    out[0] = it
-    if not converged:
-        assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, False)
-        res = 0.0
-        for k in range(N):
-            res = max(res, abs(R[k]))
-        out[3] = res
-        return _NEWTON
+    st = newton(fns, flags, Mc, prm, tabs, h, qk, pk, ws, tol, max_iter, out)
+    if st != _OK and not first:
+        # The extrapolated polynomial can be far off (stiff oscillations with ωh > 1, a
+        # sudden turn): start again from the straight line through q_k with velocity v_k.
+        used = out[0]
+        predict(tabs, n, m, s, J, h, vk, ws, True)
+        st = newton(fns, flags, Mc, prm, tabs, h, qk, pk, ws, tol, max_iter, out)
+        out[0] += used
+    if st != _OK:
+        return st
 
     # final residual at the converged unknowns: exact D_s for the momentum, and g(q1)
     st = assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, False)

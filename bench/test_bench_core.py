@@ -1,0 +1,84 @@
+"""Yardstick benchmark (issue 2, item 9): generic cfunc kernel vs hand-specialized kernel.
+
+Double pendulum (Cartesian, paper B's parameters), θ1 = θ2 = π/2 at rest, 10⁴ steps at
+h = 0.01, for ``P1L-Q2G``, ``P2L-Q3G``, ``P3L-Q4G``:
+
+* ``generic``: the public ``fastvi.integrate`` (validation, projection of the initial state,
+  the compiled loop with cfunc callbacks, every step saved, the ``Result``);
+* ``specialized``: ``bench/yardstick.py``, the same algorithm with the model inlined, driven
+  from Python the same way (every step saved).
+
+Each pair sits in one pytest-benchmark group; ``bench/conftest.py`` prints the ratio of
+medians per method. Run with ``make bench``.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fastvi
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import yardstick  # noqa: E402  (bench/ is not a package)
+from conftest import RATIO_KEY  # noqa: E402
+
+METHODS = ("P1L-Q2G", "P2L-Q3G", "P3L-Q4G")
+H = 0.01
+N_STEPS = 10_000
+MIN_ROUNDS = 7  # medians over >= 7 rounds: the machine is shared and noisy
+
+_finals: dict[str, np.ndarray] = {}  # generic final q per method, for the cross-check
+
+
+@pytest.fixture(scope="module")
+def scene():
+    model = fastvi.scenes.double_pendulum()
+    q0, v0 = model.initial_state(np.pi / 2, np.pi / 2)
+    # the state fastvi.integrate starts from after its projection (moves q0 by round-off);
+    # the yardstick starts from the same bits, so both trajectories can be compared exactly
+    start = fastvi.integrate(model, q0, v0, h=H, n_steps=1, method=METHODS[0])
+    return model, q0, v0, start.q[0].copy(), start.v[0].copy()
+
+
+def _runner(impl, method, scene):
+    model, q0, v0, qs, vs = scene
+    if impl == "generic":
+        def run():
+            res = fastvi.integrate(model, q0, v0, h=H, n_steps=N_STEPS, method=method)
+            return res.q[-1], res.energy
+    else:
+        tabs = fastvi.method(method).kernel_tables
+        prm = tuple(model.params)
+
+        def run():
+            out = yardstick.integrate_double_pendulum(qs, vs, h=H, n_steps=N_STEPS, tabs=tabs,
+                                                      params=prm)
+            return out["q"], out["energy"]
+    return run
+
+
+CASES = [(m, impl) for m in METHODS for impl in ("generic", "specialized")]
+
+
+@pytest.mark.benchmark(min_rounds=MIN_ROUNDS, warmup=False)
+@pytest.mark.parametrize("method,impl", CASES, ids=[f"{m}-{i}" for m, i in CASES])
+def test_double_pendulum_1e4_steps(benchmark, scene, method, impl):
+    benchmark.group = f"double pendulum, 1e4 steps, {method}"
+    benchmark.extra_info[RATIO_KEY] = dict(method=method, impl=impl)
+    run = _runner(impl, method, scene)
+    run()  # compile (or load from cache) and warm up outside the timing
+    q_end, energy = benchmark(run)
+
+    assert energy.shape == (N_STEPS + 1,)
+    # bounded energy error; measured max|ΔH| 3.6e-3 (P1), 1.9e-6 (P2), 1.3e-9 (P3), H0 = −29.4
+    assert np.max(np.abs(energy - energy[0])) < {"P1L-Q2G": 1e-2, "P2L-Q3G": 1e-5,
+                                                  "P3L-Q4G": 1e-8}[method]
+    if impl == "generic":
+        _finals[method] = np.array(q_end)
+    elif method in _finals:
+        # same algorithm, same floating-point operations: same end state (measured 0.0)
+        assert np.max(np.abs(q_end - _finals[method])) <= 1e-12

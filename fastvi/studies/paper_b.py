@@ -222,7 +222,8 @@ def order_table(rows: list[Row], systems: dict) -> str:
             a = _get(rows, n, h1, kind, base).dH
             b = _get(rows, n, h2, kind, base).dH
             cells.append(f"{np.log(a / b) / np.log(h1 / h2):.2f}")
-        lines.append(f"| {label if kind.startswith('rk4') else f'`{label}`'} | " + " | ".join(cells) + " |")
+        name = label if kind.startswith("rk4") else f"`{label}`"
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -443,6 +444,9 @@ def page(rows, systems, claim_lines, figs, slider, t_end, quick, diffs, t_same) 
     median, first, res = slider
     hs = sorted({r.h for r in rows}, reverse=True)
     machine = f"{platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}"
+    if hasattr(os, "getloadavg"):
+        # the study may share the machine: say how busy it was, since it moves the times
+        machine += f", load average {os.getloadavg()[0]:.1f} when the page was written"
     parts = [_INTRO.format(T=t_end, machine=machine,
                            quick="\n**Quick mode (T = {:g} s): not the published numbers.**\n".format(t_end)
                            if quick else "")]

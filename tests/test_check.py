@@ -189,6 +189,12 @@ def bad_constraint_hessian_forgets_second(q, eta, p, out):  # only η₀ ∇²g�
     out[2, 2] = eta[0]
 
 
+def bad_potential_grad_nan(q, p, out):  # e.g. sqrt of a negative number
+    out[0] = np.sqrt(-1.0 - q[0] * q[0])
+    out[1] = 0.0
+    out[2] = p[0] * p[3]
+
+
 CURVE = dict(potential=curve_potential, potential_grad=curve_potential_grad,
              potential_hessian=curve_potential_hessian, constraint=curve_constraint,
              constraint_jacobian=curve_constraint_jacobian, constraint_hessian=curve_constraint_hessian)
@@ -301,6 +307,12 @@ def test_random_nearby_states_catch_a_mistake_invisible_at_the_given_state():
     model._checked = False
     with pytest.raises(fastvi.ModelCheckError, match="potential_grad"):
         model.check(q0, CART_V, n_random=1)
+
+
+def test_non_finite_derivative_at_the_given_state_is_wrong():
+    with pytest.raises(fastvi.ModelCheckError, match="`potential_grad`.*non-finite") as err:
+        curve(potential_grad=bad_potential_grad_nan).check(CURVE_Q)
+    assert err.value.callback == "potential_grad"
 
 
 def test_check_rejects_bad_arguments_by_name():

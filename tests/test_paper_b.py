@@ -83,7 +83,7 @@ def test_full_study_meets_the_acceptance_times(tmp_path):
     """Acceptance: the whole study under 5 minutes; the paper's slider run well under 1 s."""
     t0 = time.perf_counter()
     assert paper_b.main(["--quiet", "--out", str(tmp_path)]) == 0
-    assert time.perf_counter() - t0 < 300.0  # measured 36 s on 2 shared cores
+    assert time.perf_counter() - t0 < 300.0  # measured 38-70 s on 2 shared, busy cores
     median, _, res = paper_b.time_slider()
     assert res.stats["steps"] == 10_000
     assert median < 1.0  # measured 0.08-0.13 s

@@ -1,5 +1,9 @@
-"""The ```python blocks of README.md run, in order, as one script (quick mode)."""
+"""The documentation cannot rot: README.md's ```python blocks run, and docs/api.md lists
+every public name with its parameters, each with a NumPy-style docstring."""
 
+import enum
+import importlib
+import inspect
 import os
 import re
 import subprocess
@@ -46,3 +50,144 @@ def test_readme_python_blocks_run(tmp_path):
         pytest.skip("README.md has no ```python blocks yet")
     proc = run_blocks(blocks, tmp_path)
     assert proc.returncode == 0, f"README.md python blocks failed:\n{proc.stderr[-3000:]}"
+
+
+# ----------------------------------------------------------------------------- docs/api.md
+API = ROOT / "docs" / "api.md"
+PUBLIC_MODULES = ["fastvi.check", "fastvi.symbolic", "fastvi.scenes", "fastvi.tables", "fastvi.status",
+                  "fastvi.model", "fastvi.ensemble", "fastvi.distributed", "fastvi.baselines"]
+# Public modules written for issue 8, held to the full docstring rule below for every name.
+STRICT_MODULES = ["fastvi.check", "fastvi.symbolic"]
+SECTIONS = ("Parameters", "Returns", "Raises", "Attributes", "Notes", "Examples", "References",
+            "See Also", "Yields", "Warns", "Warnings", "Other Parameters", "Methods")
+
+
+def api_sections(text: str) -> dict[str, str]:
+    """``{qualified name: section text}`` for every ``### `name(...)``` heading."""
+    out = {}
+    for block in re.split(r"^(?=### )", text, flags=re.M):
+        m = re.match(r"### `([\w.]+)", block)
+        if m:
+            for extra in re.findall(r"`([\w.]+)`", block.splitlines()[0]):  # "### `a`, `b`"
+                out.setdefault(extra, block)
+            out[m.group(1)] = block
+    return out
+
+
+def docstring_problems(obj) -> list[str]:
+    """Why ``obj``'s docstring is not NumPy style (empty list: it is)."""
+    doc = inspect.getdoc(obj)
+    if not doc:
+        return ["no docstring"]
+    lines = doc.splitlines()
+    problems = []
+    if not lines[0].strip() or not lines[0].rstrip().endswith((".", ":")):
+        problems.append(f"first line is not a one-line summary: {lines[0]!r}")
+    if len(lines) > 1 and lines[1].strip():
+        problems.append("no blank line after the summary line")
+    for i, line in enumerate(lines):
+        if re.match(r"\s*(Args|Arguments|Returns|Raises|Yields|Attributes|Example|Examples|Note|Notes):\s*$", line):
+            problems.append(f"Google-style heading {line.strip()!r}")
+        if line.strip() in SECTIONS and i + 1 < len(lines) and set(lines[i + 1].strip()) == {"-"}:
+            if len(lines[i + 1].strip()) != len(line.strip()):
+                problems.append(f"underline of {line.strip()!r} has the wrong length")
+    headed = {line.strip() for i, line in enumerate(lines[:-1]) if set(lines[i + 1].strip()) == {"-"}}
+    if inspect.isfunction(obj) or inspect.ismethod(obj):
+        params = [p for p in inspect.signature(obj).parameters if p not in ("self", "cls")]
+        if params and "Parameters" not in headed:
+            problems.append(f"no Parameters section for {params}")
+    elif inspect.isclass(obj) and not issubclass(obj, enum.Enum):
+        if not headed & {"Parameters", "Attributes"}:
+            problems.append("no Parameters or Attributes section")
+    return problems
+
+
+def _exported():
+    import fastvi
+
+    names = [(f"fastvi.{n}", getattr(fastvi, n)) for n in fastvi.__all__]
+    for mod_name in STRICT_MODULES:
+        mod = importlib.import_module(mod_name)
+        names += [(f"{mod_name}.{n}", getattr(mod, n)) for n in mod.__all__]
+    return names
+
+
+def _documentable(obj) -> bool:
+    return inspect.isfunction(obj) or inspect.isclass(obj) or inspect.ismodule(obj)
+
+
+# Known gaps in files outside issue 8 (strict: fixing them turns these red until promoted).
+KNOWN_DOCSTRING_GAPS = {
+    "fastvi.method": "fastvi/tables.py `method(name)` has Examples but no Parameters section",
+}
+
+
+def test_every_top_level_name_has_a_section_in_api_md():
+    import fastvi
+
+    sections = api_sections(API.read_text(encoding="utf-8"))
+    missing = [n for n in fastvi.__all__ if f"fastvi.{n}" not in sections]
+    assert not missing, f"add a `### `fastvi.<name>(...)`` section to docs/api.md for {missing}"
+
+
+def test_every_public_submodule_name_is_in_api_md():
+    import fastvi
+
+    text = API.read_text(encoding="utf-8")
+    missing = []
+    for mod_name in PUBLIC_MODULES:
+        try:
+            mod = importlib.import_module(mod_name)
+        except ImportError:  # pragma: no cover - optional extras are installed in .venv
+            continue
+        for n in getattr(mod, "__all__", []):
+            reexported = getattr(fastvi, n, None) is getattr(mod, n) and f"### `fastvi.{n}" in text
+            if f"`{mod_name}.{n}" not in text and not reexported:
+                missing.append(f"{mod_name}.{n}")
+    assert not missing, f"docs/api.md does not mention {missing}"
+
+
+def test_documented_signatures_name_every_parameter():
+    sections = api_sections(API.read_text(encoding="utf-8"))
+    stale = []
+    for qual, obj in _exported():
+        if qual not in sections or not (inspect.isfunction(obj) or inspect.isclass(obj)):
+            continue
+        if inspect.isclass(obj) and issubclass(obj, enum.Enum):
+            continue
+        for p in inspect.signature(obj).parameters:
+            if not re.search(rf"\b{re.escape(p)}\b", sections[qual]):
+                stale.append(f"{qual}: {p}")
+    assert not stale, f"docs/api.md sections do not mention these parameters: {stale}"
+
+
+@pytest.mark.parametrize("qual, obj", [
+    pytest.param(q, o, id=q, marks=[pytest.mark.xfail(strict=True, reason=KNOWN_DOCSTRING_GAPS[q])]
+                 if q in KNOWN_DOCSTRING_GAPS else [])
+    for q, o in _exported() if _documentable(o)])
+def test_exported_object_has_a_numpy_style_docstring(qual, obj):
+    assert docstring_problems(obj) == [], qual
+
+
+def test_docstring_rule_rejects_google_style_and_missing_sections():
+    def google(x):
+        """Do a thing.
+
+        Args:
+            x: the thing.
+        """
+
+    def bare(x):
+        """Do a thing."""
+
+    def good(x):
+        """Do a thing.
+
+        Parameters
+        ----------
+        x : float
+        """
+
+    assert any("Google" in p for p in docstring_problems(google))
+    assert docstring_problems(bare) == ["no Parameters section for ['x']"]
+    assert docstring_problems(good) == []

@@ -5,6 +5,7 @@ the downward vertical, angular velocities) into a consistent Cartesian ``(q0, v0
 registered in :data:`SCENES` by name.
 """
 
+from .chain import chain
 from .double_pendulum import double_pendulum
 from .four_bar import four_bar
 from .pendulum import pendulum
@@ -20,7 +21,8 @@ SCENES = {
     "spherical_pendulum": spherical_pendulum,
     "triple_pendulum": triple_pendulum,
     "four_bar": four_bar,
+    "chain": chain,
 }
 
 __all__ = ["SCENES", "pendulum", "double_pendulum", "rotary_rod_slider", "triple_pendulum",
-           "spherical_pendulum", "four_bar"]
+           "spherical_pendulum", "four_bar", "chain"]

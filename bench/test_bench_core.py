@@ -24,7 +24,8 @@ import fastvi
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import yardstick  # noqa: E402  (bench/ is not a package)
-from conftest import RATIO_KEY  # noqa: E402
+
+RATIO_KEY = "fastvi_yardstick"  # the tag bench/conftest.py builds its ratio table from
 
 METHODS = ("P1L-Q2G", "P2L-Q3G", "P3L-Q4G")
 H = 0.01
@@ -74,9 +75,10 @@ def test_double_pendulum_1e4_steps(benchmark, scene, method, impl):
     q_end, energy = benchmark(run)
 
     assert energy.shape == (N_STEPS + 1,)
-    # bounded energy error; measured max|ΔH| 3.6e-3 (P1), 1.9e-6 (P2), 1.3e-9 (P3), H0 = −29.4
-    assert np.max(np.abs(energy - energy[0])) < {"P1L-Q2G": 1e-2, "P2L-Q3G": 1e-5,
-                                                  "P3L-Q4G": 1e-8}[method]
+    # the run is the real one: energy error of the expected size over t = 100
+    # (measured max|ΔH| 0.124 (P1), 6.6e-5 (P2), 3.4e-7 (P3); H0 = 0, potential scale m g l ≈ 10)
+    assert np.max(np.abs(energy - energy[0])) < {"P1L-Q2G": 0.3, "P2L-Q3G": 2e-4,
+                                                  "P3L-Q4G": 1e-6}[method]
     if impl == "generic":
         _finals[method] = np.array(q_end)
     elif method in _finals:

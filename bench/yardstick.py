@@ -3,12 +3,14 @@ r"""Yardstick: the step kernel hand-specialized to the Cartesian double pendulum
 The generic kernel (``fastvi/kernels/step.py``) evaluates the model through ``numba.cfunc``
 callbacks whose sizes it learns at run time. This module runs the *same algorithm* with the
 double pendulum written directly into the assembly, so that the ratio of the two run times
-measures what the callback interface costs and nothing else:
+measures what the generic model interface costs (opaque callbacks, sizes known only at run
+time, dense handling of ``M``, ``∇²V``, ``G`` and ``∇²g``) and nothing else:
 
 * same unknowns ``X = (ΔQ^1 … ΔQ^s, η_0 … η_{J−1})`` and residual rows, same predictor
   (the previous step's polynomial extrapolated with ``E``), same Newton stopping rule and
   tolerance (increment scaled by ``max(1, |q_k|)``, contraction estimate, round-off plateau),
-  same final residual pass, same LU (:mod:`fastvi.kernels.linalg`) for the Newton matrix and
+  the same divergence exit and straight-line retry when Newton fails, same final residual
+  pass, same LU (:mod:`fastvi.kernels.linalg`) for the Newton matrix and
   for ``G M⁻¹ Gᵀ``, same RATTLE end-momentum projection, same diagnostics per step
   (``max|g(q1)|``, ``max|G v1|``, Newton iterations, energy) saved at every step;
 * the model is inlined (``n = 4``, ``m = 2`` are compile-time constants). With
@@ -233,6 +235,60 @@ def predict(tabs, s, J, h, vk, X, Xp, first):
 
 
 @njit
+def newton(prm, tabs, h, qk, pk, ws, piv, tol, max_iter, out):
+    """The generic ``newton``: increment-based stopping, divergence exit, same LU."""
+    b, L, Ld, Lc, E, tau = tabs
+    X, R, Xp, A, D, G, sm, S = ws
+    qd = sm[0]
+    gj = sm[1]
+    s = L.shape[0] - 1
+    J = Lc.shape[1] - 1
+    sn = s * NQ
+    N = sn + J * NC
+    qscale = 1.0
+    for a in range(NQ):
+        qscale = max(qscale, abs(qk[a]))
+    dprev = np.inf
+    grew = 0
+    it = 0
+    while it < max_iter:
+        it += 1
+        out[0] = it
+        st = assemble(prm, tabs, h, qk, pk, X, R, A, D, G, qd, gj, True)
+        if st != OK:
+            return st
+        if lu_factor(A, piv[0], N) != 0:
+            return SINGULAR
+        lu_solve(A, piv[0], R, N)
+        dn = 0.0
+        for k in range(N):
+            X[k] -= R[k]
+        for k in range(sn):
+            dn = max(dn, abs(R[k]))
+        dn /= qscale
+        if not np.isfinite(dn):
+            return NONFINITE
+        if dn <= tol:
+            return OK
+        if it >= 2:
+            theta = dn / dprev
+            if theta < 1.0 and theta / (1.0 - theta) * dn <= tol:
+                return OK
+            if theta >= 0.5 and dn <= 100.0 * tol:
+                return OK  # round-off plateau
+            grew = grew + 1 if theta > 1.0 else 0
+            if grew >= 2:
+                break
+        dprev = dn
+    assemble(prm, tabs, h, qk, pk, X, R, A, D, G, qd, gj, False)
+    res = 0.0
+    for k in range(N):
+        res = max(res, abs(R[k]))
+    out[3] = res
+    return NEWTON
+
+
+@njit
 def step(prm, tabs, h, qk, pk, vk, q1, p1, v1, ws, piv, tol, max_iter, first, out):
     """Advance (q_k, p_k) by one step into (q1, p1, v1); ``out`` as in the generic ``step``."""
     b, L, Ld, Lc, E, tau = tabs
@@ -257,54 +313,23 @@ def step(prm, tabs, h, qk, pk, vk, q1, p1, v1, ws, piv, tol, max_iter, first, ou
     G[0, 1, 2] = qk[2] - qk[0]
     G[0, 1, 3] = qk[3] - qk[1]
     predict(tabs, s, J, h, vk, X, Xp, first)
+    st = newton(prm, tabs, h, qk, pk, ws, piv, tol, max_iter, out)
+    if st != OK and not first:
+        # the generic kernel's retry from the straight line through q_k with velocity v_k
+        used = out[0]
+        predict(tabs, s, J, h, vk, X, Xp, True)
+        st = newton(prm, tabs, h, qk, pk, ws, piv, tol, max_iter, out)
+        out[0] += used
+    if st != OK:
+        return st
 
-    qscale = 1.0
-    for a in range(NQ):
-        qscale = max(qscale, abs(qk[a]))
-    dprev = np.inf
-    converged = False
-    it = 0
-    while it < max_iter:
-        it += 1
-        st = assemble(prm, tabs, h, qk, pk, X, R, A, D, G, qd, gj, True)
-        if st != OK:
-            out[0] = it
-            return st
-        if lu_factor(A, piv[0], N) != 0:
-            out[0] = it
-            return SINGULAR
-        lu_solve(A, piv[0], R, N)
-        dn = 0.0
-        for k in range(N):
-            X[k] -= R[k]
-        for k in range(sn):
-            dn = max(dn, abs(R[k]))
-        dn /= qscale
-        if not np.isfinite(dn):
-            out[0] = it
-            return NONFINITE
-        if dn <= tol:
-            converged = True
-            break
-        if it >= 2:
-            theta = dn / dprev
-            if theta < 1.0 and theta / (1.0 - theta) * dn <= tol:
-                converged = True
-                break
-            if theta >= 0.5 and dn <= 100.0 * tol:
-                converged = True
-                break
-        dprev = dn
-    out[0] = it
     st = assemble(prm, tabs, h, qk, pk, X, R, A, D, G, qd, gj, False)
+    if st != OK:
+        return st
     res = 0.0
     for k in range(N):
         res = max(res, abs(R[k]))
     out[3] = res
-    if not converged:
-        return NEWTON
-    if st != OK:
-        return st
     for a in range(NQ):
         q1[a] = qk[a] + X[(s - 1) * NQ + a]
 
@@ -404,6 +429,15 @@ def run(prm, tabs, h, tol, max_iter, state, ws, piv, n_steps, Qs, Vs, Ps, En, Gr
     return OK
 
 
+class YardstickError(RuntimeError):
+    """A yardstick step failed (the generic kernel's statuses, same meaning)."""
+
+    def __init__(self, status: Status, step: int, iterations: int):
+        self.status, self.step, self.iterations = status, step, iterations
+        super().__init__(f"yardstick failed: {status.name} at step {step} "
+                         f"({iterations} Newton iterations in all)")
+
+
 def integrate_double_pendulum(q0, v0, *, h, n_steps, tabs, params=(1.0, 1.0, 1.0, 1.0, 9.81),
                               tol=1e-14, max_iter=30):
     """Python driver of the yardstick (no validation: the caller passes a consistent state).
@@ -423,7 +457,13 @@ def integrate_double_pendulum(q0, v0, *, h, n_steps, tabs, params=(1.0, 1.0, 1.0
     -------
     dict with ``q``, ``p``, ``v`` (final state), ``energy`` (n_steps + 1,), the series ``qs``,
     ``vs``, ``ps``, ``constraint_residual``, ``velocity_residual``, ``newton_iterations``,
-    ``steps``, ``wall_time``; raises ``RuntimeError`` naming the status on failure.
+    ``steps``, ``iterations`` (Newton, total), ``max_residual``, ``wall_time``.
+
+    Raises
+    ------
+    YardstickError
+        A step failed; carries ``status`` (:class:`fastvi.Status`), ``step`` (its index) and
+        ``iterations`` (Newton iterations spent, the failed step's included).
     """
     prm = np.ascontiguousarray(params, dtype=np.float64)
     b, L, Ld, Lc, E, tau = tabs
@@ -449,7 +489,7 @@ def integrate_double_pendulum(q0, v0, *, h, n_steps, tabs, params=(1.0, 1.0, 1.0
              Qs, Vs, Ps, En, Gr, GVr, It, info)
     wall = time.perf_counter() - t0
     if st != OK:
-        raise RuntimeError(f"yardstick failed: {Status(st).name} at step {int(info[0])}")
+        raise YardstickError(Status(st), int(info[0]), int(info[1]))
     return dict(q=state[0].copy(), p=state[1].copy(), v=state[2].copy(), energy=En, qs=Qs, vs=Vs,
                 ps=Ps, constraint_residual=Gr, velocity_residual=GVr, newton_iterations=It,
                 steps=int(info[0]), iterations=int(info[1]), max_residual=float(info[2]),

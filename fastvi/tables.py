@@ -385,6 +385,22 @@ def _build(canonical: str) -> Method:
 def method(name: str | Method) -> Method:
     """The :class:`Method` for a name (memoised), or ``name`` itself if it is one.
 
+    Parameters
+    ----------
+    name : str or Method
+        ``P<s>L-Q<r><G|L>[-N<E|L|C>][-C<E|N|L<k>|G<k>>]`` (case-insensitive; see the module
+        docstring). Omitted parts take the defaults ``-NL-CN``.
+
+    Returns
+    -------
+    Method
+        The same object for every spelling of one combination.
+
+    Raises
+    ------
+    ValueError
+        For a name outside the grammar or an invalid count (e.g. ``Q1L``, ``CL1``).
+
     Examples
     --------
     >>> method("P2L-Q3G").name

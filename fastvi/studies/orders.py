@@ -556,8 +556,8 @@ def render(study: dict) -> str:
         if study["mild"]:
             mdeg = sorted({s for s, _ in study["mild"]})
             w(f"The same from the milder start θ_i = π/4 on [0, {MILD_T_END:g}] (triple / double), "
-              "where the error stays smooth in h down to the floor, so orders 8 and 10 have "
-              "more room:")
+              "where the error is less erratic at the smallest h (the study's window, not the "
+              "cleaner hand-picked one of `tests/test_orders.py`):")
             w("")
             w("| constraint points | " + " | ".join(f"s = {s}" for s in mdeg) + " |")
             w("|---|" + "---|" * len(mdeg))
@@ -733,7 +733,40 @@ def _findings(study: dict) -> str:
         "bobs whip through the bottom within a few steps); every combination with J ≤ s "
         f"converged at {conv}."
     )
-    return text
+    return text + "\n" + _nominal_note(study)
+
+
+def _placement_kind(name: str) -> str:
+    """``-NL-CN``, ``-CL<s+1>``, ``-CG<s-1>``, ... of a canonical name, relative to its s."""
+    from ..tables import method as get_method
+
+    meth = get_method(name)
+    nodes, cons = name.split("-")[2:4]
+    if cons in ("CE", "CN"):
+        return f"-{nodes}-{cons}" if cons == "CN" else "-CE"
+    k = int(cons[2:]) - (meth.s + 1 if cons[1] == "L" else meth.s - 1)
+    return f"-{cons[:2]}<s{'+1' if cons[1] == 'L' else '−1'}{'' if k == 0 else f'{k:+d}'}>"
+
+
+def _nominal_note(study: dict) -> str:
+    """Where ``Method.nominal_order`` promises more than the table measures."""
+    from ..tables import method as get_method
+
+    rows = study["rows"]
+    short, reach = {}, {}
+    for (s, nm), meas in rows.items():
+        nominal = get_method(nm).nominal_order
+        measured = order_class(meas)
+        (short if measured < nominal else reach).setdefault(s, []).append(nm)
+    total = sum(len(v) for v in short.values())
+    per_s = ", ".join(f"{len(short.get(s, []))} of {len(short.get(s, [])) + len(reach.get(s, []))} "
+                      f"(s = {s})" for s in study["degrees"])
+    kinds = sorted({_placement_kind(nm) for v in reach.values() for nm in v
+                    if not nm.endswith("-CE") and get_method(nm).s >= 3})
+    return (f"7. **`Method.nominal_order` is optimistic.** The Nominal column (min(2s, exactness "
+            f"of the quadrature + 1) for every interior placement) is not reached by {total} of "
+            f"the {len(rows)} combinations: {per_s}. For s ≥ 3 the interior placements that do "
+            f"reach it are only: {', '.join(f'`{k}`' for k in kinds)} — the s + 1 Lobatto points.")
 
 
 def _s5_note(study: dict) -> str:

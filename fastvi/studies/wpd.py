@@ -23,14 +23,9 @@ It then reads off, at equal maximum energy error over ``T = 1000`` s, how much f
 fastvi's best method is than SciPy DOP853 and than RK4 (goals of issue 6: ≥ 100× and > 1×),
 where the curves cross, and profiles one step (which part costs what).
 
-**The SciPy right-hand side.** :func:`fastvi.baselines.solve_ivp` calls its compiled
-right-hand side with the model's tuple of cfuncs as an argument; numba then re-derives the
-type of that tuple on every call (≈ 0.1–0.3 ms, ten times the cost of the physics). A user
-writing a SciPy right-hand side would not pay that, so the diagrams use
-:func:`lean_solve_ivp`: the same kernel (:func:`fastvi.baselines.rk4.acceleration`, the same
-callbacks) closed over the cfunc tuple, so SciPy's own per-step overhead is what is
-measured. The shipped baseline is timed beside it in panel (a) so the difference is on
-record.
+SciPy's right-hand side is :func:`fastvi.baselines.solve_ivp`'s: the compiled index-1
+acceleration (:func:`fastvi.baselines.rk4.acceleration`) with the model's cfuncs frozen in,
+a few microseconds per call, so SciPy's own per-step overhead is what is measured.
 
 Timing: everything is compiled (or loaded from numba's cache) before timing; each point is
 the median of ``REPEATS`` runs (runs longer than ``LONG_RUN`` seconds are timed once: they
@@ -56,16 +51,15 @@ from dataclasses import dataclass, field
 
 import numba as nb
 import numpy as np
-import scipy.integrate
+import scipy
 
 import fastvi
 from fastvi import _validate as check
 from fastvi._numba import njit, quiet
 from fastvi.baselines import rk4 as rk4_baseline
 from fastvi.baselines import solve_ivp as baseline_solve_ivp
-from fastvi.baselines.rk4 import BaselineResult, acceleration, make_workspace, observe
 from fastvi.kernels.linalg import lu_factor, lu_solve
-from fastvi.kernels.step import assemble, end_momentum
+from fastvi.kernels.step import _PGRAD, assemble, end_momentum
 from fastvi.kernels.step import make_workspace as vi_workspace
 from fastvi.kernels.step import step as vi_step
 from fastvi.status import Status
@@ -102,7 +96,6 @@ FULL = dict(
         "SciPy RK45": (1e-4, 1e-6, 1e-8, 1e-10, 1e-12),
         "SciPy DOP853": (1e-4, 1e-6, 1e-8, 1e-10, 1e-12),
         "SciPy Radau": (1e-4, 1e-6, 1e-8),
-        "SciPy DOP853 (baselines.solve_ivp)": (1e-6, 1e-9, 1e-12),
     },
     long={
         "P1L-Q2G": (0.02, 0.01, 0.005),
@@ -134,7 +127,6 @@ QUICK = dict(
         "SciPy RK45": (1e-5, 1e-8),
         "SciPy DOP853": (1e-5, 1e-8),
         "SciPy Radau": (1e-4,),
-        "SciPy DOP853 (baselines.solve_ivp)": (1e-8,),
     },
     long={
         "P2L-Q3G": (0.04, 0.02),
@@ -146,100 +138,6 @@ QUICK = dict(
     },
     long_horizon={},
 )
-
-
-# ----------------------------------------------------------------------------- SciPy, lean
-def _lean_kernel(fns):
-    """The index-1 right-hand side with the cfunc tuple frozen in (compiled per model)."""
-
-    @nb.njit(cache=False, nogil=True, error_model="numpy", boundscheck=False)
-    def rhs(flags, Mc, prm, y, dy, ws):
-        n = flags[0]
-        for i in range(n):
-            dy[i] = y[n + i]
-        return acceleration(fns, flags, Mc, prm, y[:n], y[n:], dy[n:], ws)
-
-    return rhs
-
-
-_LEAN: dict[int, tuple] = {}  # id(model) -> (model, kernel): compile once per model
-
-
-def lean_solve_ivp(model, q0, v0, *, t_end: float, method: str = "DOP853", rtol: float = 1e-10,
-                   atol: float = 1e-12, t_eval=None, params=None) -> BaselineResult:
-    r"""SciPy ``solve_ivp`` on the index-1 form of ``model``, with a low-overhead right-hand side.
-
-    Same equations and the same compiled physics as :func:`fastvi.baselines.solve_ivp`
-    (``y = (q, v) ↦ (v, a(q, v))`` with ``[M Gᵀ; G 0][a; λ] = [f; −Ġv]`` solved by
-    :func:`fastvi.baselines.rk4.acceleration`), but the right-hand side is a numba function
-    closed over the model's cfunc tuple, so a call costs microseconds instead of the
-    fraction of a millisecond numba spends typing a tuple of cfuncs passed as an argument.
-    The first call for a model compiles it (not timed).
-
-    Parameters
-    ----------
-    model : Model
-    q0, v0 : array_like (n,)
-        Projected onto ``g = 0``, ``G v = 0`` as by :func:`fastvi.integrate`.
-    t_end : float
-    method : {"RK45", "DOP853", "Radau", ...}
-    rtol, atol : float
-    t_eval : array_like, optional
-        Output times (default 1001 equally spaced).
-    params : array_like, optional
-
-    Returns
-    -------
-    BaselineResult
-        ``stats["wall_time"]`` covers ``scipy.integrate.solve_ivp`` only (the energies and
-        residuals at ``t_eval`` are evaluated afterwards); ``stats["steps"]`` and
-        ``stats["rhs_evaluations"]`` hold SciPy's ``nfev``.
-    """
-    n = model.n
-    q0 = check.vector(q0, "q0", n)
-    v0 = check.vector(v0, "v0", n)
-    prm = check.params(params, model)
-    q0, v0 = check.initial_state(model, q0, v0, prm)
-    if t_eval is None:
-        t_eval = np.linspace(0.0, float(t_end), 1001)
-    fns, flags, Mc = model.kernel_arguments()
-    key = id(model)
-    if key not in _LEAN or _LEAN[key][0] is not model:
-        _LEAN[key] = (model, _lean_kernel(fns))
-    kernel = _LEAN[key][1]
-    ws = make_workspace(n, model.m)
-    failure = []
-    y0 = np.concatenate((q0, v0))
-    with quiet():
-        kernel(flags, Mc, prm, y0, np.empty(2 * n), ws)  # compile outside the timing
-
-        def rhs(t, y):
-            dy = np.empty(2 * n)
-            st = kernel(flags, Mc, prm, np.ascontiguousarray(y), dy, ws)
-            if st != 0 and not failure:
-                failure.append(st)
-            return dy
-
-        t0 = time.perf_counter()
-        sol = scipy.integrate.solve_ivp(rhs, (0.0, float(t_end)), y0, method=method, rtol=rtol,
-                                        atol=atol, t_eval=t_eval)
-        wall = time.perf_counter() - t0
-        Y = sol.y.T
-        K = Y.shape[0]
-        En, Gr, GVr = np.zeros(K), np.zeros(K), np.zeros(K)
-        obs = np.zeros(3)
-        for j in range(K):
-            observe(fns, flags, Mc, prm, np.ascontiguousarray(Y[j, :n]),
-                    np.ascontiguousarray(Y[j, n:]), ws, obs)
-            En[j], Gr[j], GVr[j] = obs
-    status = Status(failure[0]) if failure else (Status.SUCCESS if sol.success else Status.NONFINITE)
-    return BaselineResult(
-        t=sol.t.copy(), q=Y[:, :n].copy(), v=Y[:, n:].copy(), energy=En,
-        constraint_residual=Gr, velocity_residual=GVr,
-        stats=dict(steps=int(sol.nfev), rhs_evaluations=int(sol.nfev), wall_time=wall,
-                   message=sol.message),
-        status=status, name=f"SciPy {method}", h=float("nan"), model_name=model.name,
-    )
 
 
 # ----------------------------------------------------------------------------- one point
@@ -272,13 +170,10 @@ class Point:
 
 def _run_once(label, model, q0, v0, knob, T, t_eval):
     """Run a contender once; returns (wall seconds, result)."""
-    if label.startswith("SciPy DOP853 (baselines"):
-        res = baseline_solve_ivp(model, q0, v0, t_end=T, method="DOP853", rtol=knob, atol=knob,
-                                 t_eval=t_eval)
-        return res.stats["wall_time"], res
     if label.startswith("SciPy"):
-        res = lean_solve_ivp(model, q0, v0, t_end=T, method=label.split()[1], rtol=knob,
-                             atol=knob, t_eval=t_eval)
+        # wall_time covers solve_ivp alone; its right-hand side is compiled beforehand
+        res = baseline_solve_ivp(model, q0, v0, t_end=T, method=label.split()[1], rtol=knob,
+                                 atol=knob, t_eval=t_eval)
         return res.stats["wall_time"], res
     t0 = time.perf_counter()
     if label.startswith("RK4"):
@@ -458,7 +353,7 @@ def _loop_assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac, K):
 
 
 @njit
-def _loop_factor(A0, A, piv, N, K, factor):
+def _loop_factor(A0, A, piv, N, factor, K):
     st = 0
     for _ in range(K):
         for i in range(N):
@@ -479,6 +374,15 @@ def _loop_solve(A, piv, R0, R, N, K):
 
 
 @njit
+def _loop_callback(fns, q, prm, out, K):
+    acc = 0.0
+    for _ in range(K):
+        fns[_PGRAD](q.ctypes, q.ctypes, prm.ctypes, out.ctypes)
+        acc += out[0]
+    return acc
+
+
+@njit
 def _loop_end(fns, flags, Mc, prm, q1, P, p1, v1, G1, ws, K):
     st = 0
     for _ in range(K):
@@ -487,7 +391,10 @@ def _loop_end(fns, flags, Mc, prm, q1, P, p1, v1, G1, ws, K):
 
 
 def _per_call(fn, *args, budget: float = 0.05, repeats: int = 5) -> float:
-    """Median seconds per iteration of a compiled loop ``fn(*args, K)``."""
+    """Seconds per iteration of a compiled loop ``fn(*args, K)``: the least disturbed
+    (minimum) of ``repeats`` timings of ``K`` iterations, ``K`` grown until one takes
+    ``budget`` seconds. On a shared machine the minimum estimates the cost of the code; a
+    median adds a share of other jobs' load."""
     fn(*args, 1)
     K = 1
     while True:
@@ -502,36 +409,39 @@ def _per_call(fn, *args, budget: float = 0.05, repeats: int = 5) -> float:
         t0 = time.perf_counter()
         fn(*args, K)
         walls.append((time.perf_counter() - t0) / K)
-    return float(np.median(walls))
+    return float(np.min(walls))
 
 
 def profile_step(model, q0, v0, method: str, h: float, n_steps: int = 2000) -> dict:
     r"""Cost of the parts of one fastvi step, in seconds per call.
 
-    Runs ``n_steps`` steps with :func:`fastvi.integrate` (the measured cost per step and
-    Newton iterations per step), then times each kernel on the state reached: the residual
-    with Newton matrix (``assemble(jac=True)``, once per Newton iteration), the dense LU
-    factorisation and solve of the ``N × N`` Newton matrix (``N = s n + J m``), the
-    residual alone (once per step, for the end momentum) and the RATTLE momentum projection
-    (``end_momentum``). ``other`` is the per-step cost the parts do not explain (predictor,
-    bookkeeping, saving the sample, the Python driver).
+    Runs ``n_steps`` steps with :func:`fastvi.integrate` three times (the cost per step is
+    the fastest of the three, divided by ``n_steps``; Newton iterations per step from the
+    same run), then times each kernel alone on the state reached: the residual with the
+    Newton matrix (``assemble(jac=True)``, once per Newton iteration), the dense LU
+    factorisation and solve of the ``N × N`` Newton matrix (``N = s n + J m``, once per
+    iteration), the residual alone (once per step, for the end momentum), the RATTLE
+    momentum projection (``end_momentum``, once per step), and one model callback (∇V).
 
     Returns
     -------
     dict
         ``step``, ``assemble_jac``, ``lu_factor``, ``lu_solve``, ``assemble_res``,
-        ``end_momentum`` (s per call), ``iterations`` (per step), ``N`` (Newton matrix
-        size), ``shares`` (fraction of the measured step cost: each part × calls per step).
+        ``end_momentum``, ``callback`` (s per call), ``iterations`` (Newton, per step),
+        ``N`` (Newton matrix rows), ``shares`` (each part × its calls per step / ``step``)
+        and ``other`` = 1 − Σ shares: the predictor, bookkeeping, saving every step and the
+        Python driver; it comes out negative when the machine's load inflated the parts'
+        timings more than the step's.
     """
     meth = fastvi.method(method)
     with quiet():
-        fastvi.integrate(model, q0, v0, h=h, n_steps=10, method=method)
+        fastvi.integrate(model, q0, v0, h=h, n_steps=2, method=method)
         walls = []
         for _ in range(3):
             t0 = time.perf_counter()
             res = fastvi.integrate(model, q0, v0, h=h, n_steps=n_steps, method=method)
             walls.append(time.perf_counter() - t0)
-    step_cost = float(np.median(walls)) / n_steps
+    step_cost = float(np.min(walls)) / n_steps
     its = res.stats["newton_iterations"] / res.stats["steps"]
     fns, flags, Mc = model.kernel_arguments()
     prm = np.asarray(model.params, float)
@@ -561,9 +471,10 @@ def profile_step(model, q0, v0, method: str, h: float, n_steps: int = 2000) -> d
         P = ws[14].copy()
         t["end_momentum"] = _per_call(_loop_end, fns, flags, Mc, prm, q1, P, p1, v1,
                                       ws[5][meth.J], ws)
+        t["callback"] = _per_call(_loop_callback, fns, qk.copy(), prm, np.zeros(n))
     calls = dict(assemble_jac=its, lu_factor=its, lu_solve=its, assemble_res=1.0, end_momentum=1.0)
     shares = {k: t[k] * calls[k] / step_cost for k in calls}
-    shares["other"] = max(0.0, 1.0 - sum(shares.values()))
+    shares["other"] = 1.0 - sum(shares.values())
     return dict(step=step_cost, iterations=its, N=N, n=n, m=m, method=method, h=h, shares=shares,
                 **t)
 
@@ -711,7 +622,8 @@ def markdown(points, cfg, figs, prof, ref_floor, command, elapsed) -> str:
         "(numba), without / with projection onto g = 0, Gv = 0 after every step, sweeping h;\n"
         "- `SciPy RK45`, `SciPy DOP853`, `SciPy Radau`: `scipy.integrate.solve_ivp` on the same "
         "index-1 right-hand side (the compiled `fastvi.baselines.rk4.acceleration`), sweeping "
-        "rtol = atol (`fastvi.studies.wpd.lean_solve_ivp`, see *SciPy's right-hand side* below).\n")
+        "rtol = atol (`fastvi.baselines.solve_ivp`; the cfuncs are frozen into its right-hand "
+        "side, a few µs per call, so SciPy's own per-step overhead is what is measured).\n")
     P.append(
         f"**Measurements.** Wall time of the whole call (fastvi: `fastvi.integrate`, including "
         f"validation and saving every step; SciPy: `solve_ivp` alone), after compilation, "
@@ -746,21 +658,6 @@ def markdown(points, cfg, figs, prof, ref_floor, command, elapsed) -> str:
         P.append(f"For the position error at T = {cfg['T_error']:g} s (panel a) the best fastvi "
                  f"method is {ratio.min():.3g}× to {ratio.max():.3g}× faster than SciPy DOP853 over "
                  f"errors {E.max():.1e} … {E.min():.1e} m.\n")
-    sh = [p for p in points if p.label.startswith("SciPy DOP853 (baselines")]
-    lean = {p.knob: p for p in points if p.label == "SciPy DOP853" and p.panel == "error"}
-    pairs = [(p, lean[p.knob]) for p in sh if p.knob in lean]
-    if pairs:
-        P.append("**SciPy's right-hand side.** `fastvi.baselines.solve_ivp` passes the model's "
-                 "tuple of cfuncs into its compiled right-hand side at every call, and numba "
-                 "spends ≈ 0.1–0.3 ms typing that tuple per call. Measured side by side here "
-                 "(same tolerance, same nfev): "
-                 + "; ".join(f"tol {a.knob:g}: {a.wall / b.wall:.3g}× slower than the lean "
-                             f"right-hand side ({1e6 * a.wall / max(1, a.work):.0f} vs "
-                             f"{1e6 * b.wall / max(1, b.work):.0f} µs per evaluation)"
-                             for a, b in pairs)
-                 + ". Against the shipped baseline every SciPy ratio above would be that much "
-                 "larger; the diagrams use the lean version because that is what a user's own "
-                 "SciPy code would cost.\n")
     if prof:
         P.append("## What a step costs\n")
         P.append("`fastvi.studies.wpd.profile_step`: the measured cost per step of "

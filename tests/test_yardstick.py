@@ -1,0 +1,74 @@
+"""The benchmark yardstick (``bench/yardstick.py``) runs the generic kernel's algorithm.
+
+The yardstick inlines the double pendulum into the step kernel; the speed ratio reported by
+``make bench`` only means something if both kernels compute the same trajectory. The
+double pendulum from θ1 = θ2 = π/2 is chaotic, so any difference in the algorithm (predictor,
+stopping rule, projection) or in the model would show up far above round-off within 1000
+steps.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fastvi
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+import yardstick  # noqa: E402
+
+METHODS = ("P1L-Q2G", "P2L-Q3G", "P3L-Q4G")
+H = 0.01
+N_STEPS = 1000
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_yardstick_trajectory_equals_fastvi_integrate(double_pendulum, dp_start, method):
+    q0, v0 = dp_start
+    ref = fastvi.integrate(double_pendulum, q0, v0, h=H, n_steps=N_STEPS, method=method)
+    # start from the state integrate starts from (its projection moves q0 by round-off)
+    out = yardstick.integrate_double_pendulum(
+        ref.q[0], ref.v[0], h=H, n_steps=N_STEPS, tabs=fastvi.method(method).kernel_tables,
+        params=tuple(double_pendulum.params))
+    assert out["steps"] == N_STEPS
+    # measured 0.0 for all three methods (same floating-point operations, same order)
+    assert np.max(np.abs(out["qs"] - ref.q)) <= 1e-12
+    assert np.max(np.abs(out["ps"] - ref.p)) <= 1e-12
+    assert np.max(np.abs(out["vs"] - ref.v)) <= 1e-12
+    assert np.max(np.abs(out["energy"] - ref.energy)) <= 1e-12
+    # same Newton iteration count at every step: same predictor and stopping rule (measured equal)
+    assert np.array_equal(out["newton_iterations"][1:], ref.newton_iterations[1:])
+    assert out["iterations"] == ref.stats["newton_iterations"]
+
+
+def test_yardstick_keeps_constraints_at_newton_tolerance(double_pendulum, dp_start):
+    """Independent of fastvi: |g| and |G v| recomputed here in NumPy from the yardstick's states."""
+    q0, v0 = dp_start
+    out = yardstick.integrate_double_pendulum(q0, v0, h=H, n_steps=N_STEPS,
+                                              tabs=fastvi.method("P2L-Q3G").kernel_tables)
+    q, v = out["qs"], out["vs"]
+    d = q[:, 2:] - q[:, :2]
+    g1 = 0.5 * (q[:, 0] ** 2 + q[:, 1] ** 2 - 1.0)
+    g2 = 0.5 * (d[:, 0] ** 2 + d[:, 1] ** 2 - 1.0)
+    gv1 = q[:, 0] * v[:, 0] + q[:, 1] * v[:, 1]
+    gv2 = d[:, 0] * (v[:, 2] - v[:, 0]) + d[:, 1] * (v[:, 3] - v[:, 1])
+    assert np.max(np.abs(np.r_[g1, g2])) < 1e-13  # measured 3.3e-16
+    assert np.max(np.abs(np.r_[gv1, gv2])) < 1e-12  # measured 1.3e-15
+
+
+def test_yardstick_fails_where_fastvi_fails(double_pendulum, dp_start):
+    """Failure path: with max_iter = 3, P1L-Q2G needs a 4th iteration at some step; the
+    divergence exit / straight-line retry / give-up logic must match the generic kernel."""
+    q0, v0 = dp_start
+    ref = fastvi.integrate(double_pendulum, q0, v0, h=H, n_steps=N_STEPS, method="P1L-Q2G",
+                           max_iter=3, on_failure="return")
+    assert ref.status == fastvi.Status.NEWTON_NOT_CONVERGED  # measured: at step 995
+    with pytest.raises(yardstick.YardstickError, match="NEWTON_NOT_CONVERGED") as info:
+        yardstick.integrate_double_pendulum(ref.q[0], ref.v[0], h=H, n_steps=N_STEPS,
+                                            tabs=fastvi.method("P1L-Q2G").kernel_tables,
+                                            max_iter=3)
+    assert info.value.step == ref.failed_step
+    assert info.value.iterations == ref.stats["newton_iterations"]  # measured 2988 both

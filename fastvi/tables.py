@@ -285,8 +285,10 @@ class Method:
     Lc : (s+1, J+1) ``ℓ_ν(d_j)``.
     E : (s+1, s+1) ``ℓ_μ(1 + τ_ν)``, the predictor that extrapolates the previous
         step's polynomial onto this step's control points.
-    nominal_order : int
-        The order this combination is designed for (measured in ``docs/orders.md``).
+    nominal_order : int or None
+        The order this combination is known to reach (2 for step-end constraints, ``2s``
+        for constraints at the ``s + 1`` Lobatto points, capped by the quadrature), or None
+        where the order table (``docs/orders.md``) shows no general rule.
     """
 
     name: str
@@ -304,7 +306,7 @@ class Method:
     Ld: np.ndarray = field(repr=False)
     Lc: np.ndarray = field(repr=False)
     E: np.ndarray = field(repr=False)
-    nominal_order: int = 2
+    nominal_order: int | None = 2
 
     @property
     def kernel_tables(self) -> tuple[np.ndarray, ...]:
@@ -328,10 +330,20 @@ def _constraint_points(code: str, k: int | None, tau: np.ndarray) -> tuple[str, 
     return f"gauss{k}", np.concatenate(([0.0], gauss_legendre(k)[0], [1.0]))
 
 
-def _nominal_order(s: int, r: int, quad: str, cons: str) -> int:
-    exact = 2 * r - 1 if quad == "G" else 2 * r - 3
-    order = min(2 * s, exact + 1)
-    return 2 if cons == "ends" else order
+def _nominal_order(s: int, r: int, quad: str, nodes: str, cons: str) -> int | None:
+    """The order a combination is known to reach (``docs/orders.md``), or None.
+
+    Constraints at the step ends give order 2 whatever ``s``; constraints at the ``s + 1``
+    Gauss–Lobatto points (``-NL-CN`` or ``-CL<s+1>``) give ``2s``, limited by the quadrature's
+    exactness. Other placements lose order in ways the order table documents case by case
+    (e.g. equidistant nodes with ``-CN`` give 4 for s = 3 and 5), so no order is promised.
+    """
+    if cons == "ends":
+        return 2
+    if (cons == "nodes" and nodes == "L") or cons == f"lobatto{s + 1}":
+        exact = 2 * r - 1 if quad == "G" else 2 * r - 3
+        return min(2 * s, exact + 1)
+    return None
 
 
 def _canonical(name: str) -> str:
@@ -359,6 +371,14 @@ def _build(canonical: str) -> Method:
     tau = control_nodes(s, NODE_FAMILIES[m["nodes"]])
     c, b = gauss_legendre(r) if quad == "G" else gauss_lobatto(r)
     cons, d = _constraint_points(m["cons"], int(m["k"]) if m["k"] else None, tau)
+    if len(d) - 1 > s:
+        # J·m constraint equations against s·n position unknowns: more constraint intervals
+        # than control points over-determine the step (singular Newton matrix, or no
+        # convergence; docs/orders.md)
+        raise ValueError(
+            f"constraint placement of `method` {canonical!r} has {len(d)} constraint points; a "
+            f"degree-{s} step takes at most s + 1 = {s + 1} (e.g. `-CL{s + 1}` or `-CG{s - 1}`)"
+        )
     L, Ld = _consistent(*lagrange_basis(tau, c))
     Lc, _ = lagrange_basis(tau, d)
     Lc, _ = _consistent(Lc, np.zeros_like(Lc))
@@ -377,7 +397,7 @@ def _build(canonical: str) -> Method:
         quadrature="gauss" if quad == "G" else "lobatto",
         nodes=NODE_FAMILIES[m["nodes"]],
         constraints=cons,
-        nominal_order=_nominal_order(s, r, quad, cons),
+        nominal_order=_nominal_order(s, r, quad, m["nodes"], cons),
         **arrays,
     )
 

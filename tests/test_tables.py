@@ -95,7 +95,7 @@ def test_method_type_is_checked():
 
 
 def test_constraint_point_families():
-    assert method("P3L-Q4G-CL5").d.shape == (5,)
+    assert method("P3L-Q4G-CL4").d.shape == (4,)
     g = method("P3L-Q4G-CG2")
     assert g.d[0] == 0.0 and g.d[-1] == 1.0 and g.J == 3
     np.testing.assert_allclose(g.d[1:-1], gauss_legendre(2)[0])
@@ -105,3 +105,17 @@ def test_node_family_must_be_known():
     with pytest.raises(ValueError, match="`family`"):
         control_nodes(3, "random")
     assert set(tables.NODE_FAMILIES.values()) == {"equidistant", "lobatto", "chebyshev"}
+
+
+@pytest.mark.parametrize("name", ["P1L-Q2G-CL3", "P1L-Q2G-CG1", "P2L-Q3G-CL4", "P3L-Q4G-CG3"])
+def test_more_constraint_points_than_the_degree_allows_are_refused(name):
+    """J > s over-determines the step (docs/orders.md measured singular or stalled Newton)."""
+    with pytest.raises(ValueError, match=r"at most s \+ 1"):
+        method(name)
+
+
+def test_nominal_order_is_promised_only_where_measured():
+    assert method("P3L-Q4G").nominal_order == 6
+    assert method("P3L-Q4G-NE-CL4").nominal_order == 6  # the same s + 1 Lobatto points
+    assert method("P3L-Q2G").nominal_order == 4  # capped by the quadrature
+    assert method("P5L-Q6G-NE-CN").nominal_order is None  # measured 4, no general rule

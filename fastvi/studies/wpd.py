@@ -415,9 +415,8 @@ def _per_call(fn, *args, budget: float = 0.05, repeats: int = 5) -> float:
 def profile_step(model, q0, v0, method: str, h: float, n_steps: int = 2000) -> dict:
     r"""Cost of the parts of one fastvi step, in seconds per call.
 
-    Runs ``n_steps`` steps with :func:`fastvi.integrate` three times (the cost per step is
-    the fastest of the three, divided by ``n_steps``; Newton iterations per step from the
-    same run), then times each kernel alone on the state reached: the residual with the
+    Runs ``n_steps`` steps with :func:`fastvi.integrate` (the cost per step, and Newton
+    iterations per step), and times each kernel alone on the state reached: the residual with the
     Newton matrix (``assemble(jac=True)``, once per Newton iteration), the dense LU
     factorisation and solve of the ``N × N`` Newton matrix (``N = s n + J m``, once per
     iteration), the residual alone (once per step, for the end momentum), the RATTLE
@@ -434,24 +433,20 @@ def profile_step(model, q0, v0, method: str, h: float, n_steps: int = 2000) -> d
         timings more than the step's.
     """
     meth = fastvi.method(method)
-    with quiet():
-        fastvi.integrate(model, q0, v0, h=h, n_steps=2, method=method)
-        walls = []
-        for _ in range(3):
-            t0 = time.perf_counter()
-            res = fastvi.integrate(model, q0, v0, h=h, n_steps=n_steps, method=method)
-            walls.append(time.perf_counter() - t0)
-    step_cost = float(np.min(walls)) / n_steps
-    its = res.stats["newton_iterations"] / res.stats["steps"]
     fns, flags, Mc = model.kernel_arguments()
     prm = np.asarray(model.params, float)
     tabs = meth.kernel_tables
     n, m = model.n, model.m
+    N = meth.s * n + meth.J * m
+    with quiet():
+        fastvi.integrate(model, q0, v0, h=h, n_steps=2, method=method)
+        res = fastvi.integrate(model, q0, v0, h=h, n_steps=n_steps, method=method)
+    its = res.stats["newton_iterations"] / res.stats["steps"]
     qk, pk, vk = res.q[-1].copy(), res.p[-1].copy(), res.v[-1].copy()
     ws = vi_workspace(n, m, meth.s, meth.r, meth.J)
-    N = meth.s * n + meth.J * m
     q1, p1, v1 = np.zeros(n), np.zeros(n), np.zeros(n)
     out = np.zeros(4)
+    t: dict[str, float] = {}
     with quiet():
         st = vi_step(fns, flags, Mc, prm, tabs, h, qk, pk, vk, q1, p1, v1, ws, 1e-14, 30, True, out)
         if st != 0:
@@ -461,17 +456,28 @@ def profile_step(model, q0, v0, method: str, h: float, n_steps: int = 2000) -> d
         A0 = ws[2][:N, :N].copy()
         R0 = ws[1][:N].copy()
         A, piv, R = np.zeros((N, N)), np.zeros(N, dtype=np.int64), np.zeros(N)
-        t = dict(
-            assemble_jac=_per_call(_loop_assemble, fns, flags, Mc, prm, tabs, h, qk, pk, ws, True),
-            assemble_res=_per_call(_loop_assemble, fns, flags, Mc, prm, tabs, h, qk, pk, ws, False),
-        )
-        copy = _per_call(_loop_factor, A0, A, piv, N, False)
-        t["lu_factor"] = max(0.0, _per_call(_loop_factor, A0, A, piv, N, True) - copy)
-        t["lu_solve"] = _per_call(_loop_solve, A, piv, R0, R, N)
         P = ws[14].copy()
-        t["end_momentum"] = _per_call(_loop_end, fns, flags, Mc, prm, q1, P, p1, v1,
-                                      ws[5][meth.J], ws)
-        t["callback"] = _per_call(_loop_callback, fns, qk.copy(), prm, np.zeros(n))
+        # rounds interleave the whole step with its parts; each keeps its fastest round, so
+        # a burst of other load shifts no part against the others
+        for _ in range(3):
+            t0 = time.perf_counter()
+            fastvi.integrate(model, q0, v0, h=h, n_steps=n_steps, method=method)
+            parts = dict(
+                step=(time.perf_counter() - t0) / n_steps,
+                assemble_jac=_per_call(_loop_assemble, fns, flags, Mc, prm, tabs, h, qk, pk, ws,
+                                       True, repeats=3),
+                assemble_res=_per_call(_loop_assemble, fns, flags, Mc, prm, tabs, h, qk, pk, ws,
+                                       False, repeats=3),
+                lu_factor=max(0.0, _per_call(_loop_factor, A0, A, piv, N, True, repeats=3)
+                              - _per_call(_loop_factor, A0, A, piv, N, False, repeats=3)),
+                lu_solve=_per_call(_loop_solve, A, piv, R0, R, N, repeats=3),
+                end_momentum=_per_call(_loop_end, fns, flags, Mc, prm, q1, P, p1, v1,
+                                       ws[5][meth.J], ws, repeats=3),
+                callback=_per_call(_loop_callback, fns, qk.copy(), prm, np.zeros(n), repeats=3),
+            )
+            for k, v in parts.items():
+                t[k] = min(t.get(k, np.inf), v)
+    step_cost = t.pop("step")
     calls = dict(assemble_jac=its, lu_factor=its, lu_solve=its, assemble_res=1.0, end_momentum=1.0)
     shares = {k: t[k] * calls[k] / step_cost for k in calls}
     shares["other"] = 1.0 - sum(shares.values())
@@ -627,8 +633,9 @@ def markdown(points, cfg, figs, prof, ref_floor, command, elapsed) -> str:
     P.append(
         f"**Measurements.** Wall time of the whole call (fastvi: `fastvi.integrate`, including "
         f"validation and saving every step; SciPy: `solve_ivp` alone), after compilation, "
-        f"median of up to {cfg['repeats']} runs (runs longer than {LONG_RUN:g} s once). "
-        f"(a) max-norm of q(T) − q_ref(T) at T = {cfg['T_error']:g} s, q_ref from SciPy DOP853 at "
+        + (f"median of {cfg['repeats']} runs (runs longer than {LONG_RUN:g} s timed once). "
+           if cfg["repeats"] > 1 else "one run each. ")
+        + f"(a) max-norm of q(T) − q_ref(T) at T = {cfg['T_error']:g} s, q_ref from SciPy DOP853 at "
         f"rtol = atol = {REF_TOL:g} in angle coordinates (independent of fastvi); the reference "
         f"itself is uncertain at ≈ {ref_floor:.0e} (its distance to the same solve at tolerance "
         f"1e-12), so errors below that are not resolved. (b) max over the run of |H − H(0)| over "
@@ -661,9 +668,14 @@ def markdown(points, cfg, figs, prof, ref_floor, command, elapsed) -> str:
     if prof:
         P.append("## What a step costs\n")
         P.append("`fastvi.studies.wpd.profile_step`: the measured cost per step of "
-                 "`fastvi.integrate`, and each kernel timed alone on the same state (median of "
-                 "repeated calls), times the calls per step (Newton iterations for the parts "
-                 "inside Newton's loop).\n")
+                 "`fastvi.integrate` (saving every step), and each kernel timed alone in a "
+                 "compiled loop on the same state, times its calls per step (Newton iterations "
+                 "for the parts inside Newton's loop); fastest of three interleaved rounds. "
+                 "*other* = the step minus the parts (predictor, bookkeeping, saving, the Python "
+                 "driver); negative values mean the machine's load inflated the parts more than "
+                 "the step, i.e. the noise of this table. One model callback (∇V) costs "
+                 + ", ".join(f"{1e9 * pr['callback']:.0f} ns" for pr in prof)
+                 + " per call: the model is not what a step spends its time on.\n")
         P.append("| method | h | N (Newton rows) | µs/step | Newton its/step | residual + Newton matrix | "
                  "LU factor | LU solve | residual (end) | momentum projection | other |")
         P.append("|---|---|---|---|---|---|---|---|---|---|---|")

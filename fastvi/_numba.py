@@ -1,14 +1,77 @@
 """One place for numba settings: every kernel is compiled with these options."""
 
 import contextlib
+import hashlib
 import warnings
+from pathlib import Path
 
 import numba as nb
+from numba.core import caching
 
 # First-class function values (our cfunc callbacks) are "experimental" in numba's words;
 # they are the documented way to pass compiled callbacks and we test them, so the warning
 # is only noise for users.
 warnings.filterwarnings("ignore", category=nb.NumbaExperimentalFeatureWarning)
+
+_PACKAGE = Path(__file__).resolve().parent
+_STAMP = None
+
+
+def _package_stamp() -> str:
+    """Hash of every package source that compiled code is made of (once per process):
+    the modules defining ``njit``/``cfunc`` functions and the status codes they return."""
+    global _STAMP
+    if _STAMP is None:
+        h = hashlib.sha256()
+        for path in sorted(_PACKAGE.rglob("*.py")):
+            text = path.read_bytes()
+            if b"njit" in text or b"cfunc" in text or path.name == "status.py":
+                h.update(str(path.relative_to(_PACKAGE)).encode())
+                h.update(text)
+        _STAMP = h.hexdigest()
+    return _STAMP
+
+
+class _PackageStampMixin:
+    """Invalidate a cached kernel when any compiled fastvi source changes.
+
+    numba checks only the file that defines a cached function, but ``drive.run`` inlines
+    ``step`` from another file: an edit to ``step.py`` alone would leave a stale ``run`` in
+    the cache. Stamping every kernel with the hash of the whole package closes that hole.
+    """
+
+    def get_source_stamp(self):
+        return _package_stamp()
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        try:
+            inside = Path(py_file).resolve().is_relative_to(_PACKAGE)
+        except (OSError, ValueError):
+            inside = False
+        return super().from_function(py_func, py_file) if inside else None
+
+
+def _numba_class(name: str):
+    # numba 0.68 made these names public; older releases have them with a leading underscore
+    return getattr(caching, name, None) or getattr(caching, "_" + name)
+
+
+class _UserProvided(_PackageStampMixin, _numba_class("UserProvidedCacheLocator")):
+    pass
+
+
+class _InTree(_PackageStampMixin, _numba_class("InTreeCacheLocator")):
+    pass
+
+
+class _UserWide(_PackageStampMixin, _numba_class("UserWideCacheLocator")):
+    pass
+
+
+_LOCATORS = _numba_class("CacheImpl")._locator_classes
+if not any(issubclass(c, _PackageStampMixin) for c in _LOCATORS):
+    _LOCATORS[:0] = [_UserProvided, _InTree, _UserWide]
 
 _OPTIONS = dict(cache=True, nogil=True, error_model="numpy", boundscheck=False)
 

@@ -375,9 +375,10 @@ def _build(canonical: str) -> Method:
         # J·m constraint equations against s·n position unknowns: more constraint intervals
         # than control points over-determine the step (singular Newton matrix, or no
         # convergence; docs/orders.md)
+        fits = f"`-CL{s + 1}`" + (f" or `-CG{s - 1}`" if s >= 2 else "")
         raise ValueError(
             f"constraint placement of `method` {canonical!r} has {len(d)} constraint points; a "
-            f"degree-{s} step takes at most s + 1 = {s + 1} (e.g. `-CL{s + 1}` or `-CG{s - 1}`)"
+            f"degree-{s} step takes at most s + 1 = {s + 1} (e.g. {fits})"
         )
     L, Ld = _consistent(*lagrange_basis(tau, c))
     Lc, _ = lagrange_basis(tau, d)

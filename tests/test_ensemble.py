@@ -166,6 +166,16 @@ def test_one_shared_params_vector_is_broadcast(pendulum):
     assert np.array_equal(a.q, b.q) and not np.array_equal(a.q, c.q)
 
 
+def test_t_end_sets_the_step_count_and_results_save_to_npz(pendulum, tmp_path):
+    Q0, V0 = _states(pendulum, [(0.3,), (0.6,)])
+    ens = fastvi.integrate_ensemble(pendulum, Q0, V0, h=H, t_end=0.2, save=5)
+    assert ens.n_steps == 20 and ens.t[-1] == pytest.approx(0.2) and (ens.steps == 20).all()
+    ens.save_npz(tmp_path / "ens.npz")
+    with np.load(tmp_path / "ens.npz") as data:
+        assert np.array_equal(data["q"], ens.q) and int(data["n_steps"]) == 20
+        assert str(data["method"]) == ens.method.name
+
+
 def test_kernels_compile_once_for_all_models(pendulum, double_pendulum):
     for model, a in ((pendulum, [(0.3,)]), (double_pendulum, [(0.3, 0.2)])):
         Q0, V0 = _states(model, a)

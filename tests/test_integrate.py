@@ -189,3 +189,28 @@ def test_newton_failure_raises_with_the_partial_result(double_pendulum):
     assert np.all(np.isfinite(err.result.q))
     partial = fastvi.integrate(double_pendulum, q0, v0, h=0.5, n_steps=100, max_iter=3, on_failure="return")
     assert not partial.success and partial.failed_step == err.step
+
+
+def test_a_fresh_process_loads_the_kernels_from_the_cache(double_pendulum, dp_start):
+    """The second process must not recompile (make demo twice)."""
+    import subprocess
+    import sys
+
+    fastvi.integrate(double_pendulum, *dp_start, h=0.01, n_steps=2)  # this process fills the cache
+    code = ("import fastvi, numpy as np; from fastvi.kernels import drive; m = fastvi.scenes.double_pendulum();"
+            "q, v = m.initial_state(1.0, 0.5); fastvi.integrate(m, q, v, h=0.01, n_steps=2);"
+            "print(sum(drive.run.stats.cache_hits.values()), sum(drive.run.stats.cache_misses.values()))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["1", "0"]
+
+
+def test_kernel_cache_is_stamped_with_every_compiled_source():
+    """numba only watches the defining file; `run` inlines `step` from another file."""
+    from fastvi import _numba
+
+    stamp = _numba._package_stamp()
+    assert len(stamp) == 64
+    loc = _numba._InTree.from_function(drive.run.py_func, drive.__file__)
+    assert loc is not None and loc.get_source_stamp() == stamp
+    assert _numba._InTree.from_function(test_kernel_cache_is_stamped_with_every_compiled_source, __file__) is None

@@ -5,12 +5,15 @@ links, released at rest from a smooth arc of angles. fastvi solves each Newton i
 a dense LU of the ``N_rows = s·n + J·m = 6N`` rows of ``P2L-Q3G`` (s = J = 2), whose cost
 grows as ``N_rows³``; the assembly grows as ``N²`` (dense n×n blocks), the callbacks as ``N``.
 
-Each size runs enough steps of h = 0.01 to take ~0.1–1 s (fewer steps for large N). The
-report at the end prints, per N, the cost per step (median over rounds), Newton iterations
-per step, the CPU time of one dense LU factorisation of the Newton matrix and its share of a
-step (``its × LU / step``), the local log–log slopes between consecutive N and the
+Each size runs enough steps of h = 0.01 to take ~0.1–1 s (fewer steps for large N:
+:func:`fastvi.studies.wpd.growth_steps`). The report at the end prints, per N, the wall time
+per step (median over the benchmark's rounds), the CPU time per step of this thread (best of
+two more runs: insensitive to other jobs on a shared machine), Newton iterations per step,
+the CPU time of one dense LU factorisation of the actual Newton matrix and its share of a
+step (``its × LU / CPU step``), the local log–log slopes between consecutive N and the
 least-squares exponent over N = 2 … 64, and stores them in the JSON (``extra_info`` of the
-N = 64 benchmark, key ``cost_growth``). Run with ``make bench`` or
+N = 64 benchmark, key ``cost_growth``). ``python -m fastvi wpd`` writes the same table into
+``docs/wpd.md``. Run with ``make bench`` or
 ``.venv/bin/python -m pytest bench/test_bench_chain.py --benchmark-only``.
 """
 
@@ -22,34 +25,14 @@ import numpy as np
 import pytest
 
 import fastvi
-from fastvi.studies.wpd import lu_factor_cost, newton_matrix
+from fastvi.studies.wpd import (GROWTH_H, GROWTH_METHOD, chain_angles, fit_exponent, growth_steps,
+                                lu_factor_cost, newton_matrix)
 
 SIZES = (2, 4, 8, 16, 32, 64)
-METHOD = "P2L-Q3G"
-H = 0.01
-STEP_BUDGET = 40_000  # n_steps(N) ≈ STEP_BUDGET / N²: the run time stays ~0.1–1 s per round
-MIN_STEPS = 20
+METHOD = GROWTH_METHOD  # P2L-Q3G
+H = GROWTH_H
 
 _rows: dict[int, dict] = {}
-
-
-def n_steps(N: int) -> int:
-    return int(max(MIN_STEPS, min(10_000, STEP_BUDGET // (N * N))))
-
-
-def initial_angles(N: int) -> np.ndarray:
-    """A smooth arc of link angles (rad), at most 0.6 from the vertical."""
-    return 0.6 * np.sin(np.linspace(0.3, 2.8, N))
-
-
-def fit(rows: dict[int, dict], key: str = "per_step") -> dict:
-    """Least-squares exponent of cost per step (``rows[N][key]``) vs N, and local slopes."""
-    Ns = np.array(sorted(rows))
-    c = np.array([rows[N][key] for N in Ns])
-    slope = float(np.polyfit(np.log(Ns), np.log(c), 1)[0])
-    local = {f"{a}-{b}": float(np.log(c[i + 1] / c[i]) / np.log(b / a))
-             for i, (a, b) in enumerate(zip(Ns[:-1], Ns[1:]))}
-    return dict(exponent=slope, local=local, sizes=[int(N) for N in Ns])
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -79,7 +62,7 @@ def _print_report(config):
               f"{1e6 * r['cpu_per_step']:>11.1f} {r['iterations']:>8.2f} {1e6 * r['lu']:>9.1f} "
               f"{100 * r['lu_share']:>7.0f}%")
     for key, what in (("per_step", "wall time (median)"), ("cpu_per_step", "CPU time (best of 2)")):
-        f = fit(_rows, key)
+        f = fit_exponent(_rows, key)
         write(f"fitted exponent of cost per step vs N, N = {f['sizes'][0]}…{f['sizes'][-1]}, "
               f"{what}: {f['exponent']:.2f}; local slopes "
               + ", ".join(f"{k}: {v:.2f}" for k, v in f["local"].items()))
@@ -92,8 +75,8 @@ def _print_report(config):
 @pytest.mark.parametrize("N", SIZES)
 def test_chain_cost_per_step(benchmark, N):
     model = fastvi.scenes.chain(N)
-    q0, v0 = model.initial_state(initial_angles(N))
-    steps = n_steps(N)
+    q0, v0 = model.initial_state(chain_angles(N))
+    steps = growth_steps(N)
     fastvi.integrate(model, q0, v0, h=H, n_steps=2, method=METHOD)  # compile / cache load
     benchmark.group = f"chain(N), {METHOD}, cost per step"
     rounds = 5 if N < 64 else 3
@@ -123,7 +106,7 @@ def test_chain_cost_per_step(benchmark, N):
                                 max_constraint_residual=float(np.max(res.constraint_residual)),
                                 max_energy_error=float(np.max(np.abs(res.energy_error))))
     if N == SIZES[-1] and len(_rows) == len(SIZES):
-        benchmark.extra_info["cost_growth"] = dict(wall=fit(_rows), cpu=fit(_rows, "cpu_per_step"),
+        benchmark.extra_info["cost_growth"] = dict(wall=fit_exponent(_rows, "per_step"), cpu=fit_exponent(_rows, "cpu_per_step"),
                                                    lu_share={n: r["lu_share"] for n, r in _rows.items()})
 
     assert res.success

@@ -75,8 +75,11 @@ SLOTS = (
     "momentum_jacobian",
 )
 _SECOND = SLOTS[6:]
-# flags vector handed to the kernels: [n, m, has_mass_fn, exact second derivatives (4)]
+# flags vector handed to the kernels:
+# [n, m, has_mass_fn, exact second derivatives (4, in _SECOND order), constant mass is diagonal]
 _F_N, _F_M, _F_MASSFN, _F_EXACT = 0, 1, 2, 3
+_F_DIAG = _F_EXACT + 4
+FLAGS_SIZE = _F_DIAG + 1
 
 
 @nb.cfunc(CALLBACK_SIGNATURE, cache=True)
@@ -298,7 +301,7 @@ class Model:
                     else _absent
                     for slot in SLOTS
                 )
-            flags = np.zeros(_F_EXACT + len(_SECOND), dtype=np.int64)
+            flags = np.zeros(FLAGS_SIZE, dtype=np.int64)
             flags[_F_N] = self.n
             flags[_F_M] = self.m
             flags[_F_MASSFN] = int("mass" in self._functions)
@@ -306,6 +309,8 @@ class Model:
                 flags[_F_EXACT + i] = int(slot in self._functions)
             M = self.mass_matrix_constant
             Mc = np.ascontiguousarray(M if M is not None else np.zeros((self.n, self.n)))
+            # a diagonal constant M lets the kernels use M v and M⁻¹ elementwise
+            flags[_F_DIAG] = int(M is not None and np.count_nonzero(M - np.diag(np.diag(M))) == 0)
             self._compiled = (cfs, flags, Mc)
         return self._compiled
 
@@ -314,7 +319,7 @@ class Model:
 
         ``callbacks`` is the tuple of cfuncs in :data:`SLOTS` order (absent ones are a
         no-op that the kernels never call), ``flags`` an int64 vector
-        ``[n, m, has_mass_function, exact second derivatives...]``.
+        ``[n, m, has_mass_function, exact second derivatives (4), constant mass is diagonal]``.
         """
         return self._compile()
 

@@ -23,6 +23,8 @@ from .linalg import lu_factor, lu_solve
 
 # indices of SLOTS in fastvi.model
 _MASS, _KGRAD, _POT, _PGRAD, _CON, _CJAC, _PHESS, _CHESS, _KHESS, _MJAC = range(10)
+# indices of the flags vector (fastvi.model._compile)
+_F_N, _F_M, _F_MASSFN, _F_EX_PHESS, _F_EX_CHESS, _F_EX_KHESS, _F_EX_MJAC, _F_DIAG = range(8)
 _FD_REL = 6.0554544523933395e-06  # cbrt(machine epsilon): central differences' best step
 
 # status as plain ints inside kernels
@@ -143,9 +145,10 @@ def assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac):
     qi, vi, F, Pm, fa, fb = vecs[0], vecs[1], vecs[2], vecs[3], vecs[4], vecs[5]
     Aq, Cq, Hc, Ma = mats[1], mats[2], mats[3], mats[4]
     gj = gvec[0]
-    n = flags[0]
-    m = flags[1]
-    has_mass = flags[2] != 0
+    n = flags[_F_N]
+    m = flags[_F_M]
+    has_mass = flags[_F_MASSFN] != 0
+    diag = flags[_F_DIAG] != 0
     s = L.shape[0] - 1
     r = L.shape[1]
     J = Lc.shape[1] - 1
@@ -183,11 +186,15 @@ def assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac):
         else:
             for a in range(n):
                 F[a] = -fa[a]
-        for a in range(n):
-            acc = 0.0
-            for c in range(n):
-                acc += Mi[a, c] * vi[c]
-            Pm[a] = acc
+        if diag:
+            for a in range(n):
+                Pm[a] = Mi[a, a] * vi[a]
+        else:
+            for a in range(n):
+                acc = 0.0
+                for c in range(n):
+                    acc += Mi[a, c] * vi[c]
+                Pm[a] = acc
         w = h * b[i]
         for nu in range(s + 1):
             cl = w * L[nu, i]
@@ -197,7 +204,7 @@ def assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac):
         if not jac:
             continue
         # ∂F/∂q = T_qq − V_qq ; ∂(Mv)/∂q
-        if flags[3] != 0:
+        if flags[_F_EX_PHESS] != 0:
             fns[_PHESS](qi.ctypes, qi.ctypes, prm.ctypes, Aq.ctypes)
         else:
             _fd_vec_jacobian(fns[_PGRAD], 1, qi, qi, prm, Aq, fa, F, Pm, n)  # F, Pm: spent scratch
@@ -205,14 +212,14 @@ def assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac):
             for c in range(n):
                 Aq[a, c] = -Aq[a, c]
         if has_mass:
-            if flags[5] != 0:
+            if flags[_F_EX_KHESS] != 0:
                 fns[_KHESS](qi.ctypes, vi.ctypes, prm.ctypes, Hc.ctypes)
             else:
                 _fd_vec_jacobian(fns[_KGRAD], 1, qi, vi, prm, Hc, fa, F, Pm, n)
             for a in range(n):
                 for c in range(n):
                     Aq[a, c] += Hc[a, c]
-            if flags[6] != 0:
+            if flags[_F_EX_MJAC] != 0:
                 fns[_MJAC](qi.ctypes, vi.ctypes, prm.ctypes, Cq.ctypes)
             else:
                 _fd_momentum_jacobian(fns[_MASS], qi, vi, prm, Cq, fa, Ma, n)
@@ -263,7 +270,7 @@ def assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac):
                                 A[row + a, c0 + c] = cl * Gj[a, c]
                 if j < J:
                     eta = X[sn + j * m : sn + (j + 1) * m]
-                    if flags[4] != 0:
+                    if flags[_F_EX_CHESS] != 0:
                         fns[_CHESS](qd.ctypes, eta.ctypes, prm.ctypes, Hc.ctypes)
                     else:
                         _fd_constraint_hessian(fns[_CJAC], qd, eta, prm, Hc, fa, gfd[1], gfd[2], n, m)
@@ -407,7 +414,13 @@ def step(fns, flags, Mc, prm, tabs, h, qk, pk, vk, q1, p1, v1, ws, tol, max_iter
 
     if m > 0:
         G0 = G[0]
-        fns[_CJAC](qk.ctypes, qk.ctypes, prm.ctypes, G0.ctypes)
+        if first:
+            fns[_CJAC](qk.ctypes, qk.ctypes, prm.ctypes, G0.ctypes)
+        else:
+            # the previous step ended with G at q(d_J) = q_k, bit for bit: reuse it
+            for a in range(m):
+                for c in range(n):
+                    G0[a, c] = G[J, a, c]
     predict(tabs, n, m, s, J, h, vk, ws, first)
     st = newton(fns, flags, Mc, prm, tabs, h, qk, pk, ws, tol, max_iter, out)
     if st != _OK and not first:
@@ -481,23 +494,32 @@ def end_momentum(fns, flags, Mc, prm, q1, P, p1, v1, G1, ws):
     gvec = ws[9]
     S = ws[10]
     pivm = ws[11]
-    if flags[2] != 0:
-        fns[_MASS](q1.ctypes, q1.ctypes, prm.ctypes, Mlu.ctypes)
-    else:
+    diag = flags[_F_DIAG] != 0
+    if diag:
         for a in range(n):
-            for c in range(n):
-                Mlu[a, c] = Mc[a, c]
-    if lu_factor(Mlu, pivn, n) != 0:
-        return _SING_MASS
-    for a in range(n):
-        v1[a] = P[a]
-    lu_solve(Mlu, pivn, v1, n)  # z = M⁻¹ P
+            v1[a] = P[a] / Mc[a, a]  # z = M⁻¹ P
+    else:
+        if flags[_F_MASSFN] != 0:
+            fns[_MASS](q1.ctypes, q1.ctypes, prm.ctypes, Mlu.ctypes)
+        else:
+            for a in range(n):
+                for c in range(n):
+                    Mlu[a, c] = Mc[a, c]
+        if lu_factor(Mlu, pivn, n) != 0:
+            return _SING_MASS
+        for a in range(n):
+            v1[a] = P[a]
+        lu_solve(Mlu, pivn, v1, n)  # z = M⁻¹ P
     if m > 0:
         for c in range(m):
             Yc = Y[c]
             for a in range(n):
                 Yc[a] = G1[c, a]
-            lu_solve(Mlu, pivn, Yc, n)  # row c of (M⁻¹ Gᵀ)ᵀ
+            if diag:
+                for a in range(n):
+                    Yc[a] /= Mc[a, a]
+            else:
+                lu_solve(Mlu, pivn, Yc, n)  # row c of (M⁻¹ Gᵀ)ᵀ
         eta = gvec[1]
         for c in range(m):
             acc = 0.0

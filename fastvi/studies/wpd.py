@@ -92,9 +92,9 @@ FULL = dict(
     repeats=REPEATS,
     error={
         "P1L-Q2G": (0.02, 0.01, 0.005, 0.0025, 0.00125),
-        "P2L-Q3G": (0.04, 0.02, 0.01, 0.005, 0.0025),
-        "P3L-Q4G": (0.05, 0.025, 0.0125, 0.00625),
-        "P4L-Q5G": (0.05, 0.025, 0.0125),
+        "P2L-Q3G": (0.08, 0.04, 0.02, 0.01, 0.005, 0.0025),
+        "P3L-Q4G": (0.1, 0.05, 0.025, 0.0125, 0.00625),
+        "P4L-Q5G": (0.1, 0.05, 0.025, 0.0125),
         "P2L-Q3G-NE-CE": (0.02, 0.01, 0.005, 0.0025, 0.00125),
         "RK4": (0.01, 0.005, 0.0025, 0.00125, 0.000625),
         "RK4+proj": (0.01, 0.005, 0.0025, 0.00125, 0.000625),
@@ -105,8 +105,8 @@ FULL = dict(
     long={
         "P1L-Q2G": (0.02, 0.01),
         "P2L-Q3G": (0.04, 0.02, 0.01, 0.005),
-        "P3L-Q4G": (0.05, 0.025, 0.0125, 0.00625),
-        "P4L-Q5G": (0.05, 0.025, 0.0125),
+        "P3L-Q4G": (0.1, 0.05, 0.025, 0.0125, 0.00625),
+        "P4L-Q5G": (0.1, 0.05, 0.025, 0.0125),
         "P2L-Q3G-NE-CE": (0.02, 0.01),
         "RK4": (0.005, 0.0025, 0.00125),
         "RK4+proj": (0.01, 0.005, 0.0025, 0.00125),
@@ -118,6 +118,8 @@ FULL = dict(
     long_horizon={"SciPy Radau": 100.0},
     #: (method, h) profiled, steps per profiling run, interleaved rounds, budget per timing (s)
     profile=((("P2L-Q3G", 0.01), ("P3L-Q4G", 0.0125), ("P4L-Q5G", 0.025)), 2000, 3, 0.05),
+    #: chain(N) sizes of the cost-growth table
+    growth=(2, 4, 8, 16, 32, 64),
 )
 QUICK = dict(
     T_error=1.0,
@@ -145,6 +147,7 @@ QUICK = dict(
     },
     long_horizon={},
     profile=((("P3L-Q4G", 0.0125),), 200, 1, 0.01),
+    growth=(2, 4),
 )
 
 
@@ -621,6 +624,99 @@ def profile_step(model, q0, v0, method: str, h: float, n_steps: int = 2000, roun
                 **t)
 
 
+# ----------------------------------------------------------------------------- cost growth
+GROWTH_METHOD = "P2L-Q3G"
+GROWTH_H = 0.01
+GROWTH_STEP_BUDGET = 40_000  # steps(N) ≈ budget / N²: ~0.1–0.5 s per run
+GROWTH_MIN_STEPS = 20
+
+
+def chain_angles(N: int) -> np.ndarray:
+    """The start of the cost-growth runs: a smooth arc of link angles, at most 0.6 rad."""
+    return 0.6 * np.sin(np.linspace(0.3, 2.8, N))
+
+
+def growth_steps(N: int) -> int:
+    """Steps timed for ``chain(N)``: fewer for large N, so each run takes ~0.1–0.5 s."""
+    return int(max(GROWTH_MIN_STEPS, min(10_000, GROWTH_STEP_BUDGET // (N * N))))
+
+
+def fit_exponent(rows: dict, key: str = "cpu_per_step") -> dict:
+    """Least-squares slope of log(cost per step) against log N, and the local slopes."""
+    Ns = np.array(sorted(rows))
+    c = np.array([rows[N][key] for N in Ns])
+    slope = float(np.polyfit(np.log(Ns), np.log(c), 1)[0])
+    local = {f"{a}-{b}": float(np.log(c[i + 1] / c[i]) / np.log(b / a))
+             for i, (a, b) in enumerate(zip(Ns[:-1], Ns[1:]))}
+    return dict(exponent=slope, local=local, sizes=[int(N) for N in Ns])
+
+
+def chain_cost(N: int, method: str = GROWTH_METHOD, h: float = GROWTH_H) -> dict:
+    r"""Cost per step of ``method`` on ``fastvi.scenes.chain(N)``, and the share of the LU.
+
+    CPU time of this thread (best of two runs of :func:`growth_steps` steps, the whole
+    ``fastvi.integrate`` call divided by the steps), Newton iterations per step, and one
+    dense LU factorisation of the actual Newton matrix (``6N`` rows for ``P2L-Q3G``; its
+    sparsity matters, see :func:`newton_matrix`). ``lu_share = its × LU / step``.
+    """
+    model = fastvi.scenes.chain(N)
+    q0, v0 = model.initial_state(chain_angles(N))
+    steps = growth_steps(N)
+    with quiet():
+        fastvi.integrate(model, q0, v0, h=h, n_steps=2, method=method)
+        cpu = []
+        for _ in range(2):
+            c0 = time.thread_time()
+            res = fastvi.integrate(model, q0, v0, h=h, n_steps=steps, method=method)
+            cpu.append((time.thread_time() - c0) / steps)
+    A = newton_matrix(model, res.q[-1], res.p[-1], res.v[-1], method, h)
+    lu = lu_factor_cost(A)
+    its = res.stats["newton_iterations"] / res.stats["steps"]
+    return dict(N=N, rows=A.shape[0], fill=float(np.count_nonzero(A)) / A.size, steps=steps,
+                cpu_per_step=min(cpu), iterations=its, lu=lu, lu_share=its * lu / min(cpu),
+                g=float(np.max(res.constraint_residual)))
+
+
+def growth_lines(rows: dict) -> list[str]:
+    """The cost-growth section: table, fitted exponent, local slopes, where the LU dominates."""
+    if len(rows) < 2:
+        return []
+    f = fit_exponent(rows)
+    P = ["## Cost growth with the number of bodies\n",
+         f"`fastvi.scenes.chain(N)` (n = 2N, m = N constraints), `{GROWTH_METHOD}`, "
+         f"h = {GROWTH_H:g}, at rest from a smooth arc of angles; CPU time of the thread per step "
+         "of the whole `fastvi.integrate` call (best of two runs; fewer steps for large N), and "
+         "one dense LU of the actual Newton matrix (its fill is the fraction of non-zeros; the "
+         "LU skips zero multipliers, so the fill matters). The same measurement under "
+         "pytest-benchmark: `bench/test_bench_chain.py`.\n",
+         "| N | Newton rows | fill | steps | µs/step | Newton its/step | LU (µs) | LU share of a step | max\\|g\\| |",
+         "|---|---|---|---|---|---|---|---|---|"]
+    for N in sorted(rows):
+        r = rows[N]
+        P.append(f"| {N} | {r['rows']} | {r['fill']:.3f} | {r['steps']} | {1e6 * r['cpu_per_step']:.1f} | "
+                 f"{r['iterations']:.2f} | {1e6 * r['lu']:.1f} | {100 * r['lu_share']:.0f}% | {r['g']:.1e} |")
+    Ns = f["sizes"]
+    last = list(f["local"].items())[-1]
+    P.append("")
+    P.append(f"Fitted exponent of the cost per step over N = {Ns[0]}…{Ns[-1]}: **{f['exponent']:.2f}**; "
+             "local slopes " + ", ".join(f"{k}: {v:.2f}" for k, v in f["local"].items()) + ".")
+    over = [N for N in sorted(rows) if rows[N]["lu_share"] > 0.5]
+    if last[1] > 2.0:
+        P.append(f"The slope at the large end ({last[0]}: {last[1]:.2f}) is above 2: the dense LU of "
+                 "the (s·n + J·m)-row Newton matrix, O(N³), takes over from the O(N²) assembly."
+                 + (f" It is more than half of a step from N = {over[0]} ({rows[over[0]]['rows']} "
+                    "rows)." if over else "")
+                 + " Ordered by body, the chain's Newton matrix is block tridiagonal (each body "
+                 "couples only to its neighbours through one link constraint), so a banded or "
+                 "block-tridiagonal solve would cost O(N) per iteration; it would take over from "
+                 f"about N = {over[0] if over else Ns[-1]}, where the LU becomes the largest part "
+                 "of a step.")
+    elif over:
+        P.append(f"The dense LU is more than half of a step from N = {over[0]}.")
+    P.append("")
+    return P
+
+
 # ----------------------------------------------------------------------------- figures
 _STYLE = {"fastvi": dict(ls="-", marker="o"), "rk4": dict(ls="--", marker="s"),
           "scipy": dict(ls=":", marker="^")}
@@ -695,56 +791,83 @@ def _at_decades(E, ratio, which):
     return out
 
 
-def goal_lines(points, cfg, metric: str = "dH") -> tuple[list[str], dict]:
-    """The goal verdicts and crossover points, in words, with the numbers behind them.
+#: (rival, goal) of the comparisons at equal max|ΔH| over T = 1000 s; None: no goal, reported
+RIVALS = (("SciPy DOP853", GOAL_SCIPY), ("RK4+proj", GOAL_RK4), ("RK4", GOAL_RK4),
+          ("SciPy RK45", None), ("SciPy Radau", None))
+#: rivals of the position-error comparison (panel a), all reported without a goal
+RIVALS_A = ("SciPy DOP853", "RK4+proj", "RK4", "SciPy RK45", "SciPy Radau")
+
+
+def comparison_lines(points, metric: str, rival: str, goal, what: str, unit: str) -> tuple[list[str], dict]:
+    """One bullet (and sub-lines) comparing the best fastvi method with ``rival`` at equal error.
+
+    ``goal`` (a ratio, or None) adds a verdict, the error where the ratio crosses it and the
+    trend of the ratio beyond the measured range. Break-even points (ratio = 1) are always
+    stated. Returns the lines and ``{"E", "ratio", "which", "cpu_ratio"}`` (empty if the
+    rival's and fastvi's errors do not overlap)."""
+    E, ratio, which = compare(points, metric, rival)
+    if len(E) == 0:
+        return [f"- **vs {rival}**: its {what} and fastvi's do not overlap (see the table): no "
+                "ratio at equal error."], {}
+    _, rc, _ = compare(points, metric, rival, cost="cpu")
+    k_lo, k_hi = int(np.argmin(ratio)), int(np.argmax(ratio))
+    head = f"- **vs {rival}**"
+    met_all = goal is not None and bool(np.all(ratio >= goal))
+    if goal is not None:
+        verdict = ("met over the whole common range" if met_all else
+                   "met only in part of the range" if np.any(ratio >= goal) else "**not met**")
+        head += f" (goal ≥ {goal:g}×): {verdict}"
+    else:
+        head += " (no goal)"
+    dec = "; ".join(f"{r:.3g}× at {d:.0e} {unit} ({w})" for d, r, w in _at_decades(E, ratio, which))
+    lines = [head + f". Over {what} from {E.max():.1e} to {E.min():.1e} {unit} the best fastvi method "
+             f"is {ratio.min():.3g}× ({which[k_lo]}, at {E[k_lo]:.1e} {unit}) to {ratio.max():.3g}× "
+             f"({which[k_hi]}, at {E[k_hi]:.1e} {unit}) faster" + (f"; at each decade: {dec}" if dec else "")
+             + "." + (f" In CPU time (insensitive to other jobs' load): {rc.min():.3g}× to "
+                      f"{rc.max():.3g}×." if len(rc) else "")]
+    cross = crossings(E, ratio, goal) if goal not in (None, 1.0) else []
+    even = crossings(E, ratio, 1.0)
+    if cross:
+        lines.append(f"  Crossover (ratio = {goal:g}×) at {what} ≈ "
+                     + ", ".join(f"{c:.1e}" for c in cross) + f" {unit}.")
+    if even:
+        lines.append(f"  Break-even (ratio = 1×, the rival is cheaper on the looser side) at "
+                     f"{what} ≈ " + ", ".join(f"{c:.1e}" for c in even) + f" {unit}."
+                     if ratio[0] < 1.0 else
+                     f"  Break-even (ratio = 1×) at {what} ≈ " + ", ".join(f"{c:.1e}" for c in even)
+                     + f" {unit}.")
+    if not cross and not even:
+        ref = goal if goal is not None else 1.0
+        lines.append(f"  No crossover inside the common range: the ratio stays "
+                     f"{'above' if ratio.min() >= ref else 'below'} {ref:g}×.")
+    if goal is not None and not met_all and len(E) > 2:
+        # log ratio against log error, least squares: the trend beyond the common range
+        slope = np.polyfit(np.log10(E), np.log10(ratio), 1)[0]
+        per_dec = 10.0 ** (-slope)
+        if per_dec > 1.0 + 1e-3:
+            E_goal = 10.0 ** (np.log10(E[-1]) - np.log10(goal / ratio[-1]) / np.log10(per_dec))
+            lines.append(f"  Trend: the ratio grows ≈ {per_dec:.2f}× per decade of accuracy; "
+                         f"continued, it would reach {goal:g}× at {what} ≈ {E_goal:.0e} {unit}"
+                         + (" (below round-off: never in practice)." if E_goal < 1e-13 else
+                            " (an extrapolation, not a measurement)."))
+        else:
+            lines.append("  Trend: the ratio does not grow with accuracy.")
+    return lines, dict(E=E, ratio=ratio, which=which, cpu_ratio=rc)
+
+
+def goal_lines(points, cfg) -> tuple[list[str], dict]:
+    """The goal verdicts and crossover points at equal max|ΔH| over T = 1000 s (panel b).
 
     Returns the Markdown lines and ``{rival: {"E", "ratio", "which", "cpu_ratio"}}``."""
     lines, summary = [], {}
-    T = cfg["T_long"]
-    for rival, goal in (("SciPy DOP853", GOAL_SCIPY), ("RK4+proj", GOAL_RK4), ("RK4", GOAL_RK4),
-                        ("SciPy RK45", GOAL_SCIPY)):
-        E, ratio, which = compare(points, metric, rival)
-        if len(E) == 0:
-            lines.append(f"- **vs {rival}**: its max|ΔH| over T = {T:g} s and fastvi's do not "
-                         "overlap (see the table): no ratio at equal error.")
+    what = f"max|ΔH| over T = {cfg['T_long']:g} s"
+    for rival, goal in RIVALS:
+        if not _select(points, "dH", rival):
             continue
-        Ec, rc, _ = compare(points, metric, rival, cost="cpu")
-        summary[rival] = dict(E=E, ratio=ratio, which=which, cpu_ratio=rc)
-        k_lo, k_hi = int(np.argmin(ratio)), int(np.argmax(ratio))
-        met_all = bool(np.all(ratio >= goal))
-        verdict = ("met over the whole common range" if met_all else
-                   "met only in part of the range" if np.any(ratio >= goal) else "**not met**")
-        dec = "; ".join(f"{r:.3g}× at {d:.0e} J ({w})" for d, r, w in _at_decades(E, ratio, which))
-        lines.append(
-            f"- **vs {rival}** (goal ≥ {goal:g}×): {verdict}. Over max|ΔH| = {E.max():.1e} … "
-            f"{E.min():.1e} J the best fastvi method is {ratio.min():.3g}× ({which[k_lo]}, at "
-            f"{E[k_lo]:.1e} J) to {ratio.max():.3g}× ({which[k_hi]}, at {E[k_hi]:.1e} J) faster"
-            + (f"; at each decade: {dec}" if dec else "") + "."
-            + (f" In CPU time (insensitive to other jobs' load): "
-               f"{rc.min():.3g}× to {rc.max():.3g}×." if len(rc) else ""))
-        cross = crossings(E, ratio, goal)
-        even = crossings(E, ratio, 1.0) if goal != 1.0 else []
-        if cross:
-            lines.append(f"  Crossover (ratio = {goal:g}×) at max|ΔH| ≈ "
-                         + ", ".join(f"{c:.1e}" for c in cross) + " J.")
-        if even:
-            lines.append("  Break-even (ratio = 1×) at max|ΔH| ≈ "
-                         + ", ".join(f"{c:.1e}" for c in even) + " J.")
-        if not cross and not even:
-            lines.append(f"  No crossover inside the common range: the ratio stays "
-                         f"{'above' if ratio.min() >= goal else 'below'} {goal:g}×.")
-        if not met_all and len(E) > 2:
-            # log ratio against log error, least squares: the trend outside the common range
-            slope = np.polyfit(np.log10(E), np.log10(ratio), 1)[0]
-            per_dec = 10.0 ** (-slope)
-            if per_dec > 1.0 + 1e-3:
-                E_goal = 10.0 ** (np.log10(E[-1]) - np.log10(goal / ratio[-1]) / np.log10(per_dec))
-                lines.append(f"  Trend: the ratio grows ≈ {per_dec:.2f}× per decade of accuracy; "
-                             f"continued, it would reach {goal:g}× at max|ΔH| ≈ {E_goal:.0e} J"
-                             + (" (below round-off: never in practice)." if E_goal < 1e-13 else
-                                " (an extrapolation, not a measurement)."))
-            else:
-                lines.append("  Trend: the ratio does not grow with accuracy.")
+        ls, data = comparison_lines(points, "dH", rival, goal, what, "J")
+        lines += ls
+        if data:
+            summary[rival] = data
     return lines, summary
 
 
@@ -778,21 +901,21 @@ def limits_lines(points, prof, cfg) -> list[str]:
             + "; ".join(f"{1e6 * r:.2f} µs at max|ΔH| = {p.dH:.1e} J (DOP853: {p.work} evaluations "
                         f"in {p.wall:.2f} s; {w}: ≈ {n:.0f} steps at {1e6 * c:.1f} µs each)"
                         for p, w, n, r, c in need) + ".")
+        factors = [c / r for _, _, _, r, c in need]
+        lines.append(f"fastvi's step would have to become {min(factors):.0f}–{max(factors):.0f}× "
+                     "cheaper.")
         if prof:
             res_min = min(pr["assemble_res"] for pr in prof)
             worst = max(r for _, _, _, r, _ in need)
             if worst < res_min:
                 lines.append(
-                    f"Even the largest of these is below the cost of one residual evaluation of "
-                    f"the step equations ({1e6 * res_min:.2f} µs, profile table; a step needs "
-                    "one per Newton iteration plus one): no tuning of the dense kernel reaches the "
-                    "goal on this 4-coordinate model. A 100× lead presumes SciPy pays a large "
-                    "per-evaluation overhead; with a compiled right-hand side it pays "
-                    f"{1e6 * per_eval:.0f} µs, and DOP853 (order 8) takes long steps.")
-            else:
-                lines.append(f"The profiled step costs {min(pr['step'] for pr in prof) * 1e6:.1f} µs "
-                             f"or more: it would have to be ≈ "
-                             f"{min(pr['step'] for pr in prof) / worst:.0f}× cheaper.")
+                    f"Even one evaluation of the residual of the step equations, which every "
+                    f"Newton iteration needs, costs {1e6 * res_min:.2f} µs (profile table): more "
+                    "than the whole budget of a step.")
+        lines.append(
+            "A 100× lead presumes that SciPy pays a large overhead per evaluation; with a "
+            f"compiled right-hand side it pays {1e6 * per_eval:.1f} µs, and DOP853 (order 8) "
+            "takes long steps.")
     return lines
 
 
@@ -810,7 +933,7 @@ def _table(points, panel, metric_cols, cfg) -> list[str]:
     return out
 
 
-def markdown(points, cfg, figs, prof, ref_floor, command, elapsed) -> str:
+def markdown(points, cfg, figs, prof, ref_floor, command, elapsed, growth=None) -> str:
     goals, summary = goal_lines(points, cfg)
     spans = method_crossovers(points, "dH")
     spans_a = method_crossovers(points, "err_q")
@@ -873,12 +996,17 @@ def markdown(points, cfg, figs, prof, ref_floor, command, elapsed) -> str:
     if spans_a:
         P.append(f"For the position error at T = {cfg['T_error']:g} s: " + "; ".join(
             f"{w} from {a:.1e} down to {b:.1e}" for w, a, b in spans_a) + ".\n")
-    # position-error comparison at the same time
-    E, ratio, which = compare(points, "err_q", "SciPy DOP853")
-    if len(E):
-        P.append(f"For the position error at T = {cfg['T_error']:g} s (panel a) the best fastvi "
-                 f"method is {ratio.min():.3g}× to {ratio.max():.3g}× faster than SciPy DOP853 over "
-                 f"errors {E.max():.1e} … {E.min():.1e} m.\n")
+    # position-error comparison (panel a): no goal, but the crossovers
+    what_a = f"error of q at T = {cfg['T_error']:g} s"
+    lines_a = []
+    for rival in RIVALS_A:
+        if _select(points, "err_q", rival):
+            lines_a += comparison_lines(points, "err_q", rival, None, what_a, "m")[0]
+    if lines_a:
+        P.append(f"At equal position error at T = {cfg['T_error']:g} s (panel a; short runs, so "
+                 "fixed costs such as validation and the initial projection weigh more):\n")
+        P.extend(lines_a)
+        P.append("")
     lim = limits_lines(points, prof, cfg)
     if prof:
         P.append("## What a step costs\n")
@@ -908,6 +1036,7 @@ def markdown(points, cfg, figs, prof, ref_floor, command, elapsed) -> str:
         P.append("")
     if lim:
         P.append("**What limits the ratio to SciPy.** " + " ".join(lim) + "\n")
+    P.extend(growth_lines(growth or {}))
     P.append("## Diagrams\n")
     for (panel, metric, fname, xlabel, title), rel in zip(PANELS, figs):
         P.append(f"![{title.format(**cfg)}]({rel})\n")
@@ -928,7 +1057,8 @@ def markdown(points, cfg, figs, prof, ref_floor, command, elapsed) -> str:
 
 
 # ----------------------------------------------------------------------------- main
-def run_study(cfg, outdir: str, log, command: str, figures_on: bool = True, profile: bool = True):
+def run_study(cfg, outdir: str, log, command: str, figures_on: bool = True, profile: bool = True,
+              growth_on: bool = True):
     """Run the sweeps, write ``outdir/wpd.md`` and the figures; returns (points, path)."""
     t_start = time.perf_counter()
     model = fastvi.scenes.double_pendulum()
@@ -947,10 +1077,18 @@ def run_study(cfg, outdir: str, log, command: str, figures_on: bool = True, prof
             prof.append(pr)
             log(f"profile {method} h={h:g}: {1e6 * pr['step']:.1f} µs/step, "
                 + ", ".join(f"{k} {100 * v:.0f}%" for k, v in pr["shares"].items()))
+    growth = {}
+    if growth_on:
+        for N in cfg["growth"]:
+            growth[N] = chain_cost(N)
+            r = growth[N]
+            log(f"chain({N}): {r['rows']} rows, {1e6 * r['cpu_per_step']:.1f} µs/step, "
+                f"LU {100 * r['lu_share']:.0f}% of a step")
     os.makedirs(outdir, exist_ok=True)
     figs = figures(points, cfg, outdir, log) if figures_on else []
     path = os.path.join(outdir, "wpd.md")
-    text = markdown(points, cfg, figs, prof, ref_floor, command, time.perf_counter() - t_start)
+    text = markdown(points, cfg, figs, prof, ref_floor, command, time.perf_counter() - t_start,
+                    growth)
     with open(path, "w", encoding="utf-8") as fh:
         fh.write(text)
     log(f"wrote {path}" + (f" and {len(figs)} figures" if figs else ""))
@@ -964,6 +1102,7 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default="docs", help="directory for wpd.md and figures/ (default: docs)")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     parser.add_argument("--no-profile", action="store_true", help="skip the per-step profile")
+    parser.add_argument("--no-growth", action="store_true", help="skip the chain(N) cost-growth table")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     args = parser.parse_args(argv)
 
@@ -973,7 +1112,8 @@ def main(argv=None) -> int:
 
     command = "python -m fastvi wpd" + (" --quick" if args.quick else "")
     points, path = run_study(QUICK if args.quick else FULL, args.out, log, command,
-                             figures_on=not args.no_figures, profile=not args.no_profile)
+                             figures_on=not args.no_figures, profile=not args.no_profile,
+                             growth_on=not args.no_growth)
     goals, _ = goal_lines(points, QUICK if args.quick else FULL)
     print("\n".join(goals))
     print(f"wrote {path}")

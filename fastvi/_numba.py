@@ -6,7 +6,9 @@ import warnings
 from pathlib import Path
 
 import numba as nb
+from numba import types
 from numba.core import caching
+from numba.core.extending import intrinsic
 
 # First-class function values (our cfunc callbacks) are "experimental" in numba's words;
 # they are the documented way to pass compiled callbacks and we test them, so the warning
@@ -94,3 +96,19 @@ def quiet():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", nb.NumbaExperimentalFeatureWarning)
         yield
+
+
+@intrinsic
+def ptr(typingctx, arr):
+    """The data pointer of an array, for a model callback, with no reference counting.
+
+    ``arr.ctypes`` does the same job but increments and decrements the array's reference
+    count, atomically, on every call: measured 50 ns per callback on views such as
+    ``ws[6][0]``, more than the model's own work. The array outlives the call (it is a local
+    of the caller), so the bare pointer is safe.
+    """
+
+    def codegen(context, builder, signature, args):
+        return context.make_array(signature.args[0])(context, builder, value=args[0]).data
+
+    return types.CPointer(arr.dtype)(arr), codegen

@@ -49,7 +49,7 @@ import numba as nb
 import numpy as np
 from numba import carray, types
 
-from ._numba import njit, quiet
+from ._numba import njit, ptr, quiet
 
 __all__ = ["Model", "CALLBACK_SIGNATURE", "SLOTS"]
 
@@ -90,7 +90,7 @@ def _absent(q, v, params, out):  # pragma: no cover - never called: flags skip i
 @njit
 def _call(fn, q, v, params, out):
     """Evaluate one compiled callback from Python (validation, diagnostics, baselines)."""
-    fn(q.ctypes, v.ctypes, params.ctypes, out.ctypes)
+    fn(ptr(q), ptr(v), ptr(params), ptr(out))
 
 
 def _wrap(kind: str, fn: Callable, n: int, m: int, k: int):

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import _validate as check
-from .._numba import njit
+from .._numba import njit, ptr
 from ..kernels.linalg import lu_factor, lu_solve
 from ..model import SLOTS, Model
 from ..status import MESSAGES, Status
@@ -138,7 +138,7 @@ def make_workspace(n, m):
 def _mass(fns, flags, Mc, prm, q, M):
     n = q.shape[0]
     if flags[_F_MASSFN] != 0:
-        fns[_MASS](q.ctypes, q.ctypes, prm.ctypes, M.ctypes)
+        fns[_MASS](ptr(q), ptr(q), ptr(prm), ptr(M))
     else:
         for a in range(n):
             for c in range(n):
@@ -187,16 +187,16 @@ def acceleration(fns, flags, Mc, prm, q, v, a, ws):
     dV, dT, qa, fa = ws[6][0], ws[6][1], ws[6][2], ws[6][3]
     unit = ws[7][1]
     _mass(fns, flags, Mc, prm, q, M)
-    fns[_PGRAD](q.ctypes, q.ctypes, prm.ctypes, dV.ctypes)
+    fns[_PGRAD](ptr(q), ptr(q), ptr(prm), ptr(dV))
     for i in range(n):
         rhs[i] = -dV[i]
     if flags[_F_MASSFN] != 0:
-        fns[_KGRAD](q.ctypes, v.ctypes, prm.ctypes, dT.ctypes)
+        fns[_KGRAD](ptr(q), ptr(v), ptr(prm), ptr(dT))
         for i in range(n):
             rhs[i] += dT[i]
         # − (∂(M v)/∂q) v: the part of d/dt (M v) that is not M a
         if flags[_F_EXACT_MJAC] != 0:
-            fns[_MJAC](q.ctypes, v.ctypes, prm.ctypes, Cq.ctypes)
+            fns[_MJAC](ptr(q), ptr(v), ptr(prm), ptr(Cq))
             for i in range(n):
                 acc = 0.0
                 for c in range(n):
@@ -208,21 +208,21 @@ def acceleration(fns, flags, Mc, prm, q, v, a, ws):
                 for sgn in (1.0, -1.0):
                     for c in range(n):
                         qa[c] = q[c] + sgn * eps * v[c]
-                    fns[_MASS](qa.ctypes, qa.ctypes, prm.ctypes, Hc.ctypes)
+                    fns[_MASS](ptr(qa), ptr(qa), ptr(prm), ptr(Hc))
                     for i in range(n):
                         acc = 0.0
                         for c in range(n):
                             acc += Hc[i, c] * v[c]
                         rhs[i] -= sgn * acc * (0.5 / eps)
     if m > 0:
-        fns[_CJAC](q.ctypes, q.ctypes, prm.ctypes, G.ctypes)
+        fns[_CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
         # −(Ġ v)_c = −vᵀ ∇²g_c v
         if flags[_F_EXACT_CHESS] != 0:
             for c in range(m):
                 for d in range(m):
                     unit[d] = 0.0
                 unit[c] = 1.0
-                fns[_CHESS](q.ctypes, unit.ctypes, prm.ctypes, Hc.ctypes)
+                fns[_CHESS](ptr(q), ptr(unit), ptr(prm), ptr(Hc))
                 acc = 0.0
                 for i in range(n):
                     for j in range(n):
@@ -235,10 +235,10 @@ def acceleration(fns, flags, Mc, prm, q, v, a, ws):
             if eps > 0.0:
                 for c in range(n):
                     qa[c] = q[c] + eps * v[c]
-                fns[_CJAC](qa.ctypes, qa.ctypes, prm.ctypes, Gp.ctypes)
+                fns[_CJAC](ptr(qa), ptr(qa), ptr(prm), ptr(Gp))
                 for c in range(n):
                     qa[c] = q[c] - eps * v[c]
-                fns[_CJAC](qa.ctypes, qa.ctypes, prm.ctypes, Gm.ctypes)
+                fns[_CJAC](ptr(qa), ptr(qa), ptr(prm), ptr(Gm))
                 for c in range(m):
                     acc = 0.0
                     for i in range(n):
@@ -271,12 +271,12 @@ def _project(fns, flags, Mc, prm, q, v, ws):
     for i in range(n):
         qs = max(qs, abs(q[i]))
     _mass(fns, flags, Mc, prm, q, M)
-    fns[_CJAC](q.ctypes, q.ctypes, prm.ctypes, G.ctypes)
+    fns[_CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
     _saddle(M, G, n, m, K)
     if lu_factor(K, piv, n + m) != 0:
         return _SINGULAR
     for _ in range(PROJECTION_MAX_ITER):
-        fns[_CON](q.ctypes, q.ctypes, prm.ctypes, gv.ctypes)
+        fns[_CON](ptr(q), ptr(q), ptr(prm), ptr(gv))
         gmax = 0.0
         for c in range(m):
             gmax = max(gmax, abs(gv[c]))
@@ -292,7 +292,7 @@ def _project(fns, flags, Mc, prm, q, v, ws):
         for i in range(n):
             q[i] += rhs[i]
     _mass(fns, flags, Mc, prm, q, M)
-    fns[_CJAC](q.ctypes, q.ctypes, prm.ctypes, G.ctypes)
+    fns[_CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
     _saddle(M, G, n, m, K)
     if lu_factor(K, piv, n + m) != 0:
         return _SINGULAR
@@ -356,7 +356,7 @@ def observe(fns, flags, Mc, prm, q, v, ws, out):
     m = flags[1]
     M, G, gv, pot = ws[3], ws[5][0], ws[7][0], ws[9]
     _mass(fns, flags, Mc, prm, q, M)
-    fns[_POT](q.ctypes, q.ctypes, prm.ctypes, pot.ctypes)
+    fns[_POT](ptr(q), ptr(q), ptr(prm), ptr(pot))
     e = pot[0]
     for i in range(n):
         acc = 0.0
@@ -367,8 +367,8 @@ def observe(fns, flags, Mc, prm, q, v, ws, out):
     out[1] = 0.0
     out[2] = 0.0
     if m > 0:
-        fns[_CON](q.ctypes, q.ctypes, prm.ctypes, gv.ctypes)
-        fns[_CJAC](q.ctypes, q.ctypes, prm.ctypes, G.ctypes)
+        fns[_CON](ptr(q), ptr(q), ptr(prm), ptr(gv))
+        fns[_CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
         for c in range(m):
             out[1] = max(out[1], abs(gv[c]))
             acc = 0.0

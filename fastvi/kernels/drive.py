@@ -6,7 +6,7 @@ chunks when it shows progress; the state carries everything, so chunking changes
 
 import numpy as np
 
-from .._numba import njit
+from .._numba import njit, ptr
 from .step import _POT, step
 
 # layout of the float64 ``info`` vector shared with fastvi.integrate
@@ -17,7 +17,7 @@ INFO_SIZE = 10
 @njit
 def energy(fns, prm, q, p, v, scratch):
     """H = ½ vᵀp + V(q) with v = M⁻¹p already known."""
-    fns[_POT](q.ctypes, q.ctypes, prm.ctypes, scratch.ctypes)
+    fns[_POT](ptr(q), ptr(q), ptr(prm), ptr(scratch))
     e = scratch[0]
     for a in range(q.shape[0]):
         e += 0.5 * v[a] * p[a]

@@ -17,7 +17,7 @@ Workspace, model and method are plain arrays and cfuncs; nothing here allocates.
 
 import numpy as np
 
-from .._numba import njit
+from .._numba import njit, ptr
 from ..status import Status
 from .linalg import lu_factor, lu_solve
 
@@ -69,9 +69,9 @@ def _fd_vec_jacobian(fn, slot_kind, q, v, prm, out, qa, fa, fb, n):
             qa[a] = q[a]
         dq = _FD_REL * max(1.0, abs(q[b]))
         qa[b] = q[b] + dq
-        fn(qa.ctypes, v.ctypes, prm.ctypes, fa.ctypes)
+        fn(ptr(qa), ptr(v), ptr(prm), ptr(fa))
         qa[b] = q[b] - dq
-        fn(qa.ctypes, v.ctypes, prm.ctypes, fb.ctypes)
+        fn(ptr(qa), ptr(v), ptr(prm), ptr(fb))
         inv = 0.5 / dq
         for a in range(n):
             out[a, b] = (fa[a] - fb[a]) * inv
@@ -91,14 +91,14 @@ def _fd_momentum_jacobian(fmass, q, v, prm, out, qa, Ma, n):
             qa[a] = q[a]
         dq = _FD_REL * max(1.0, abs(q[b]))
         qa[b] = q[b] + dq
-        fmass(qa.ctypes, qa.ctypes, prm.ctypes, Ma.ctypes)
+        fmass(ptr(qa), ptr(qa), ptr(prm), ptr(Ma))
         for a in range(n):
             acc = 0.0
             for c in range(n):
                 acc += Ma[a, c] * v[c]
             out[a, b] = acc
         qa[b] = q[b] - dq
-        fmass(qa.ctypes, qa.ctypes, prm.ctypes, Ma.ctypes)
+        fmass(ptr(qa), ptr(qa), ptr(prm), ptr(Ma))
         inv = 0.5 / dq
         for a in range(n):
             acc = 0.0
@@ -115,9 +115,9 @@ def _fd_constraint_hessian(fjac, q, eta, prm, out, qa, Gp, Gm, n, m):
             qa[a] = q[a]
         dq = _FD_REL * max(1.0, abs(q[b]))
         qa[b] = q[b] + dq
-        fjac(qa.ctypes, qa.ctypes, prm.ctypes, Gp.ctypes)
+        fjac(ptr(qa), ptr(qa), ptr(prm), ptr(Gp))
         qa[b] = q[b] - dq
-        fjac(qa.ctypes, qa.ctypes, prm.ctypes, Gm.ctypes)
+        fjac(ptr(qa), ptr(qa), ptr(prm), ptr(Gm))
         inv = 0.5 / dq
         for a in range(n):
             acc = 0.0
@@ -177,10 +177,10 @@ def assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac):
                 va += Ld[nu, i] * x
             qi[a] = qa
             vi[a] = va * inv_h
-        fns[_PGRAD](qi.ctypes, qi.ctypes, prm.ctypes, fa.ctypes)
+        fns[_PGRAD](ptr(qi), ptr(qi), ptr(prm), ptr(fa))
         if has_mass:
-            fns[_KGRAD](qi.ctypes, vi.ctypes, prm.ctypes, F.ctypes)
-            fns[_MASS](qi.ctypes, qi.ctypes, prm.ctypes, Mi.ctypes)
+            fns[_KGRAD](ptr(qi), ptr(vi), ptr(prm), ptr(F))
+            fns[_MASS](ptr(qi), ptr(qi), ptr(prm), ptr(Mi))
             for a in range(n):
                 F[a] -= fa[a]
         else:
@@ -205,7 +205,7 @@ def assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac):
             continue
         # ∂F/∂q = T_qq − V_qq ; ∂(Mv)/∂q
         if flags[_F_EX_PHESS] != 0:
-            fns[_PHESS](qi.ctypes, qi.ctypes, prm.ctypes, Aq.ctypes)
+            fns[_PHESS](ptr(qi), ptr(qi), ptr(prm), ptr(Aq))
         else:
             _fd_vec_jacobian(fns[_PGRAD], 1, qi, qi, prm, Aq, fa, F, Pm, n)  # F, Pm: spent scratch
         for a in range(n):
@@ -213,14 +213,14 @@ def assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac):
                 Aq[a, c] = -Aq[a, c]
         if has_mass:
             if flags[_F_EX_KHESS] != 0:
-                fns[_KHESS](qi.ctypes, vi.ctypes, prm.ctypes, Hc.ctypes)
+                fns[_KHESS](ptr(qi), ptr(vi), ptr(prm), ptr(Hc))
             else:
                 _fd_vec_jacobian(fns[_KGRAD], 1, qi, vi, prm, Hc, fa, F, Pm, n)
             for a in range(n):
                 for c in range(n):
                     Aq[a, c] += Hc[a, c]
             if flags[_F_EX_MJAC] != 0:
-                fns[_MJAC](qi.ctypes, vi.ctypes, prm.ctypes, Cq.ctypes)
+                fns[_MJAC](ptr(qi), ptr(vi), ptr(prm), ptr(Cq))
             else:
                 _fd_momentum_jacobian(fns[_MASS], qi, vi, prm, Cq, fa, Ma, n)
         for nu in range(s):
@@ -254,9 +254,9 @@ def assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac):
                 for nu in range(1, s + 1):
                     qa += Lc[nu, j] * X[(nu - 1) * n + a]
                 qd[a] = qa
-            fns[_CON](qd.ctypes, qd.ctypes, prm.ctypes, gj.ctypes)
+            fns[_CON](ptr(qd), ptr(qd), ptr(prm), ptr(gj))
             Gj = G[j]
-            fns[_CJAC](qd.ctypes, qd.ctypes, prm.ctypes, Gj.ctypes)
+            fns[_CJAC](ptr(qd), ptr(qd), ptr(prm), ptr(Gj))
             row = sn + (j - 1) * m
             for a in range(m):
                 R[row + a] = gj[a]
@@ -271,7 +271,7 @@ def assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac):
                 if j < J:
                     eta = X[sn + j * m : sn + (j + 1) * m]
                     if flags[_F_EX_CHESS] != 0:
-                        fns[_CHESS](qd.ctypes, eta.ctypes, prm.ctypes, Hc.ctypes)
+                        fns[_CHESS](ptr(qd), ptr(eta), ptr(prm), ptr(Hc))
                     else:
                         _fd_constraint_hessian(fns[_CJAC], qd, eta, prm, Hc, fa, gfd[1], gfd[2], n, m)
                     for nu in range(s):
@@ -415,7 +415,7 @@ def step(fns, flags, Mc, prm, tabs, h, qk, pk, vk, q1, p1, v1, ws, tol, max_iter
     if m > 0:
         G0 = G[0]
         if first:
-            fns[_CJAC](qk.ctypes, qk.ctypes, prm.ctypes, G0.ctypes)
+            fns[_CJAC](ptr(qk), ptr(qk), ptr(prm), ptr(G0))
         else:
             # the previous step ended with G at q(d_J) = q_k, bit for bit: reuse it
             for a in range(m):
@@ -500,7 +500,7 @@ def end_momentum(fns, flags, Mc, prm, q1, P, p1, v1, G1, ws):
             v1[a] = P[a] / Mc[a, a]  # z = M⁻¹ P
     else:
         if flags[_F_MASSFN] != 0:
-            fns[_MASS](q1.ctypes, q1.ctypes, prm.ctypes, Mlu.ctypes)
+            fns[_MASS](ptr(q1), ptr(q1), ptr(prm), ptr(Mlu))
         else:
             for a in range(n):
                 for c in range(n):

@@ -126,7 +126,8 @@ def test_failed_member_samples_stop_at_the_failure(pendulum):
     P = np.tile(pendulum.params, (2, 1))
     P[1, 2] = 20000.0
     ens = fastvi.integrate_ensemble(pendulum, Q0, V0, h=H, n_steps=20, params=P, max_iter=6, save=2)
-    k = ens.failed_step[1]  # measured 7: samples at steps 0, 2, 4, 6
+    k = ens.failed_step[1]  # measured 3: samples at steps 0 and 2
+    assert k > 0
     assert ens.n_saved[1] == k // 2 + 1 and ens.n_saved[0] == 11
     assert np.isnan(ens.q[1, ens.n_saved[1]:]).all() and np.isfinite(ens.q[1, :ens.n_saved[1]]).all()
     r = fastvi.integrate(pendulum, Q0[1], V0[1], h=H, n_steps=20, params=P[1], max_iter=6,

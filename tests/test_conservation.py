@@ -17,9 +17,10 @@ def test_energy_error_does_not_drift_over_1e5_steps(double_pendulum, name):
     err = r.energy_error
     slope, window_max = drift_slope(r.t, err)
     growth = abs(slope) * r.t[-1]
-    # a drift would make the fitted growth over the run comparable to the error itself;
-    # measured growth/max: P2 0.0x, P3 0.0x
-    assert growth <= 0.25 * np.abs(err).max(), (growth, window_max)
+    # A drifting method (RK4) grows by about its whole error over the run (growth/max ~ 1);
+    # here the window maxima only fluctuate with the chaotic motion. Measured growth/max:
+    # P2 0.014, P3 0.19 (0.03 over 4·10^5 steps, so the 0.19 is fluctuation, not a trend).
+    assert growth <= 0.5 * np.abs(err).max(), (growth, window_max)
     assert np.abs(err).max() < {"P2L-Q3G": 1e-3, "P3L-Q4G": 1e-5}[name]  # measured 6e-5, 3e-7
 
 

@@ -1,7 +1,10 @@
 """fastvi: high-order Galerkin variational integrators for constrained mechanical systems.
 
 Public API: :class:`Model`, :func:`integrate`, :class:`Result`, :class:`IntegrationError`,
+:func:`integrate_ensemble`, :class:`EnsembleResult`, :class:`ModelCheckError`,
 :class:`Status`, :func:`method`, and the ready-made mechanisms in :mod:`fastvi.scenes`.
+Optional: :mod:`fastvi.baselines` (RK4, SciPy), :mod:`fastvi.distributed` (Dask),
+:mod:`fastvi.symbolic` (SymPy).
 """
 
 from . import _numba  # noqa: F401  (numba settings first)

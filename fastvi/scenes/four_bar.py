@@ -17,23 +17,9 @@ import numpy as np
 
 from ..model import Model
 from ._common import attach, check_positive
+from .double_pendulum import _V, _dV, _ddV  # same masses-then-g layout: V = g (mB yB + mC yC)
 
 # params = (mB, mC, a, L, g)
-
-
-def _V(q, p):
-    return p[4] * (p[0] * q[1] + p[1] * q[3])
-
-
-def _dV(q, p, out):
-    out[0] = 0.0
-    out[1] = p[4] * p[0]
-    out[2] = 0.0
-    out[3] = p[4] * p[1]
-
-
-def _ddV(q, p, out):
-    out[:, :] = 0.0
 
 
 def _g(q, p, out):

@@ -19,92 +19,25 @@ import numpy as np
 
 from ..model import Model
 from ._common import attach, check_positive
+from .chain import _G, _V, _dV, _ddg, _ddV, _g
+from .chain import angles as _chain_angles
+from .chain import state_from_angles as _chain_state
 
-# params = (m1, m2, m3, l1, l2, l3, g)
-_NB = 3  # bodies
-
-
-def _V(q, p):
-    return p[6] * (p[0] * q[1] + p[1] * q[3] + p[2] * q[5])
-
-
-def _dV(q, p, out):
-    for i in range(_NB):
-        out[2 * i] = 0.0
-        out[2 * i + 1] = p[6] * p[i]
-
-
-def _ddV(q, p, out):
-    out[:, :] = 0.0
-
-
-def _g(q, p, out):
-    px = 0.0
-    py = 0.0
-    for i in range(_NB):
-        dx = q[2 * i] - px
-        dy = q[2 * i + 1] - py
-        out[i] = 0.5 * (dx * dx + dy * dy - p[3 + i] * p[3 + i])
-        px = q[2 * i]
-        py = q[2 * i + 1]
-
-
-def _G(q, p, out):
-    out[:, :] = 0.0
-    px = 0.0
-    py = 0.0
-    for i in range(_NB):
-        dx = q[2 * i] - px
-        dy = q[2 * i + 1] - py
-        out[i, 2 * i] = dx
-        out[i, 2 * i + 1] = dy
-        if i > 0:
-            out[i, 2 * i - 2] = -dx
-            out[i, 2 * i - 1] = -dy
-        px = q[2 * i]
-        py = q[2 * i + 1]
-
-
-def _ddg(q, eta, p, out):
-    out[:, :] = 0.0
-    for i in range(_NB):
-        d = eta[i] + (eta[i + 1] if i + 1 < _NB else 0.0)
-        out[2 * i, 2 * i] = d
-        out[2 * i + 1, 2 * i + 1] = d
-        if i + 1 < _NB:
-            e = -eta[i + 1]
-            out[2 * i, 2 * i + 2] = e
-            out[2 * i + 2, 2 * i] = e
-            out[2 * i + 1, 2 * i + 3] = e
-            out[2 * i + 3, 2 * i + 1] = e
-
-
+# params = (m1, m2, m3, l1, l2, l3, g): the layout of a 3-link `chain`, whose callbacks
+# (written for any number of links) this scene reuses.
 def state_from_angles(theta1, theta2, theta3, omega1=0.0, omega2=0.0, omega3=0.0,
                       l1=1.0, l2=1.0, l3=1.0):
     """Cartesian ``(q, v)`` from angles measured from the downward vertical.
 
     ``r_i = r_{i−1} + l_i (sin θ_i, −cos θ_i)`` and ``ṙ_i = ṙ_{i−1} + l_i ω_i (cos θ_i, sin θ_i)``.
     """
-    q = np.zeros(6)
-    v = np.zeros(6)
-    x = y = vx = vy = 0.0
-    for i, (th, om, li) in enumerate(((theta1, omega1, l1), (theta2, omega2, l2),
-                                      (theta3, omega3, l3))):
-        s, c = np.sin(th), np.cos(th)
-        x, y = x + li * s, y - li * c
-        vx, vy = vx + li * c * om, vy + li * s * om
-        q[2 * i], q[2 * i + 1] = x, y
-        v[2 * i], v[2 * i + 1] = vx, vy
-    return q, v
+    return _chain_state((theta1, theta2, theta3), (omega1, omega2, omega3), (l1, l2, l3))
 
 
 def angles(q):
     """``(theta1, theta2, theta3)`` of configurations ``q`` (..., 6)."""
-    q = np.asarray(q)
-    t1 = np.arctan2(q[..., 0], -q[..., 1])
-    t2 = np.arctan2(q[..., 2] - q[..., 0], -(q[..., 3] - q[..., 1]))
-    t3 = np.arctan2(q[..., 4] - q[..., 2], -(q[..., 5] - q[..., 3]))
-    return t1, t2, t3
+    th = _chain_angles(q)
+    return th[..., 0], th[..., 1], th[..., 2]
 
 
 def _triple(name: str, value) -> tuple[float, float, float]:

@@ -64,8 +64,6 @@ N_FIX = {1: 64, 2: 32, 3: 16, 4: 16, 5: 16}
 DEGREES = (1, 2, 3, 4, 5)
 QUICK_DEGREES = (1, 2)
 QUICK_SEQUENCE = tuple(n for n in N_SEQUENCE if 16 <= n <= 64)
-#: step counts at which the over-determined placements (J > s) are tried
-OVER_N = (16, 32, 64, 128)  # (kept for reference; J > s names are refused now)
 DEFAULT_OUT = Path(__file__).resolve().parents[2] / "docs" / "orders.md"
 COMMAND = "python -m fastvi orders"
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -19,6 +20,10 @@ from .tables import Method
 __all__ = ["integrate", "Result", "IntegrationError"]
 
 _PROGRESS_CHUNKS = 50  # progress lines per run when progress=True
+#: growth of the energy error (last tenth of the samples over the first) that no bounded,
+#: oscillating error reaches: round-off grows like √steps, chaos by a small factor, while a
+#: step beyond a method's stability limit grows exponentially (docs/robustness.md)
+ENERGY_GROWTH_ALARM = 1e6
 
 
 @dataclass
@@ -299,11 +304,34 @@ def integrate(
         status=status, method=meth, h=h, model_name=model.name,
         failed_step=None if status == 0 else int(info[drive.I_FAILED]),
     )
+    _warn_if_energy_explodes(result)
     if status != 0 and on_failure == "raise":
         k = int(info[drive.I_FAILED])
         culprit = _nonfinite_callback(model, prm, state, ws) if status == Status.NONFINITE else None
         raise IntegrationError(status, k, k * h, float(info[drive.I_RES]), result, culprit)
     return result
+
+
+def _warn_if_energy_explodes(result: Result) -> None:
+    """Warn when the energy error grows by ``ENERGY_GROWTH_ALARM`` over the run.
+
+    A variational integrator's energy error stays bounded; exponential growth means the
+    step is beyond the method's stability limit (e.g. ``P1L-Q2G`` with ``ωh > √12`` on a
+    stiff spring), and the trajectory is then wrong even though every step converged.
+    """
+    err = np.abs(result.energy_error[1:])
+    if err.size < 20 or not np.all(np.isfinite(err)):
+        return
+    k = err.size // 10
+    first, last = err[:k].max(), err[-k:].max()
+    floor = 1e-6 * max(1.0, abs(result.energy[0]))
+    if last > floor and last > ENERGY_GROWTH_ALARM * first:
+        warnings.warn(
+            f"the energy error grew from {first:.2e} to {last:.2e} over the run: h = {result.h:g} is "
+            f"probably beyond the stability limit of {result.method.name} for this model (a stiff "
+            "spring?); use a smaller h or a method with r = s, e.g. 'P2L-Q2G' (docs/robustness.md)",
+            RuntimeWarning, stacklevel=3,
+        )
 
 
 def _retry_in_substeps(model, meth, h, tol, iters, prm, state, levels, total, every, outs, info, ws):

@@ -76,3 +76,27 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
         rounds = "/".join(str(k) for k in row["rounds"])
         tr.write_line(f"{row['method']:<10} {row['ratio']:>8.2f} {row['ratio_min']:>8.2f}  "
                       f"{blocks:<22} {rounds:>7}   {verdict}")
+
+
+@pytest.fixture(scope="session")
+def print_uncaptured(pytestconfig):
+    """``emit(fn)`` calls ``fn(write)`` with output going to the terminal, not to pytest's
+    capture (a module fixture's teardown output is captured otherwise); ``write`` prints a
+    line, ``fn`` may also use ``write.sep(title)`` for a separator line."""
+
+    def emit(fn):
+        capman = pytestconfig.pluginmanager.get_plugin("capturemanager")
+        tr = pytestconfig.pluginmanager.get_plugin("terminalreporter")
+
+        def write(line=""):
+            (tr.write_line if tr is not None else print)(line)
+
+        write.sep = (lambda title: (tr.write_line(""), tr.write_sep("-", title))) if tr is not None \
+            else (lambda title: print(f"\n---- {title}"))
+        if capman is None:
+            fn(write)
+            return
+        with capman.global_and_fixture_disabled():
+            fn(write)
+
+    return emit

@@ -36,24 +36,14 @@ _rows: dict[int, dict] = {}
 
 
 @pytest.fixture(scope="module", autouse=True)
-def report(request):
+def report(print_uncaptured):
     yield
-    if len(_rows) < 2:
-        return
-    capman = request.config.pluginmanager.get_plugin("capturemanager")
-    if capman is not None:
-        with capman.global_and_fixture_disabled():
-            _print_report(request.config)
-    else:
-        _print_report(request.config)
+    if len(_rows) >= 2:
+        print_uncaptured(_print_report)
 
 
-def _print_report(config):
-    tr = config.pluginmanager.get_plugin("terminalreporter")
-    write = tr.write_line if tr is not None else print
-    if tr is not None:
-        tr.write_line("")
-        tr.write_sep("-", f"fastvi cost growth: chain(N), {METHOD}, h = {H:g}")
+def _print_report(write):
+    write.sep(f"fastvi cost growth: chain(N), {METHOD}, h = {H:g}")
     write(f"{'N':>3} {'rows':>5} {'fill':>5} {'steps':>6} {'us/step':>10} {'CPU us/step':>11} "
           f"{'its/step':>8} {'LU us':>9} {'LU share':>8}")
     for N in sorted(_rows):

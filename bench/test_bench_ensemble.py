@@ -62,9 +62,10 @@ def members():
 
 
 @pytest.fixture(scope="module", autouse=True)
-def report(request, members):
+def report(members, print_uncaptured):
     yield
-    _print_report(request.config, members)
+    if _results:
+        print_uncaptured(lambda write: _print_report(write, members))
 
 
 def _contender(name, members):
@@ -153,19 +154,9 @@ def test_thread_speedup_interleaved(benchmark, members):
     _results["interleaved"] = dict(one=float(np.median(one)), two=two, load=float(np.median(load)))
 
 
-def _print_report(config, members):
-    if not _results:
-        return
-    capman = config.pluginmanager.getplugin("capturemanager")
-    if capman is None:
-        _write_report(print, members)
-        return
-    with capman.global_and_fixture_disabled():  # fixture teardown output is captured otherwise
-        tr = config.pluginmanager.get_plugin("terminalreporter")
-        if tr is not None:
-            tr.write_line("")
-            tr.write_sep("-", "fastvi ensembles: 256 members x 1000 steps, double pendulum, P2L-Q3G")
-        _write_report(tr.write_line if tr is not None else print, members)
+def _print_report(write, members):
+    write.sep("fastvi ensembles: 256 members x 1000 steps, double pendulum, P2L-Q3G")
+    _write_report(write, members)
 
 
 def _write_report(write, members):

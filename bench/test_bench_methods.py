@@ -84,27 +84,18 @@ def scenes():
 
 
 @pytest.fixture(scope="module", autouse=True)
-def report(request, scenes):
+def report(scenes, print_uncaptured):
     yield
-    capman = request.config.pluginmanager.get_plugin("capturemanager")
-    if capman is not None:
-        with capman.global_and_fixture_disabled():
-            _print_report(request.config)
-    else:
-        _print_report(request.config)
+    print_uncaptured(_print_report)
 
 
-def _print_report(config):
-    tr = config.pluginmanager.get_plugin("terminalreporter")
-    write = tr.write_line if tr is not None else print
+def _print_report(write):
     for scene in SCENES:
         rows = _results[scene]
         if not rows:
             continue
-        if tr is not None:
-            tr.write_line("")
-            tr.write_sep("-", f"fastvi methods benchmark: {scene}, T = {T_END:g} s "
-                              f"(10^4 steps of h = {H:g} for fixed-step methods)")
+        write.sep(f"fastvi methods benchmark: {scene}, T = {T_END:g} s "
+                  f"(10^4 steps of h = {H:g} for fixed-step methods)")
         base = rows.get("P2L-Q3G", {}).get("median", np.nan)
         write(f"{'contender':<16} {'median s':>9} {'/P2L-Q3G':>9} {'max|dH|':>9} {'max|g|':>9} "
               f"{'|dq(10s)|':>9} {'work':>8}")

@@ -36,7 +36,7 @@ import time
 
 import numpy as np
 
-from fastvi._numba import njit
+from fastvi._numba import hot, njit
 from fastvi.kernels.linalg import lu_factor, lu_solve
 from fastvi.status import Status
 
@@ -44,15 +44,13 @@ from fastvi.status import Status
 NQ = 4
 NC = 2
 
-# fastvi's status codes as plain ints inside the kernel
-OK = int(Status.SUCCESS)
-NEWTON = int(Status.NEWTON_NOT_CONVERGED)
-SINGULAR = int(Status.SINGULAR_JACOBIAN)
-NONFINITE = int(Status.NONFINITE)
-SING_CONS = int(Status.SINGULAR_CONSTRAINTS)
+# fastvi's status codes, as the generic kernel uses them
+from fastvi.kernels.layout import NEWTON_FAILED as NEWTON  # noqa: E402
+from fastvi.kernels.layout import NONFINITE, OK, SINGULAR  # noqa: E402
+from fastvi.kernels.layout import SINGULAR_CONSTRAINTS as SING_CONS  # noqa: E402
 
 
-@njit
+@hot
 def _constraint_point(prm, qd, gj, Gj):
     """g(qd) into ``gj`` and the non-zero entries of G(qd) into ``Gj`` (its zeros stay 0)."""
     dx = qd[2] - qd[0]
@@ -69,13 +67,13 @@ def _constraint_point(prm, qd, gj, Gj):
     Gj[1, 3] = dy
 
 
-@njit
+@hot
 def assemble(prm, tabs, h, qk, pk, X, R, A, D, G, qd, gj, jac):
     """Residual (and, if ``jac``, the Newton matrix) at ``X``; the double pendulum inlined.
 
     Mirrors ``fastvi.kernels.step.assemble`` row for row. Returns 0 or ``NONFINITE``.
     """
-    b, L, Ld, Lc, E, tau = tabs
+    b, L, Ld, Lc, E, tau = tabs.b, tabs.L, tabs.Ld, tabs.Lc, tabs.E, tabs.tau
     m1 = prm[0]
     m2 = prm[1]
     grav = prm[4]
@@ -211,10 +209,10 @@ def assemble(prm, tabs, h, qk, pk, X, R, A, D, G, qd, gj, jac):
     return OK
 
 
-@njit
+@hot
 def predict(tabs, s, J, h, vk, X, Xp, first):
     """The generic predictor: straight line on the first step, else extrapolation by ``E``."""
-    b, L, Ld, Lc, E, tau = tabs
+    b, L, Ld, Lc, E, tau = tabs.b, tabs.L, tabs.Ld, tabs.Lc, tabs.E, tabs.tau
     sn = s * NQ
     if first:
         for nu in range(1, s + 1):
@@ -234,10 +232,10 @@ def predict(tabs, s, J, h, vk, X, Xp, first):
         X[k] = Xp[k]
 
 
-@njit
+@hot
 def newton(prm, tabs, h, qk, pk, ws, piv, tol, max_iter, out):
     """The generic ``newton``: increment-based stopping, divergence exit, same LU."""
-    b, L, Ld, Lc, E, tau = tabs
+    b, L, Ld, Lc, E, tau = tabs.b, tabs.L, tabs.Ld, tabs.Lc, tabs.E, tabs.tau
     X, R, Xp, A, D, G, sm, S = ws
     qd = sm[0]
     gj = sm[1]
@@ -288,10 +286,10 @@ def newton(prm, tabs, h, qk, pk, ws, piv, tol, max_iter, out):
     return NEWTON
 
 
-@njit
+@hot
 def step(prm, tabs, h, qk, pk, vk, q1, p1, v1, ws, piv, tol, max_iter, first, out):
     """Advance (q_k, p_k) by one step into (q1, p1, v1); ``out`` as in the generic ``step``."""
-    b, L, Ld, Lc, E, tau = tabs
+    b, L, Ld, Lc, E, tau = tabs.b, tabs.L, tabs.Ld, tabs.Lc, tabs.E, tabs.tau
     X, R, Xp, A, D, G, sm, S = ws
     qd = sm[0]
     gj = sm[1]
@@ -466,7 +464,7 @@ def integrate_double_pendulum(q0, v0, *, h, n_steps, tabs, params=(1.0, 1.0, 1.0
         ``iterations`` (Newton iterations spent, the failed step's included).
     """
     prm = np.ascontiguousarray(params, dtype=np.float64)
-    b, L, Ld, Lc, E, tau = tabs
+    L, Lc = tabs.L, tabs.Lc
     s = L.shape[0] - 1
     J = Lc.shape[1] - 1
     N = s * NQ + J * NC
@@ -485,7 +483,7 @@ def integrate_double_pendulum(q0, v0, *, h, n_steps, tabs, params=(1.0, 1.0, 1.0
     En[0] = prm[4] * (prm[0] * q0[1] + prm[1] * q0[3]) + 0.5 * float(v0 @ state[1])
     info = np.zeros(3)
     t0 = time.perf_counter()
-    st = run(prm, tuple(tabs), float(h), float(tol), int(max_iter), state, ws, piv, int(n_steps),
+    st = run(prm, tabs, float(h), float(tol), int(max_iter), state, ws, piv, int(n_steps),
              Qs, Vs, Ps, En, Gr, GVr, It, info)
     wall = time.perf_counter() - t0
     if st != OK:

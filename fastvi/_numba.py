@@ -21,13 +21,14 @@ _STAMP = None
 
 def _package_stamp() -> str:
     """Hash of every package source that compiled code is made of (once per process):
-    the modules defining ``njit``/``cfunc`` functions and the status codes they return."""
+    the modules defining ``njit``/``hot``/``cfunc`` functions, the named tuples the kernels
+    take and the status codes they return."""
     global _STAMP
     if _STAMP is None:
         h = hashlib.sha256()
         for path in sorted(_PACKAGE.rglob("*.py")):
             text = path.read_bytes()
-            if b"njit" in text or b"cfunc" in text or path.name == "status.py":
+            if any(word in text for word in (b"njit", b"cfunc", b"@hot", b"namedtuple")) or path.name == "status.py":
                 h.update(str(path.relative_to(_PACKAGE)).encode())
                 h.update(text)
         _STAMP = h.hexdigest()
@@ -84,6 +85,19 @@ def njit(fn=None, **extra):
     if fn is None:
         return lambda f: nb.njit(**opts)(f)
     return nb.njit(**opts)(fn)
+
+
+def hot(fn):
+    """:func:`njit` for the kernels of the time loop: compiled without reference counting.
+
+    numba counts references to every array it extracts from a tuple or slices (an atomic
+    increment and decrement per view): measured 0.9 µs of the 1.25 µs a residual of the
+    double pendulum cost, several times its arithmetic (``docs/benchmarks.md``). The kernels
+    of the time loop allocate nothing and only borrow arrays that their caller keeps alive,
+    so they need no reference counting. numba refuses to compile an allocation in such a
+    function, which also enforces the no-allocation rule.
+    """
+    return nb.njit(**_OPTIONS, _nrt=False)(fn)
 
 
 @contextlib.contextmanager

@@ -108,6 +108,22 @@ def max_iter(k) -> int:
     return _count(k, "max_iter", 1)
 
 
+def newton(mode) -> int:
+    """The Newton variant by name (see :func:`fastvi.integrate`), as the kernels' integer."""
+    from .kernels.layout import NEWTON_MODES
+
+    if not isinstance(mode, str) or mode not in NEWTON_MODES:
+        raise ValueError(f"`newton` must be one of {sorted(NEWTON_MODES)}, got {mode!r}")
+    return NEWTON_MODES[mode]
+
+
+def newton_options(tol_, max_iter_, mode):
+    """The validated :class:`~fastvi.kernels.layout.NewtonOptions` of a run."""
+    from .kernels.layout import NewtonOptions
+
+    return NewtonOptions(tolerance(tol_), max_iter(max_iter_), newton(mode))
+
+
 def recover(k) -> int:
     """Number of halvings for the opt-in failed-step recovery (0 = off, at most 10)."""
     k = _count(k, "recover", 0)

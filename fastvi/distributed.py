@@ -49,6 +49,7 @@ def integrate_ensemble(
     threads: int | None = None,
     tol: float = _ens.check.DEFAULT_TOL,
     max_iter: int = _ens.check.DEFAULT_MAX_ITER,
+    newton: str = "auto",
     check: bool = True,
     chunk_size: int | None = None,
 ) -> EnsembleResult:
@@ -56,7 +57,7 @@ def integrate_ensemble(
 
     Parameters
     ----------
-    model, Q0, V0, h, t_end, n_steps, method, params, save, tol, max_iter, check :
+    model, Q0, V0, h, t_end, n_steps, method, params, save, tol, max_iter, newton, check :
         As in :func:`fastvi.integrate_ensemble`.
     client : distributed.Client
         A connected Dask client (``Client("tcp://scheduler:8786")``, a ``LocalCluster``,
@@ -90,7 +91,7 @@ def integrate_ensemble(
         raise ImportError('fastvi.distributed needs Dask: pip install "fastvi[dask]"') from exc
     if not isinstance(model, Model):
         raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
-    opts = _ens._options(h, t_end, n_steps, method, save, tol, max_iter)
+    opts = _ens._options(h, t_end, n_steps, method, save, tol, max_iter, newton)
     if threads is not None:  # the upper bound is the worker's NUMBA_NUM_THREADS: checked there
         threads = _ens.check._count(threads, "threads", 1)
     Q0, V0, P = _ens._members(model, Q0, V0, params)

@@ -21,6 +21,7 @@ import numpy as np
 from . import _validate as check
 from .integrate import Result
 from .kernels import drive
+from .kernels import layout as lay
 from .kernels.step import velocity_residual
 from .model import Model
 from .status import MESSAGES, Status
@@ -252,6 +253,7 @@ def integrate_ensemble(
     threads: int | None = None,
     tol: float = check.DEFAULT_TOL,
     max_iter: int = check.DEFAULT_MAX_ITER,
+    newton: str = "auto",
     check: bool = True,
 ) -> EnsembleResult:
     r"""Integrate ``N`` members (initial states and/or parameters) of one model in parallel.
@@ -285,8 +287,8 @@ def integrate_ensemble(
     threads : int, optional
         Numba threads for this call (``1 … NUMBA_NUM_THREADS``); the previous setting is
         restored afterwards. Default: numba's current setting.
-    tol, max_iter :
-        Newton tolerance and iteration limit per step, as in :func:`fastvi.integrate`.
+    tol, max_iter, newton :
+        Newton tolerance, iteration limit per step and variant, as in :func:`fastvi.integrate`.
     check : bool, default True
         As in :func:`fastvi.integrate`: compare the model's derivative callbacks with finite
         differences (at the first member's state) the first time the model is used.
@@ -322,7 +324,7 @@ def integrate_ensemble(
     run_check = check
     if not isinstance(model, Model):
         raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
-    opts = _options(h, t_end, n_steps, method, save, tol, max_iter)
+    opts = _options(h, t_end, n_steps, method, save, tol, max_iter, newton)
     threads = _validate_threads(threads)
     return _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0)
 
@@ -332,11 +334,11 @@ def _validate_threads(threads):
     return check.threads(threads)
 
 
-def _options(h, t_end, n_steps, method, save, tol, max_iter) -> dict:
+def _options(h, t_end, n_steps, method, save, tol, max_iter, newton="auto") -> dict:
     """The validated scalar options of a run (cheap: the client of a Dask run calls it too)."""
     h = check.step_size(h)
     return dict(h=h, total=check.step_count(h, t_end, n_steps), method=check.method(method),
-                save=check.ensemble_save(save), tol=check.tolerance(tol), max_iter=check.max_iter(max_iter))
+                save=check.ensemble_save(save), newton=check.newton_options(tol, max_iter, newton))
 
 
 def _members(model: Model, Q0, V0, params):
@@ -360,21 +362,21 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -
     N, n = Q0.shape
     h, total, meth, save = opts["h"], opts["total"], opts["method"], opts["save"]
     if save == "final":
-        mode, every, K = drive.SAVE_FINAL, total, 1
+        mode, every, K = lay.SAVE_FINAL, total, 1
     elif save == "diagnostics":
-        mode, every, K = drive.SAVE_DIAGNOSTICS, total, 1
+        mode, every, K = lay.SAVE_DIAGNOSTICS, total, 1
     else:
-        mode, every = drive.SAVE_STRIDE, save
+        mode, every = lay.SAVE_STRIDE, save
         K = total // every + 1 + (1 if total % every else 0)
-    fill = np.nan if mode == drive.SAVE_STRIDE else 0.0
+    fill = np.nan if mode == lay.SAVE_STRIDE else 0.0
     Qs, Vs, Ps = (np.full((N, K, n), fill) for _ in range(3))
     En, Gr, GVr, It = (np.full((N, K), fill) for _ in range(4))
-    if mode == drive.SAVE_STRIDE:  # slot 0 is the initial state, exactly as in integrate
+    if mode == lay.SAVE_STRIDE:  # slot 0 is the initial state, exactly as in integrate
         Qs[:, 0], Ps[:, 0], Vs[:, 0] = X0[:, 0], X0[:, 1], X0[:, 2]
         En[:, 0], Gr[:, 0], GVr[:, 0], It[:, 0] = H0, g0, gv0, 0.0
-    ist = np.zeros((N, drive.E_SIZE), dtype=np.int64)
-    fst = np.zeros((N, drive.F_SIZE))
-    fst[:, drive.F_G], fst[:, drive.F_GV] = g0, gv0
+    ist = np.zeros((N, lay.E_SIZE), dtype=np.int64)
+    fst = np.zeros((N, lay.F_SIZE))
+    fst[:, lay.F_G], fst[:, lay.F_GV] = g0, gv0
 
     fns, flags, Mc = model.kernel_arguments()
     with _PARALLEL_LOCK:
@@ -386,7 +388,7 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -
             used = numba.get_num_threads()
             numba.set_parallel_chunksize(max(1, N // (CHUNKS_PER_THREAD * used)))
             t0 = time.perf_counter()
-            drive.run_ensemble(fns, flags, Mc, P, meth.kernel_tables, h, opts["tol"], opts["max_iter"],
+            drive.run_ensemble(fns, flags, Mc, P, meth.kernel_tables, opts["newton"], h,
                                meth.s, meth.r, meth.J, X0, total, mode, every, H0,
                                Qs, Vs, Ps, En, Gr, GVr, It, ist, fst)
             wall = time.perf_counter() - t0
@@ -394,12 +396,12 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -
             numba.set_parallel_chunksize(prev_chunk)
             numba.set_num_threads(prev_threads)
 
-    steps = ist[:, drive.E_STEPS].copy()
-    iterations = fst[:, drive.F_ITERS].astype(np.int64)
+    steps = ist[:, lay.E_STEPS].copy()
+    iterations = fst[:, lay.F_ITERS].astype(np.int64)
     stats = dict(members=N, member_steps=int(steps.sum()), newton_iterations=int(iterations.sum()),
                  wall_time=wall, setup_time=setup, threads=used)
-    diag = mode == drive.SAVE_DIAGNOSTICS
-    stride = mode == drive.SAVE_STRIDE
+    diag = mode == lay.SAVE_DIAGNOSTICS
+    stride = mode == lay.SAVE_STRIDE
     if stride:
         ks = np.arange(every, total + 1, every)
         if total % every:
@@ -413,12 +415,12 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -
         t=t, q=q, v=v, p=p, energy=energy,
         constraint_residual=Gr if stride else None, velocity_residual=GVr if stride else None,
         newton_iterations=It if stride else None,
-        max_energy_error=fst[:, drive.F_DH].copy() if diag else None,
-        max_constraint_residual=fst[:, drive.F_G].copy() if diag else None,
-        max_velocity_residual=fst[:, drive.F_GV].copy() if diag else None,
-        iterations=iterations, max_residual=fst[:, drive.F_MAXRES].copy(),
-        residual=fst[:, drive.F_RES].copy(), status=ist[:, drive.E_STATUS].copy(),
-        failed_step=ist[:, drive.E_FAILED].copy(), steps=steps, n_saved=ist[:, drive.E_SAVED].copy(),
+        max_energy_error=fst[:, lay.F_DH].copy() if diag else None,
+        max_constraint_residual=fst[:, lay.F_G].copy() if diag else None,
+        max_velocity_residual=fst[:, lay.F_GV].copy() if diag else None,
+        iterations=iterations, max_residual=fst[:, lay.F_MAXRES].copy(),
+        residual=fst[:, lay.F_RES].copy(), status=ist[:, lay.E_STATUS].copy(),
+        failed_step=ist[:, lay.E_FAILED].copy(), steps=steps, n_saved=ist[:, lay.E_SAVED].copy(),
         method=meth, h=h, n_steps=total, save=save, stats=stats, model_name=model.name,
     )
 

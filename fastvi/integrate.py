@@ -12,7 +12,9 @@ import numpy as np
 from . import _validate as valid
 from ._numba import quiet
 from .kernels import drive
-from .kernels.step import make_workspace, velocity_residual
+from .kernels import layout as lay
+from .kernels.layout import ModelData, Samples, make_workspace
+from .kernels.step import velocity_residual
 from .model import Model
 from .status import MESSAGES, Status
 from .tables import Method
@@ -148,9 +150,9 @@ class IntegrationError(RuntimeError):
         )
 
 
-def _alloc(K: int, n: int):
-    return (np.zeros(K), np.zeros((K, n)), np.zeros((K, n)), np.zeros((K, n)), np.zeros(K),
-            np.zeros(K), np.zeros(K), np.zeros(K))
+def _alloc(K: int, n: int) -> Samples:
+    return Samples(np.zeros(K), np.zeros((K, n)), np.zeros((K, n)), np.zeros((K, n)), np.zeros(K),
+                   np.zeros(K), np.zeros(K), np.zeros(K))
 
 
 def integrate(
@@ -165,6 +167,7 @@ def integrate(
     save_every: int = 1,
     tol: float = valid.DEFAULT_TOL,
     max_iter: int = valid.DEFAULT_MAX_ITER,
+    newton: str = "auto",
     params=None,
     progress: bool = False,
     on_failure: str = "raise",
@@ -201,6 +204,15 @@ def integrate(
         momentum rows would leave an error of order ``tol/h`` per step).
     max_iter : int, default 30
         Newton iterations per step before giving up.
+    newton : {"auto", "full"}, default "auto"
+        ``"auto"``: iterate with the *mechanics matrix* — the mass block ``(1/h) A ⊗ M(q_k)``
+        and the exact constraint-Jacobian blocks, with the force and constraint Hessians
+        dropped — solved through a Schur complement of size ``J m`` on the impulses
+        (``docs/method.md`` §10). It contracts like ``(ωh)²``; a step on which it contracts
+        slower than ``MECH_THETA_MAX`` (a stiff spring) is redone with the full Newton, which
+        then stays on for ``FULL_HOLD`` steps (``stats["full_newton_steps"]`` counts them).
+        ``"full"``: the exact Newton matrix, assembled and factored at every iteration.
+        Both solve the same equations to the same tolerance; they differ at round-off.
     params : array_like (k,), optional
         Parameters for this run (default: the model's).
     progress : bool, default False
@@ -243,72 +255,69 @@ def integrate(
     h = valid.step_size(h)
     total = valid.step_count(h, t_end, n_steps)
     every = valid.save_every(save_every)
-    tol = valid.tolerance(tol)
-    iters = valid.max_iter(max_iter)
+    opts = valid.newton_options(tol, max_iter, newton)
     recover = valid.recover(recover)
     meth = valid.method(method)
     if check and not model._checked:  # before the projection, which trusts G(q)
         model.check(q0, v0, params=prm, n_random=1)
     q0, v0 = valid.initial_state(model, q0, v0, prm)
 
-    fns, flags, Mc = model.kernel_arguments()
+    md = ModelData(*model.kernel_arguments(), prm)
     M0 = model.mass_matrix(q0, prm)
     state = np.zeros((6, n))
     state[0], state[1], state[2] = q0, M0 @ v0, v0
     ws = make_workspace(n, model.m, meth.s, meth.r, meth.J)
     K = total // every + 1 + (1 if total % every else 0)
-    outs = _alloc(K, n)
-    T, Qs, Vs, Ps, En, Gr, GVr, It = outs
-    Qs[0], Vs[0], Ps[0] = q0, v0, state[1]
-    En[0] = 0.5 * v0 @ state[1] + model.potential_energy(q0, prm)
+    smp = _alloc(K, n)
+    smp.q[0], smp.v[0], smp.p[0] = q0, v0, state[1]
+    smp.energy[0] = 0.5 * v0 @ state[1] + model.potential_energy(q0, prm)
     if model.m:
-        Gr[0] = np.max(np.abs(model.constraint_value(q0, prm)))
-        GVr[0] = velocity_residual(model.constraint_jacobian_value(q0, prm), v0, n, model.m)
-    info = np.zeros(drive.INFO_SIZE)
-    info[drive.I_SLOT] = 1
-    info[drive.I_FIRST] = 1
+        smp.g[0] = np.max(np.abs(model.constraint_value(q0, prm)))
+        smp.gv[0] = velocity_residual(model.constraint_jacobian_value(q0, prm), v0, n, model.m)
+    info = np.zeros(lay.INFO_SIZE)
+    info[lay.I_SLOT] = 1
+    info[lay.I_FIRST] = 1
     tabs = meth.kernel_tables
 
     chunk = total if not progress else max(1, total // _PROGRESS_CHUNKS)
     t0 = time.perf_counter()
     status = 0
     recovered = []
-    while info[drive.I_STEPS] < total:
+    while info[lay.I_STEPS] < total:
         with quiet():
-            status = drive.run(fns, flags, Mc, prm, tabs, h, tol, iters, state, ws, chunk, total,
-                               every, outs, info)
+            status = drive.run(md, tabs, opts, h, state, ws, chunk, total, every, smp, info)
         if status != 0 and recover:
-            sub = _retry_in_substeps(model, meth, h, tol, iters, prm, state, recover, total, every,
-                                     outs, info, ws)
+            sub = _retry_in_substeps(md, model, meth, h, opts, state, recover, total, every, smp,
+                                     info, ws)
             if sub:
-                recovered.append((int(info[drive.I_STEPS]) - 1, sub))
+                recovered.append((int(info[lay.I_STEPS]) - 1, sub))
                 status = 0
                 continue
         if progress:
-            done = int(info[drive.I_STEPS])
+            done = int(info[lay.I_STEPS])
             el = time.perf_counter() - t0
             print(f"fastvi: {done}/{total} steps ({100 * done / total:.0f}%), t = {done * h:.6g}, "
                   f"{el:.1f} s elapsed, {done / max(el, 1e-9):.3g} steps/s", file=sys.stderr, flush=True)
         if status != 0:
             break
     wall = time.perf_counter() - t0
-    J = int(info[drive.I_SLOT])
+    J = int(info[lay.I_SLOT])
     status = Status(status)
     result = Result(
-        t=T[:J].copy(), q=Qs[:J].copy(), v=Vs[:J].copy(), p=Ps[:J].copy(), energy=En[:J].copy(),
-        constraint_residual=Gr[:J].copy(), velocity_residual=GVr[:J].copy(),
-        newton_iterations=It[:J].copy(),
-        stats=dict(steps=int(info[drive.I_STEPS]), newton_iterations=int(info[drive.I_ITERS]),
-                   wall_time=wall, max_residual=float(info[drive.I_MAXRES]),
-                   recovered_steps=recovered),
+        t=smp.t[:J].copy(), q=smp.q[:J].copy(), v=smp.v[:J].copy(), p=smp.p[:J].copy(),
+        energy=smp.energy[:J].copy(), constraint_residual=smp.g[:J].copy(),
+        velocity_residual=smp.gv[:J].copy(), newton_iterations=smp.iters[:J].copy(),
+        stats=dict(steps=int(info[lay.I_STEPS]), newton_iterations=int(info[lay.I_ITERS]),
+                   wall_time=wall, max_residual=float(info[lay.I_MAXRES]),
+                   full_newton_steps=int(info[lay.I_FULL]), recovered_steps=recovered),
         status=status, method=meth, h=h, model_name=model.name,
-        failed_step=None if status == 0 else int(info[drive.I_FAILED]),
+        failed_step=None if status == 0 else int(info[lay.I_FAILED]),
     )
     _warn_if_energy_explodes(result)
     if status != 0 and on_failure == "raise":
-        k = int(info[drive.I_FAILED])
+        k = int(info[lay.I_FAILED])
         culprit = _nonfinite_callback(model, prm, state, ws) if status == Status.NONFINITE else None
-        raise IntegrationError(status, k, k * h, float(info[drive.I_RES]), result, culprit)
+        raise IntegrationError(status, k, k * h, float(info[lay.I_RES]), result, culprit)
     return result
 
 
@@ -334,31 +343,34 @@ def _warn_if_energy_explodes(result: Result) -> None:
         )
 
 
-def _retry_in_substeps(model, meth, h, tol, iters, prm, state, levels, total, every, outs, info, ws):
+def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, smp, info, ws):
     """Retake the failed step (state rows 0–2 still hold its start) as 2, 4, … substeps.
 
     Returns the number of substeps that succeeded (the step is then accepted and booked as
     one step of the main grid), or 0 if all ``levels`` halvings failed.
     """
-    fns, flags, Mc = model.kernel_arguments()
     tabs = meth.kernel_tables
     for level in range(1, levels + 1):
         sub = 2**level
         trial = state.copy()
         ws_sub = make_workspace(model.n, model.m, meth.s, meth.r, meth.J)
-        outs_sub = _alloc(1, model.n)
-        info_sub = np.zeros(drive.INFO_SIZE)
-        info_sub[drive.I_FIRST] = 1
+        smp_sub = _alloc(1, model.n)
+        info_sub = np.zeros(lay.INFO_SIZE)
+        info_sub[lay.I_FIRST] = 1
         with quiet():
-            st = drive.run(fns, flags, Mc, prm, tabs, h / sub, tol, iters, trial, ws_sub, sub, sub, sub,
-                           outs_sub, info_sub)
+            st = drive.run(md, tabs, opts, h / sub, trial, ws_sub, sub, sub, sub, smp_sub, info_sub)
         if st == 0:
             state[:3] = trial[:3]
-            info[drive.I_ITERS] += info_sub[drive.I_ITERS]
-            info[drive.I_FIRST] = 1  # the last polynomial belongs to h/sub: no extrapolation
+            info[lay.I_ITERS] += info_sub[lay.I_ITERS]
+            info[lay.I_FIRST] = 1  # the last polynomial belongs to h/sub: no extrapolation
+            sout = np.zeros(lay.STEP_OUT_SIZE)
+            sout[lay.S_ITERS] = info_sub[lay.I_ITERS]
+            sout[lay.S_G] = smp_sub.g[0]
+            sout[lay.S_GV] = smp_sub.gv[0]
+            sout[lay.S_RES] = info_sub[lay.I_MAXRES]
+            sout[lay.S_FULL] = info_sub[lay.I_FULL]
             with quiet():
-                drive.accept(fns, prm, h, state, ws, total, every, outs, info, info_sub[drive.I_ITERS],
-                             outs_sub[5][0], outs_sub[6][0], info_sub[drive.I_MAXRES])
+                drive.accept(md, h, state, ws, total, every, smp, info, sout)
             return sub
     return 0
 
@@ -368,7 +380,7 @@ def _nonfinite_callback(model, prm, state, ws):
     n, m = model.n, model.m
     shapes = {"potential": (), "potential_grad": (n,), "mass": (n, n), "kinetic_grad": (n,),
               "constraint": (m,), "constraint_jacobian": (m, n)}
-    for q, v in ((state[0], state[2]), (ws[6][0], ws[6][1])):
+    for q, v in ((state[0], state[2]), (ws.qi, ws.vi)):
         for slot, shape in shapes.items():
             if slot in model._functions:
                 val = model._eval(slot, q, v, params=prm, shape=shape)

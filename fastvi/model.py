@@ -50,6 +50,9 @@ import numpy as np
 from numba import carray, types
 
 from ._numba import njit, ptr, quiet
+from .kernels import layout as lay
+from .kernels.layout import SECOND as _SECOND
+from .kernels.layout import SLOTS
 
 __all__ = ["Model", "CALLBACK_SIGNATURE", "SLOTS"]
 
@@ -60,27 +63,6 @@ CALLBACK_SIGNATURE = types.void(
     types.CPointer(types.float64),
     types.CPointer(types.float64),
 )
-
-#: Order of the callbacks in the tuple handed to the kernels.
-SLOTS = (
-    "mass",
-    "kinetic_grad",
-    "potential",
-    "potential_grad",
-    "constraint",
-    "constraint_jacobian",
-    "potential_hessian",
-    "constraint_hessian",
-    "kinetic_hessian",
-    "momentum_jacobian",
-)
-_SECOND = SLOTS[6:]
-# flags vector handed to the kernels:
-# [n, m, has_mass_fn, exact second derivatives (4, in _SECOND order), constant mass is diagonal]
-_F_N, _F_M, _F_MASSFN, _F_EXACT = 0, 1, 2, 3
-_F_DIAG = _F_EXACT + 4
-FLAGS_SIZE = _F_DIAG + 1
-
 
 @nb.cfunc(CALLBACK_SIGNATURE, cache=True)
 def _absent(q, v, params, out):  # pragma: no cover - never called: flags skip it
@@ -301,16 +283,16 @@ class Model:
                     else _absent
                     for slot in SLOTS
                 )
-            flags = np.zeros(FLAGS_SIZE, dtype=np.int64)
-            flags[_F_N] = self.n
-            flags[_F_M] = self.m
-            flags[_F_MASSFN] = int("mass" in self._functions)
-            for i, slot in enumerate(_SECOND):
-                flags[_F_EXACT + i] = int(slot in self._functions)
+            flags = np.zeros(lay.FLAGS_SIZE, dtype=np.int64)
+            flags[lay.F_N] = self.n
+            flags[lay.F_M] = self.m
+            flags[lay.F_MASSFN] = int("mass" in self._functions)
+            for slot, index in zip(_SECOND, lay.F_EXACT):
+                flags[index] = int(slot in self._functions)
             M = self.mass_matrix_constant
             Mc = np.ascontiguousarray(M if M is not None else np.zeros((self.n, self.n)))
             # a diagonal constant M lets the kernels use M v and M⁻¹ elementwise
-            flags[_F_DIAG] = int(M is not None and np.count_nonzero(M - np.diag(np.diag(M))) == 0)
+            flags[lay.F_DIAG] = int(M is not None and np.count_nonzero(M - np.diag(np.diag(M))) == 0)
             self._compiled = (cfs, flags, Mc)
         return self._compiled
 

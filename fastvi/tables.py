@@ -31,7 +31,7 @@ import math
 import re
 from dataclasses import dataclass, field
 from fractions import Fraction
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 
@@ -308,10 +308,27 @@ class Method:
     E: np.ndarray = field(repr=False)
     nominal_order: int | None = 2
 
-    @property
-    def kernel_tables(self) -> tuple[np.ndarray, ...]:
-        """``(b, L, Ld, Lc, E, tau)``: the arrays the step kernel reads."""
-        return (self.b, self.L, self.Ld, self.Lc, self.E, self.tau)
+    @cached_property
+    def kernel_tables(self):
+        """The arrays the step kernel reads, as a :class:`fastvi.kernels.layout.Tables`.
+
+        Besides ``b, L, Ld, Lc, E, tau`` it holds the tables of the mechanics Newton matrix
+        (``docs/method.md`` §10): with ``A[ν, μ−1] = Σ_i b_i ℓ'_ν(c_i) ℓ'_μ(c_i)``
+        (ν = 0…s−1, μ = 1…s; the mass block of the step equations is ``(1/h) A ⊗ M``),
+        ``Ainv = A⁻¹``, the impulse coupling ``W = Lc_C A⁻¹ Lc_B`` of the Schur complement
+        ``S_{jj'} = h W[j−1, j'] G_j M⁻¹ G_{j'}ᵀ``, and ``As[μ−1] = Σ_i b_i ℓ'_s(c_i) ℓ'_μ(c_i)``
+        (the mass part of ``∂P/∂Q^μ``).
+        """
+        from .kernels.layout import Tables
+
+        s, J = self.s, self.J
+        A = np.einsum("i,vi,ui->vu", self.b, self.Ld[:s], self.Ld[1:])
+        As = np.einsum("i,i,ui->u", self.b, self.Ld[s], self.Ld[1:])
+        mech = bool(np.linalg.cond(A) < 1e12)  # r < s Gauss points make A singular
+        Ainv = np.linalg.inv(A) if mech else np.zeros((s, s))
+        W = self.Lc[1:, 1:].T @ Ainv @ self.Lc[:s, :J]
+        return Tables(self.b, self.L, self.Ld, self.Lc, self.E, self.tau,
+                      np.ascontiguousarray(Ainv), np.ascontiguousarray(W), As, mech)
 
 
 def _constraint_points(code: str, k: int | None, tau: np.ndarray) -> tuple[str, np.ndarray]:

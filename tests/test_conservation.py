@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import fastvi
-from fastvi.kernels.step import make_workspace, step
+from tests.kernel_helpers import one_step
 from fastvi.studies.convergence import drift_slope
 
 from . import models
@@ -25,13 +25,8 @@ def test_energy_error_does_not_drift_over_1e5_steps(double_pendulum, name):
 
 
 def _one_step(model, meth, h, q, p):
-    fns, flags, Mc = model.kernel_arguments()
-    ws = make_workspace(model.n, model.m, meth.s, meth.r, meth.J)
     v = np.linalg.solve(model.mass_matrix(q), p)
-    q1, p1, v1 = np.zeros(model.n), np.zeros(model.n), np.zeros(model.n)
-    out = np.zeros(4)
-    with fastvi._numba.quiet():
-        st = step(fns, flags, Mc, model.params, meth.kernel_tables, h, q, p, v, q1, p1, v1, ws, 1e-15, 50, True, out)
+    st, q1, p1, _, _, _ = one_step(model, meth, h, q, p, v, tol=1e-15, max_iter=50)
     assert st == 0
     return q1, p1
 

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 import fastvi
-from fastvi.kernels.step import make_workspace, step
+from fastvi.kernels.layout import make_workspace
+from tests.kernel_helpers import one_step
 from fastvi.studies import orders
 from fastvi.studies.convergence import observed_order
 from fastvi.studies.reference import chain_cartesian, chain_pendulum_reference
@@ -77,24 +78,21 @@ def _constraint_at_points(model, name, h=1 / 32, steps=16):
     """Max |g| on the step polynomials at the constraint points, and at points between them.
 
     Drives the step kernel directly and rebuilds q(τ) = q_k + Σ_{ν≥1} ℓ_ν(τ) ΔQ^ν from the
-    unknowns X = ws[0] with a Lagrange basis evaluated afresh (not the kernel's tables).
+    unknowns X = ws.X with a Lagrange basis evaluated afresh (not the kernel's tables).
     """
     meth = fastvi.method(name)
-    fns, flags, Mc = model.kernel_arguments()
     n, m, s = model.n, model.m, meth.s
     ws = make_workspace(n, m, s, meth.r, meth.J)
     q, v = model.initial_state(np.pi / 2, np.pi / 2, np.pi / 2)
     p = model.mass_matrix(q) @ v
-    q1, p1, v1, out = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(4)
     d = np.asarray(meth.d)
     ell_on, _ = lagrange_basis(meth.tau, d)
     ell_off, _ = lagrange_basis(meth.tau, 0.5 * (d[1:] + d[:-1]))
     on = off = 0.0
     for k in range(steps):
-        status = step(fns, flags, Mc, model.params, meth.kernel_tables, h, q, p, v, q1, p1, v1,
-                      ws, 1e-14, 30, k == 0, out)
+        status, q1, p1, v1, _, _ = one_step(model, meth, h, q, p, v, ws=ws, first=k == 0)
         assert status == 0, f"step {k} of {name}: status {status}"
-        X = ws[0][: s * n].reshape(s, n)  # ΔQ^1 … ΔQ^s
+        X = ws.X[: s * n].reshape(s, n)  # ΔQ^1 … ΔQ^s
         assert np.allclose(q + X[-1], q1, rtol=0, atol=1e-15)
         on = max(on, max(np.max(np.abs(model.constraint_value(x))) for x in q + ell_on[1:].T @ X))
         off = max(off, max(np.max(np.abs(model.constraint_value(x))) for x in q + ell_off[1:].T @ X))

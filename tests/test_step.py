@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 import fastvi
-from fastvi.kernels.step import assemble, make_workspace
+from fastvi.kernels.layout import ModelData, make_workspace
+from fastvi.kernels.step import assemble
 
 from . import models, reference
 
@@ -33,14 +34,14 @@ MODELS = _models()
 
 
 def _kernel(model, meth, h, qk, pk, X, jac=True):
-    fns, flags, Mc = model.kernel_arguments()
+    md = ModelData(*model.kernel_arguments(), model.params)
     ws = make_workspace(model.n, model.m, meth.s, meth.r, meth.J)
-    ws[0][:] = X
+    ws.X[:] = X
     if model.m:
-        ws[5][0][:, :] = model.constraint_jacobian_value(qk)
-    st = assemble(fns, flags, Mc, model.params, meth.kernel_tables, h, qk, pk, ws, jac)
+        ws.G[0][:, :] = model.constraint_jacobian_value(qk)
+    st = assemble(md, meth.kernel_tables, h, qk, pk, ws, jac)
     assert st == 0
-    return ws[1].copy(), ws[2].copy()
+    return ws.R.copy(), ws.A.copy()
 
 
 def _random_unknowns(model, meth, h, v, seed):

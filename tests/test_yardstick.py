@@ -31,7 +31,7 @@ N_STEPS = 1000
 @pytest.mark.parametrize("method", METHODS + OTHER_TABLES)
 def test_yardstick_trajectory_equals_fastvi_integrate(double_pendulum, dp_start, method):
     q0, v0 = dp_start
-    ref = fastvi.integrate(double_pendulum, q0, v0, h=H, n_steps=N_STEPS, method=method)
+    ref = fastvi.integrate(double_pendulum, q0, v0, h=H, n_steps=N_STEPS, method=method, newton="full")
     # start from the state integrate starts from (its projection moves q0 by round-off)
     out = yardstick.integrate_double_pendulum(
         ref.q[0], ref.v[0], h=H, n_steps=N_STEPS, tabs=fastvi.method(method).kernel_tables,
@@ -70,7 +70,7 @@ def test_yardstick_retries_like_fastvi(double_pendulum, dp_start):
     """Retry path: with max_iter = 3, a few P1L-Q2G steps need the straight-line restart."""
     q0, v0 = dp_start
     tabs = fastvi.method("P1L-Q2G").kernel_tables
-    ref = fastvi.integrate(double_pendulum, q0, v0, h=H, n_steps=N_STEPS, method="P1L-Q2G",
+    ref = fastvi.integrate(double_pendulum, q0, v0, h=H, n_steps=N_STEPS, method="P1L-Q2G", newton="full",
                            max_iter=3, on_failure="return")
     assert ref.success, _STALE
     # 5 retried steps (3 + 3 iterations), measured at steps 995–999
@@ -85,7 +85,7 @@ def test_yardstick_fails_where_fastvi_fails(double_pendulum, dp_start):
     """Give-up path: at h = 0.02 with max_iter = 3 both the extrapolated and the straight-line
     start fail at some step; the yardstick must give up at the same step, same count."""
     q0, v0 = dp_start
-    ref = fastvi.integrate(double_pendulum, q0, v0, h=0.02, n_steps=N_STEPS, method="P1L-Q2G",
+    ref = fastvi.integrate(double_pendulum, q0, v0, h=0.02, n_steps=N_STEPS, method="P1L-Q2G", newton="full",
                            max_iter=3, on_failure="return")
     assert ref.status == fastvi.Status.NEWTON_NOT_CONVERGED  # measured at step 107
     assert ref.stats["newton_iterations"] > 3 * ref.failed_step + 3, _STALE  # measured 417

@@ -40,16 +40,17 @@ from ..status import MESSAGES, Status
 
 __all__ = ["rk4", "BaselineResult", "acceleration", "make_workspace"]
 
-_MASS = SLOTS.index("mass")
-_KGRAD = SLOTS.index("kinetic_grad")
-_POT = SLOTS.index("potential")
-_PGRAD = SLOTS.index("potential_grad")
-_CON = SLOTS.index("constraint")
-_CJAC = SLOTS.index("constraint_jacobian")
-_CHESS = SLOTS.index("constraint_hessian")
-_MJAC = SLOTS.index("momentum_jacobian")
-# flags layout of Model.kernel_arguments(): [n, m, has_mass_fn, exact P, C, K, Mv hessians]
-_F_MASSFN, _F_EXACT_CHESS, _F_EXACT_MJAC = 2, 4, 6
+from ..kernels.layout import CHESS as _CHESS
+from ..kernels.layout import CJAC as _CJAC
+from ..kernels.layout import CON as _CON
+from ..kernels.layout import F_EX_CHESS as _F_EXACT_CHESS
+from ..kernels.layout import F_EX_MJAC as _F_EXACT_MJAC
+from ..kernels.layout import F_MASSFN as _F_MASSFN
+from ..kernels.layout import KGRAD as _KGRAD
+from ..kernels.layout import MASS as _MASS
+from ..kernels.layout import MJAC as _MJAC
+from ..kernels.layout import POT as _POT
+from ..kernels.layout import PGRAD as _PGRAD
 
 _FD_REL = 6.0554544523933395e-06  # cbrt(machine epsilon): central differences' best step
 #: simplified-Newton sweeps of the position projection (it converges linearly, fast)
@@ -57,9 +58,9 @@ PROJECTION_MAX_ITER = 20
 #: the position projection stops at this max|g|, relative to max(1, |q|)
 PROJECTION_TOL = 4e-16
 
-_OK = int(Status.SUCCESS)
-_SINGULAR = int(Status.SINGULAR_CONSTRAINTS)
-_NONFINITE = int(Status.NONFINITE)
+from ..kernels.layout import NONFINITE as _NONFINITE  # noqa: E402
+from ..kernels.layout import OK as _OK  # noqa: E402
+from ..kernels.layout import SINGULAR_CONSTRAINTS as _SINGULAR  # noqa: E402
 
 
 @dataclass

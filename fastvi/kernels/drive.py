@@ -2,186 +2,152 @@
 
 ``run`` advances one trajectory by a chunk of steps (the Python driver calls it once, or in
 chunks when it shows progress; the state carries everything, so chunking changes no bit).
+``run_member``/``run_ensemble`` do the same for the members of an ensemble, in parallel.
+Both take the step with :func:`.step.step` and book it with :func:`record`, so a member of an
+ensemble equals :func:`fastvi.integrate` of that member bit for bit by construction.
 """
 
 import numpy as np
+from numba import prange
 
-from .._numba import njit, ptr
-from .step import _POT, step
+from .._numba import hot, njit, ptr
+from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_ITERS, F_M,
+                     F_MAXRES, F_N, F_RES, I_FAILED, I_FIRST, I_FULL, I_ITERS, I_MAXRES, I_RES,
+                     I_SLOT, I_STEPS, I_WIN_G, I_WIN_GV, I_WIN_IT, INFO_SIZE, POT, S_FULL, S_G,
+                     S_GV, S_ITERS, S_RES, SAVE_DIAGNOSTICS, SAVE_FINAL, SAVE_STRIDE,
+                     STEP_OUT_SIZE, ModelData, Samples, make_workspace)
+from .step import step
 
-# layout of the float64 ``info`` vector shared with fastvi.integrate
-I_STEPS, I_ITERS, I_WIN_G, I_WIN_GV, I_WIN_IT, I_RES, I_FAILED, I_SLOT, I_FIRST, I_MAXRES = range(10)
-INFO_SIZE = 10
+__all__ = ["run", "run_member", "run_ensemble", "energy", "accept", "record", "INFO_SIZE"]
 
 
-@njit
-def energy(fns, prm, q, p, v, scratch):
+@hot
+def energy(md, q, p, v, scratch):
     """H = ½ vᵀp + V(q) with v = M⁻¹p already known."""
-    fns[_POT](ptr(q), ptr(q), ptr(prm), ptr(scratch))
+    md.fns[POT](ptr(q), ptr(q), ptr(md.prm), ptr(scratch))
     e = scratch[0]
     for a in range(q.shape[0]):
         e += 0.5 * v[a] * p[a]
     return e
 
 
-@njit
-def accept(fns, prm, h, state, ws, n_total, save_every, outs, info, iters, gmax, gvmax, res):
+@hot
+def record(md, state, ws, smp, slot, info):
+    """Write the state (rows q, p, v) into sample ``slot`` with the residual windows of
+    ``info``, and open new windows."""
+    q, p, v = state[0], state[1], state[2]
+    for a in range(q.shape[0]):
+        smp.q[slot, a] = q[a]
+        smp.v[slot, a] = v[a]
+        smp.p[slot, a] = p[a]
+    smp.energy[slot] = energy(md, q, p, v, ws.g)
+    smp.g[slot] = info[I_WIN_G]
+    smp.gv[slot] = info[I_WIN_GV]
+    smp.iters[slot] = info[I_WIN_IT]
+    info[I_WIN_G] = 0.0
+    info[I_WIN_GV] = 0.0
+    info[I_WIN_IT] = 0.0
+
+
+@hot
+def accept(md, h, state, ws, n_total, save_every, smp, info, sout):
     """Book-keeping after a step has been taken (state rows 0–2 already hold the new state):
     counters, residual windows, and the sample when one is due."""
-    T, Qs, Vs, Ps, En, Gr, GVr, It = outs
-    q, p, v = state[0], state[1], state[2]
-    info[I_MAXRES] = max(info[I_MAXRES], res)
-    info[I_WIN_G] = max(info[I_WIN_G], gmax)
-    info[I_WIN_GV] = max(info[I_WIN_GV], gvmax)
-    info[I_WIN_IT] += iters
+    info[I_MAXRES] = max(info[I_MAXRES], sout[S_RES])
+    info[I_WIN_G] = max(info[I_WIN_G], sout[S_G])
+    info[I_WIN_GV] = max(info[I_WIN_GV], sout[S_GV])
+    info[I_WIN_IT] += sout[S_ITERS]
+    info[I_FULL] += sout[S_FULL]
     k = int(info[I_STEPS]) + 1
     info[I_STEPS] = k
-    if k % save_every == 0 or k == n_total:
+    if save_every > 0 and (k % save_every == 0 or k == n_total):
         j = int(info[I_SLOT])
-        T[j] = k * h
-        for a in range(q.shape[0]):
-            Qs[j, a] = q[a]
-            Vs[j, a] = v[a]
-            Ps[j, a] = p[a]
-        En[j] = energy(fns, prm, q, p, v, ws[9][0])
-        Gr[j] = info[I_WIN_G]
-        GVr[j] = info[I_WIN_GV]
-        It[j] = info[I_WIN_IT]
-        info[I_WIN_G] = 0.0
-        info[I_WIN_GV] = 0.0
-        info[I_WIN_IT] = 0.0
+        smp.t[j] = k * h
+        record(md, state, ws, smp, j, info)
         info[I_SLOT] = j + 1
 
 
+@hot
+def _take(md, tabs, opts, h, state, ws, info, sout):
+    """One step from state rows 0–2; on success the new state is copied into them."""
+    k = int(info[I_STEPS])
+    status = step(md, tabs, opts, h, state, ws, info[I_FIRST] != 0.0, sout)
+    info[I_ITERS] += sout[S_ITERS]
+    info[I_RES] = sout[S_RES]
+    if status != 0:
+        info[I_FAILED] = k
+        return status
+    info[I_FIRST] = 0.0
+    for a in range(state.shape[1]):
+        state[0, a] = state[3, a]
+        state[1, a] = state[4, a]
+        state[2, a] = state[5, a]
+    return 0
+
+
 @njit
-def run(fns, flags, Mc, prm, tabs, h, tol, max_iter, state, ws, n_chunk, n_total, save_every, outs, info):
+def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info):
     """Advance ``state`` (rows q, p, v, then scratch) by up to ``n_chunk`` steps.
 
-    Saves every ``save_every``-th step and the last one into ``outs`` =
-    (t, q, v, p, energy, max|g|, max|Gv|, Newton iterations), the residuals and iterations
-    being the maxima/sums over the steps since the previous sample. Returns a status code;
-    on failure ``info[I_FAILED]`` holds the index of the step that failed.
+    Saves every ``save_every``-th step and the last one into the :class:`Samples` ``smp``,
+    the residuals and iterations being the maxima/sums over the steps since the previous
+    sample. Returns a status code; on failure ``info[I_FAILED]`` holds the failed step.
     """
-    q, p, v, q1, p1, v1 = state[0], state[1], state[2], state[3], state[4], state[5]
-    sout = np.zeros(4)  # once per chunk, not per step
-    n = q.shape[0]
+    sout = np.zeros(STEP_OUT_SIZE)  # once per chunk, not per step
     for _ in range(n_chunk):
-        k = int(info[I_STEPS])
-        if k >= n_total:
+        if int(info[I_STEPS]) >= n_total:
             break
-        status = step(fns, flags, Mc, prm, tabs, h, q, p, v, q1, p1, v1, ws, tol, max_iter,
-                      info[I_FIRST] != 0.0, sout)
-        info[I_ITERS] += sout[0]
-        info[I_RES] = sout[3]
+        status = _take(md, tabs, opts, h, state, ws, info, sout)
         if status != 0:
-            info[I_FAILED] = k
             return status
-        info[I_FIRST] = 0.0
-        for a in range(n):
-            q[a] = q1[a]
-            p[a] = p1[a]
-            v[a] = v1[a]
-        accept(fns, prm, h, state, ws, n_total, save_every, outs, info, sout[0], sout[1], sout[2], sout[3])
+        accept(md, h, state, ws, n_total, save_every, smp, info, sout)
     return 0
 
 
 # ----------------------------------------------------------------------------- ensembles
-# The prange driver: one workspace and one state per member, the same ``step`` in the same
-# order as ``run``, so member i of an ensemble equals ``fastvi.integrate`` of member i bit
-# for bit. A failing member stops only itself.
-from numba import prange  # noqa: E402  (kept beside the ensemble kernels it serves)
-
-from .step import make_workspace  # noqa: E402
-
-#: save modes of ``run_ensemble``
-SAVE_FINAL, SAVE_STRIDE, SAVE_DIAGNOSTICS = 0, 1, 2
-# columns of the per-member int64 rows ``ist``
-E_STATUS, E_STEPS, E_FAILED, E_SAVED = range(4)
-E_SIZE = 4
-# columns of the per-member float64 rows ``fst``: Newton iterations (total), residual of the
-# last step tried, max residual over good steps, max |H − H0|, max |g|, max |Gv|
-F_ITERS, F_RES, F_MAXRES, F_DH, F_G, F_GV = range(6)
-F_SIZE = 6
-
-
 @njit
-def run_member(fns, flags, Mc, prm, tabs, h, tol, max_iter, state, ws, n_total, mode, every, H0,
-               Qs, Vs, Ps, En, Gr, GVr, It, ist, fst):
+def run_member(md, tabs, opts, h, state, ws, n_total, mode, every, H0, smp, ist, fst):
     """Advance one member (rows q, p, v, then scratch of ``state``) through ``n_total`` steps.
 
-    ``mode`` is ``SAVE_FINAL`` (the final state into slot 0 of ``Qs, Vs, Ps, En``),
-    ``SAVE_STRIDE`` (every ``every``-th step and the last into slots 1, 2, …, exactly as
-    ``run`` fills ``outs``; slot 0 is the caller's) or ``SAVE_DIAGNOSTICS`` (the final state,
-    and ``max |H − H0|``, ``max |g|``, ``max |Gv|`` over every step into ``fst``; the caller
+    ``mode`` is ``SAVE_FINAL`` (the final state into slot 0 of ``smp``), ``SAVE_STRIDE``
+    (every ``every``-th step and the last into slots 1, 2, …, exactly as ``run`` fills its
+    samples; slot 0 is the caller's) or ``SAVE_DIAGNOSTICS`` (the final state, and
+    ``max |H − H0|``, ``max |g|``, ``max |Gv|`` over every step into ``fst``; the caller
     seeds ``fst[F_G]``, ``fst[F_GV]`` with the initial residuals). Returns the status code,
     also stored in ``ist[E_STATUS]``; a failed step's index goes to ``ist[E_FAILED]``.
     """
-    q, p, v, q1, p1, v1 = state[0], state[1], state[2], state[3], state[4], state[5]
-    sout = np.zeros(4)
-    n = q.shape[0]
-    scratch = ws[9][0]
-    first = True
-    win_g = 0.0
-    win_gv = 0.0
-    win_it = 0.0
-    maxres = 0.0
-    iters = 0.0
+    sout = np.zeros(STEP_OUT_SIZE)
+    info = np.zeros(INFO_SIZE)
+    info[I_FIRST] = 1.0
+    info[I_SLOT] = 1.0
     dh = 0.0
     gmax = fst[F_G]
     gvmax = fst[F_GV]
-    slot = 1
     status = 0
-    k = 0
     ist[E_FAILED] = -1
-    while k < n_total:
-        status = step(fns, flags, Mc, prm, tabs, h, q, p, v, q1, p1, v1, ws, tol, max_iter,
-                      first, sout)
-        iters += sout[0]
-        fst[F_RES] = sout[3]
+    stride = every if mode == SAVE_STRIDE else 0
+    while int(info[I_STEPS]) < n_total:
+        status = _take(md, tabs, opts, h, state, ws, info, sout)
+        fst[F_RES] = sout[S_RES]
         if status != 0:
-            ist[E_FAILED] = k
+            ist[E_FAILED] = int(info[I_FAILED])
             break
-        first = False
-        maxres = max(maxres, sout[3])
-        win_g = max(win_g, sout[1])
-        win_gv = max(win_gv, sout[2])
-        win_it += sout[0]
-        for a in range(n):
-            q[a] = q1[a]
-            p[a] = p1[a]
-            v[a] = v1[a]
-        k += 1
+        accept(md, h, state, ws, n_total, stride, smp, info, sout)
         if mode == SAVE_DIAGNOSTICS:
-            e = energy(fns, prm, q, p, v, scratch)
+            e = energy(md, state[0], state[1], state[2], ws.g)
             dh = max(dh, abs(e - H0))
-            gmax = max(gmax, sout[1])
-            gvmax = max(gvmax, sout[2])
-        elif mode == SAVE_STRIDE and (k % every == 0 or k == n_total):
-            for a in range(n):
-                Qs[slot, a] = q[a]
-                Vs[slot, a] = v[a]
-                Ps[slot, a] = p[a]
-            En[slot] = energy(fns, prm, q, p, v, scratch)
-            Gr[slot] = win_g
-            GVr[slot] = win_gv
-            It[slot] = win_it
-            win_g = 0.0
-            win_gv = 0.0
-            win_it = 0.0
-            slot += 1
+            gmax = max(gmax, sout[S_G])
+            gvmax = max(gvmax, sout[S_GV])
+    slot = int(info[I_SLOT])
     if mode != SAVE_STRIDE:
         # the last good state (the final one unless the member failed)
-        for a in range(n):
-            Qs[0, a] = q[a]
-            Vs[0, a] = v[a]
-            Ps[0, a] = p[a]
-        En[0] = energy(fns, prm, q, p, v, scratch)
+        record(md, state, ws, smp, 0, info)
         slot = 1
     ist[E_STATUS] = status
-    ist[E_STEPS] = k
+    ist[E_STEPS] = int(info[I_STEPS])
     ist[E_SAVED] = slot
-    fst[F_ITERS] = iters
-    fst[F_MAXRES] = maxres
+    fst[F_ITERS] = info[I_ITERS]
+    fst[F_MAXRES] = info[I_MAXRES]
     fst[F_DH] = dh
     fst[F_G] = gmax
     fst[F_GV] = gvmax
@@ -189,7 +155,7 @@ def run_member(fns, flags, Mc, prm, tabs, h, tol, max_iter, state, ws, n_total, 
 
 
 @njit(parallel=True)
-def run_ensemble(fns, flags, Mc, P, tabs, h, tol, max_iter, s, r, J, X0, n_total, mode, every, H0,
+def run_ensemble(fns, flags, Mc, P, tabs, opts, h, s, r, J, X0, n_total, mode, every, H0,
                  Qs, Vs, Ps, En, Gr, GVr, It, ist, fst):
     """``run_member`` for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in parallel.
 
@@ -198,8 +164,8 @@ def run_ensemble(fns, flags, Mc, P, tabs, h, tol, max_iter, s, r, J, X0, n_total
     gets its own workspace and state, allocated inside the loop body, so threads share
     nothing but read-only model and method data.
     """
-    n = flags[0]
-    m = flags[1]
+    n = flags[F_N]
+    m = flags[F_M]
     for i in prange(X0.shape[0]):
         ws = make_workspace(n, m, s, r, J)
         state = np.zeros((6, n))
@@ -207,5 +173,7 @@ def run_ensemble(fns, flags, Mc, P, tabs, h, tol, max_iter, s, r, J, X0, n_total
             state[0, a] = X0[i, 0, a]
             state[1, a] = X0[i, 1, a]
             state[2, a] = X0[i, 2, a]
-        run_member(fns, flags, Mc, P[i], tabs, h, tol, max_iter, state, ws, n_total, mode, every,
-                   H0[i], Qs[i], Vs[i], Ps[i], En[i], Gr[i], GVr[i], It[i], ist[i], fst[i])
+        # the member's times are the caller's grid, so they go to scratch
+        smp = Samples(np.zeros(En.shape[1]), Qs[i], Vs[i], Ps[i], En[i], Gr[i], GVr[i], It[i])
+        run_member(ModelData(fns, flags, Mc, P[i]), tabs, opts, h, state, ws, n_total, mode,
+                   every, H0[i], smp, ist[i], fst[i])

@@ -6,10 +6,10 @@ step kernel must not allocate; numpy's ``solve`` would allocate on every call.
 
 import numpy as np
 
-from .._numba import njit
+from .._numba import hot
 
 
-@njit
+@hot
 def lu_factor(A, piv, N):
     """Factor the leading N×N block of ``A`` in place as P A = L U.
 
@@ -43,7 +43,7 @@ def lu_factor(A, piv, N):
     return 0
 
 
-@njit
+@hot
 def lu_solve(A, piv, b, N):
     """Solve with the factors of :func:`lu_factor`; ``b`` (length ≥ N) is overwritten."""
     for k in range(N):
@@ -64,7 +64,7 @@ def lu_solve(A, piv, b, N):
         b[i] = s / A[i, i]
 
 
-@njit
+@hot
 def pivot_ratio(A, N):
     """min |U_kk| / max |U_kk| of a factored matrix: a cheap conditioning alarm."""
     lo = np.inf

@@ -12,56 +12,43 @@ with ``∂S_u/∂Q^ν = h Σ_i b_i [ℓ_ν(c_i) ∂L/∂q + (1/h) ℓ'_ν(c_i) M
     P = ∂S_u/∂Q^s − Σ_{j<J} ℓ_s(d_j) G_jᵀ η_j,   p_{k+1} = P − G(q_{k+1})ᵀ η_J,
     (G M⁻¹ Gᵀ) η_J = G M⁻¹ P   at q_{k+1}                      (RATTLE projection)
 
-Workspace, model and method are plain arrays and cfuncs; nothing here allocates.
+Two Newton variants solve these equations (``docs/method.md`` §9–10):
+
+* ``full``: the exact Newton matrix, assembled and factored at every iteration;
+* ``auto`` (default): the *mechanics matrix* — the mass block ``(1/h) A ⊗ M̄`` with
+  ``M̄ = M(q_k)`` and the exact constraint-Jacobian blocks, the force and constraint
+  Hessians dropped (they are O((ωh)²) relative to the mass block). Its inverse factors
+  into ``h A⁻¹ ⊗ M̄⁻¹`` and a Schur complement of size ``J m`` on the impulses, so an
+  iteration costs one residual and a few small solves. It contracts like (ωh)²; when it
+  contracts slower than ``MECH_THETA_MAX`` (stiff springs) the step is redone with the
+  full Newton, which then stays on for ``FULL_HOLD`` steps.
+
+Model, method, options and scratch arrive as the named tuples of :mod:`.layout`; nothing
+here allocates.
 """
 
 import numpy as np
 
-from .._numba import njit, ptr
-from ..status import Status
+from .._numba import hot, ptr
+from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_KHESS, F_EX_MJAC, F_EX_PHESS,
+                     F_M, F_MASSFN, F_N, KGRAD, MASS, MJAC, NEWTON_FAILED, NEWTON_FULL, NONFINITE,
+                     OK, PGRAD, PHESS, KHESS, S_FULL, S_G, S_GV, S_ITERS, S_RES, SINGULAR,
+                     SINGULAR_CONSTRAINTS, SINGULAR_MASS, make_workspace)
 from .linalg import lu_factor, lu_solve
 
-# indices of SLOTS in fastvi.model
-_MASS, _KGRAD, _POT, _PGRAD, _CON, _CJAC, _PHESS, _CHESS, _KHESS, _MJAC = range(10)
-# indices of the flags vector (fastvi.model._compile)
-_F_N, _F_M, _F_MASSFN, _F_EX_PHESS, _F_EX_CHESS, _F_EX_KHESS, _F_EX_MJAC, _F_DIAG = range(8)
+__all__ = ["make_workspace", "assemble", "step", "end_momentum", "velocity_residual"]
+
 _FD_REL = 6.0554544523933395e-06  # cbrt(machine epsilon): central differences' best step
-
-# status as plain ints inside kernels
-_OK = int(Status.SUCCESS)
-_NEWTON = int(Status.NEWTON_NOT_CONVERGED)
-_SINGULAR = int(Status.SINGULAR_JACOBIAN)
-_NONFINITE = int(Status.NONFINITE)
-_SING_MASS = int(Status.SINGULAR_MASS)
-_SING_CONS = int(Status.SINGULAR_CONSTRAINTS)
-
-
-@njit
-def make_workspace(n, m, s, r, J):
-    """Scratch arrays for one trajectory (allocated once, outside the time loop)."""
-    N = s * n + J * m
-    mm = max(m, 1)
-    return (
-        np.zeros(N),  # 0 X: unknowns
-        np.zeros(N),  # 1 R: residual, then Newton increment
-        np.zeros((N, N)),  # 2 A: Newton matrix, factored in place
-        np.zeros(N, dtype=np.int64),  # 3 piv
-        np.zeros((s + 1, n)),  # 4 D: ∂S_u/∂Q^ν
-        np.zeros((J + 1, mm, n)),  # 5 G at the constraint points
-        np.zeros((6, n)),  # 6 vectors: q_i, v_i, F, Mv, fd+, fd-
-        np.zeros((5, n, n)),  # 7 matrices: M_i, ∂F/∂q, ∂(Mv)/∂q, constraint Hessian, fd
-        np.zeros((3, mm, n)),  # 8 Y = M⁻¹Gᵀ (transposed), fd G+, fd G-
-        np.zeros((2, mm)),  # 9 g, η_J
-        np.zeros((mm, mm)),  # 10 S = G M⁻¹ Gᵀ
-        np.zeros(mm, dtype=np.int64),  # 11 pivm
-        np.zeros(n, dtype=np.int64),  # 12 pivn
-        np.zeros(N),  # 13 X of the previous step (predictor)
-        np.zeros(n),  # 14 P, then z = M⁻¹P
-    )
+#: the mechanics matrix is abandoned for the full Newton when successive increments shrink
+#: by less than this factor: each of its iterations costs a residual, and at θ = 0.25 it
+#: needs about as many as the full Newton costs in assembly and LU (docs/benchmarks.md)
+MECH_THETA_MAX = 0.25
+#: steps the full Newton stays on after the mechanics matrix failed (then it is tried again)
+FULL_HOLD = 32
 
 
 # ----------------------------------------------------------------------------- derivatives
-@njit
+@hot
 def _fd_vec_jacobian(fn, slot_kind, q, v, prm, out, qa, fa, fb, n):
     """out[:, b] = ∂f/∂q_b by central differences of a vector callback f(q, v)."""
     for b in range(n):
@@ -83,7 +70,7 @@ def _fd_vec_jacobian(fn, slot_kind, q, v, prm, out, qa, fa, fb, n):
                 out[b, a] = t
 
 
-@njit
+@hot
 def _fd_momentum_jacobian(fmass, q, v, prm, out, qa, Ma, n):
     """out[a, b] = ∂(M(q) v)_a / ∂q_b by central differences of the mass callback."""
     for b in range(n):
@@ -107,7 +94,7 @@ def _fd_momentum_jacobian(fmass, q, v, prm, out, qa, Ma, n):
             out[a, b] = (out[a, b] - acc) * inv
 
 
-@njit
+@hot
 def _fd_constraint_hessian(fjac, q, eta, prm, out, qa, Gp, Gm, n, m):
     """out = Σ_a η_a ∇²g_a = ∂(Gᵀη)/∂q by central differences of the Jacobian callback."""
     for b in range(n):
@@ -132,23 +119,24 @@ def _fd_constraint_hessian(fjac, q, eta, prm, out, qa, Gp, Gm, n, m):
 
 
 # ----------------------------------------------------------------------------- assembly
-@njit
-def assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac):
-    """Residual (and, if ``jac``, the Newton matrix) at the unknowns ``ws[0]``.
+@hot
+def assemble(md, tabs, h, qk, pk, ws, jac):
+    """Residual (and, if ``jac``, the Newton matrix) at the unknowns ``ws.X``.
 
+    Also leaves ``ws.D`` (∂S_u/∂Q^ν) and ``ws.G[j]`` (G at the constraint points j ≥ 1).
     Returns 0, or ``NONFINITE`` when a callback produced NaN/inf.
     """
-    b, L, Ld, Lc, E, tau = tabs
-    X, R, A = ws[0], ws[1], ws[2]
-    D, G = ws[4], ws[5]
-    vecs, mats, gfd, gvec = ws[6], ws[7], ws[8], ws[9]
-    qi, vi, F, Pm, fa, fb = vecs[0], vecs[1], vecs[2], vecs[3], vecs[4], vecs[5]
-    Aq, Cq, Hc, Ma = mats[1], mats[2], mats[3], mats[4]
-    gj = gvec[0]
-    n = flags[_F_N]
-    m = flags[_F_M]
-    has_mass = flags[_F_MASSFN] != 0
-    diag = flags[_F_DIAG] != 0
+    fns, flags, Mc, prm = md
+    b, L, Ld, Lc = tabs.b, tabs.L, tabs.Ld, tabs.Lc
+    X, R, A = ws.X, ws.R, ws.A
+    D, G = ws.D, ws.G
+    qi, vi, F, Pm, fa = ws.qi, ws.vi, ws.F, ws.Pm, ws.fa
+    Aq, Cq, Hc, Ma = ws.Aq, ws.Cq, ws.Hc, ws.Ma
+    gj = ws.g
+    n = flags[F_N]
+    m = flags[F_M]
+    has_mass = flags[F_MASSFN] != 0
+    diag = flags[F_DIAG] != 0
     s = L.shape[0] - 1
     r = L.shape[1]
     J = Lc.shape[1] - 1
@@ -166,7 +154,7 @@ def assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac):
         for a in range(n):
             D[nu, a] = 0.0
 
-    Mi = Mc if not has_mass else mats[0]
+    Mi = Mc if not has_mass else ws.Mi
     for i in range(r):
         for a in range(n):
             qa = qk[a]
@@ -177,10 +165,10 @@ def assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac):
                 va += Ld[nu, i] * x
             qi[a] = qa
             vi[a] = va * inv_h
-        fns[_PGRAD](ptr(qi), ptr(qi), ptr(prm), ptr(fa))
+        fns[PGRAD](ptr(qi), ptr(qi), ptr(prm), ptr(fa))
         if has_mass:
-            fns[_KGRAD](ptr(qi), ptr(vi), ptr(prm), ptr(F))
-            fns[_MASS](ptr(qi), ptr(qi), ptr(prm), ptr(Mi))
+            fns[KGRAD](ptr(qi), ptr(vi), ptr(prm), ptr(F))
+            fns[MASS](ptr(qi), ptr(qi), ptr(prm), ptr(Mi))
             for a in range(n):
                 F[a] -= fa[a]
         else:
@@ -204,25 +192,25 @@ def assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac):
         if not jac:
             continue
         # ∂F/∂q = T_qq − V_qq ; ∂(Mv)/∂q
-        if flags[_F_EX_PHESS] != 0:
-            fns[_PHESS](ptr(qi), ptr(qi), ptr(prm), ptr(Aq))
+        if flags[F_EX_PHESS] != 0:
+            fns[PHESS](ptr(qi), ptr(qi), ptr(prm), ptr(Aq))
         else:
-            _fd_vec_jacobian(fns[_PGRAD], 1, qi, qi, prm, Aq, fa, F, Pm, n)  # F, Pm: spent scratch
+            _fd_vec_jacobian(fns[PGRAD], 1, qi, qi, prm, Aq, fa, F, Pm, n)  # F, Pm: spent scratch
         for a in range(n):
             for c in range(n):
                 Aq[a, c] = -Aq[a, c]
         if has_mass:
-            if flags[_F_EX_KHESS] != 0:
-                fns[_KHESS](ptr(qi), ptr(vi), ptr(prm), ptr(Hc))
+            if flags[F_EX_KHESS] != 0:
+                fns[KHESS](ptr(qi), ptr(vi), ptr(prm), ptr(Hc))
             else:
-                _fd_vec_jacobian(fns[_KGRAD], 1, qi, vi, prm, Hc, fa, F, Pm, n)
+                _fd_vec_jacobian(fns[KGRAD], 1, qi, vi, prm, Hc, fa, F, Pm, n)
             for a in range(n):
                 for c in range(n):
                     Aq[a, c] += Hc[a, c]
-            if flags[_F_EX_MJAC] != 0:
-                fns[_MJAC](ptr(qi), ptr(vi), ptr(prm), ptr(Cq))
+            if flags[F_EX_MJAC] != 0:
+                fns[MJAC](ptr(qi), ptr(vi), ptr(prm), ptr(Cq))
             else:
-                _fd_momentum_jacobian(fns[_MASS], qi, vi, prm, Cq, fa, Ma, n)
+                _fd_momentum_jacobian(fns[MASS], qi, vi, prm, Cq, fa, Ma, n)
         for nu in range(s):
             for mu in range(1, s + 1):
                 cA = w * L[nu, i] * L[mu, i]
@@ -247,16 +235,16 @@ def assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac):
             R[nu * n + a] += D[nu, a]
 
     if m > 0:
-        qd = vecs[0]
+        qd = qi
         for j in range(1, J + 1):
             for a in range(n):
                 qa = qk[a]
                 for nu in range(1, s + 1):
                     qa += Lc[nu, j] * X[(nu - 1) * n + a]
                 qd[a] = qa
-            fns[_CON](ptr(qd), ptr(qd), ptr(prm), ptr(gj))
+            fns[CON](ptr(qd), ptr(qd), ptr(prm), ptr(gj))
             Gj = G[j]
-            fns[_CJAC](ptr(qd), ptr(qd), ptr(prm), ptr(Gj))
+            fns[CJAC](ptr(qd), ptr(qd), ptr(prm), ptr(Gj))
             row = sn + (j - 1) * m
             for a in range(m):
                 R[row + a] = gj[a]
@@ -270,10 +258,10 @@ def assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac):
                                 A[row + a, c0 + c] = cl * Gj[a, c]
                 if j < J:
                     eta = X[sn + j * m : sn + (j + 1) * m]
-                    if flags[_F_EX_CHESS] != 0:
-                        fns[_CHESS](ptr(qd), ptr(eta), ptr(prm), ptr(Hc))
+                    if flags[F_EX_CHESS] != 0:
+                        fns[CHESS](ptr(qd), ptr(eta), ptr(prm), ptr(Hc))
                     else:
-                        _fd_constraint_hessian(fns[_CJAC], qd, eta, prm, Hc, fa, gfd[1], gfd[2], n, m)
+                        _fd_constraint_hessian(fns[CJAC], qd, eta, prm, Hc, fa, ws.Gp, ws.Gm, n, m)
                     for nu in range(s):
                         for mu in range(1, s + 1):
                             cc = Lc[nu, j] * Lc[mu, j]
@@ -303,17 +291,19 @@ def assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac):
 
     for k in range(N):
         if not np.isfinite(R[k]):
-            return _NONFINITE
-    return _OK
+            return NONFINITE
+    return OK
 
 
 # ----------------------------------------------------------------------------- one step
-@njit
-def predict(tabs, n, m, s, J, h, vk, ws, first):
+@hot
+def predict(tabs, n, m, h, vk, ws, first):
     """Initial guess: the previous step's polynomial extrapolated onto this step."""
-    b, L, Ld, Lc, E, tau = tabs
-    X = ws[0]
-    Xp = ws[13]
+    E, tau = tabs.E, tabs.tau
+    s = E.shape[0] - 1
+    J = tabs.Lc.shape[1] - 1
+    X = ws.X
+    Xp = ws.Xprev
     if first:
         # straight line with the initial velocity; impulses start at zero
         for nu in range(1, s + 1):
@@ -334,9 +324,17 @@ def predict(tabs, n, m, s, J, h, vk, ws, first):
         X[k] = Xp[k]
 
 
-@njit
-def newton(fns, flags, Mc, prm, tabs, h, qk, pk, ws, tol, max_iter, out):
-    """Newton's method on the step equations from the unknowns in ``ws[0]``.
+@hot
+def _qscale(qk):
+    qscale = 1.0
+    for a in range(qk.shape[0]):
+        qscale = max(qscale, abs(qk[a]))
+    return qscale
+
+
+@hot
+def newton_full(md, tabs, opts, h, qk, pk, ws, out):
+    """Newton's method with the exact Newton matrix, from the unknowns in ``ws.X``.
 
     Stops on the increment of the control points, scaled by ``max(1, |q_k|)``: converged
     when it is below ``tol``, when the contraction estimate ``θ/(1−θ)·|δ|`` predicts the
@@ -344,28 +342,26 @@ def newton(fns, flags, Mc, prm, tabs, h, qk, pk, ws, tol, max_iter, out):
     tol``). A residual test on the momentum rows would leave an error ~tol/h per step.
     Gives up early when the increments grow twice in a row (divergence).
     """
-    b, L, Ld, Lc, E, tau = tabs
-    X, R, A, piv = ws[0], ws[1], ws[2], ws[3]
-    n = flags[0]
-    m = flags[1]
-    s = L.shape[0] - 1
-    J = Lc.shape[1] - 1
+    X, R, A, piv = ws.X, ws.R, ws.A, ws.piv
+    n = md.flags[F_N]
+    m = md.flags[F_M]
+    s = tabs.L.shape[0] - 1
+    J = tabs.Lc.shape[1] - 1
     sn = s * n
     N = sn + J * m
-    qscale = 1.0
-    for a in range(n):
-        qscale = max(qscale, abs(qk[a]))
+    tol = opts.tol
+    qscale = _qscale(qk)
     dprev = np.inf
     grew = 0
     it = 0
-    while it < max_iter:
+    while it < opts.max_iter:
         it += 1
-        out[0] = it
-        st = assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, True)
-        if st != _OK:
+        out[S_ITERS] = it
+        st = assemble(md, tabs, h, qk, pk, ws, True)
+        if st != OK:
             return st
         if lu_factor(A, piv, N) != 0:
-            return _SINGULAR
+            return SINGULAR
         lu_solve(A, piv, R, N)
         dn = 0.0
         for k in range(N):
@@ -374,40 +370,389 @@ def newton(fns, flags, Mc, prm, tabs, h, qk, pk, ws, tol, max_iter, out):
             dn = max(dn, abs(R[k]))
         dn /= qscale
         if not np.isfinite(dn):
-            return _NONFINITE
+            return NONFINITE
         if dn <= tol:
-            return _OK
+            return OK
         if it >= 2:
             theta = dn / dprev
             if theta < 1.0 and theta / (1.0 - theta) * dn <= tol:
-                return _OK
+                return OK
             if theta >= 0.5 and dn <= 100.0 * tol:
-                return _OK  # round-off plateau
+                return OK  # round-off plateau
             grew = grew + 1 if theta > 1.0 else 0
             if grew >= 2:
                 break
         dprev = dn
-    assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, False)
+    assemble(md, tabs, h, qk, pk, ws, False)
     res = 0.0
     for k in range(N):
         res = max(res, abs(R[k]))
-    out[3] = res
-    return _NEWTON
+    out[S_RES] = res
+    return NEWTON_FAILED
 
 
-@njit
-def step(fns, flags, Mc, prm, tabs, h, qk, pk, vk, q1, p1, v1, ws, tol, max_iter, first, out):
-    """Advance (q_k, p_k) by one step into (q1, p1, v1).
+# ----------------------------------------------------------------------------- mechanics matrix
+@hot
+def _mass_bar(md, qk, ws, n):
+    """Prepare ``M̄⁻¹`` for this step: ``1/diag(M)``, or the LU of ``M(q_k)`` (of the
+    constant ``M`` once per trajectory). Returns a status code."""
+    fns, flags, Mc, prm = md
+    if flags[F_DIAG] != 0:
+        if ws.hold[1] == 0:
+            for a in range(n):
+                ws.minv[a] = 1.0 / Mc[a, a]
+            ws.hold[1] = 1
+        return OK
+    Mb = ws.Mb
+    if flags[F_MASSFN] != 0:
+        fns[MASS](ptr(qk), ptr(qk), ptr(prm), ptr(Mb))
+    elif ws.hold[1] != 0:
+        return OK
+    else:
+        for a in range(n):
+            for c in range(n):
+                Mb[a, c] = Mc[a, c]
+        ws.hold[1] = 1
+    if lu_factor(Mb, ws.pivn, n) != 0:
+        return SINGULAR_MASS
+    return OK
 
-    ``out`` (float64, ≥ 4) receives: Newton iterations, max|g(q1)|, max|G(q1) v1|, and the
-    final max-norm of the residual. Returns a status code (0 on success).
+
+@hot
+def _minv(md, ws, x, n):
+    """x ← M̄⁻¹ x."""
+    if md.flags[F_DIAG] != 0:
+        for a in range(n):
+            x[a] *= ws.minv[a]
+    else:
+        lu_solve(ws.Mb, ws.pivn, x, n)
+
+
+@hot
+def _mech_rows(md, ws, j, n, m):
+    """``ws.Y[j]`` = (M̄⁻¹ G_jᵀ)ᵀ from ``ws.G[j]``."""
+    for c in range(m):
+        Yc = ws.Y[j, c]
+        for a in range(n):
+            Yc[a] = ws.G[j, c, a]
+        _minv(md, ws, Yc, n)
+
+
+@hot
+def residual(md, tabs, h, qk, pk, ws):
+    """The residual alone at ``ws.X``, into ``ws.R`` (with ``ws.D`` and ``ws.G[1:]``).
+
+    The same equations as :func:`assemble` without the Newton matrix, with the loops
+    ordered so that the innermost one runs over the coordinates independently: the
+    tiny reductions of the generic order (over the s control points) are bound by the
+    latency of their additions. It differs from ``assemble(jac=False)`` at round-off.
+    Returns 0, or ``NONFINITE`` when a callback produced NaN/inf.
     """
-    b, L, Ld, Lc, E, tau = tabs
-    X, R, A, piv = ws[0], ws[1], ws[2], ws[3]
-    D, G = ws[4], ws[5]
-    n = flags[0]
-    m = flags[1]
+    fns, flags, Mc, prm = md
+    b, L, Ld, Lc = tabs.b, tabs.L, tabs.Ld, tabs.Lc
+    X, R, D, G = ws.X, ws.R, ws.D, ws.G
+    qi, vi, F, Pm, fa = ws.qi, ws.vi, ws.F, ws.Pm, ws.fa
+    n = flags[F_N]
+    m = flags[F_M]
+    has_mass = flags[F_MASSFN] != 0
+    diag = flags[F_DIAG] != 0
     s = L.shape[0] - 1
+    r = L.shape[1]
+    J = Lc.shape[1] - 1
+    sn = s * n
+    N = sn + J * m
+    inv_h = 1.0 / h
+    Mi = Mc if not has_mass else ws.Mi
+    for nu in range(s + 1):
+        for a in range(n):
+            D[nu, a] = 0.0
+    for i in range(r):
+        for a in range(n):
+            qi[a] = qk[a]
+            vi[a] = 0.0
+        for nu in range(1, s + 1):
+            cl = L[nu, i]
+            cd = Ld[nu, i] * inv_h
+            off = (nu - 1) * n
+            for a in range(n):
+                x = X[off + a]
+                qi[a] += cl * x
+                vi[a] += cd * x
+        fns[PGRAD](ptr(qi), ptr(qi), ptr(prm), ptr(fa))
+        if has_mass:
+            fns[KGRAD](ptr(qi), ptr(vi), ptr(prm), ptr(F))
+            fns[MASS](ptr(qi), ptr(qi), ptr(prm), ptr(Mi))
+            for a in range(n):
+                F[a] -= fa[a]
+        else:
+            for a in range(n):
+                F[a] = -fa[a]
+        if diag:
+            for a in range(n):
+                Pm[a] = Mi[a, a] * vi[a]
+        else:
+            for a in range(n):
+                Pm[a] = 0.0
+            for c in range(n):
+                vc = vi[c]
+                for a in range(n):
+                    Pm[a] += Mi[a, c] * vc
+        w = h * b[i]
+        for nu in range(s + 1):
+            cl = w * L[nu, i]
+            cd = b[i] * Ld[nu, i]
+            for a in range(n):
+                D[nu, a] += cl * F[a] + cd * Pm[a]
+    for a in range(n):
+        R[a] = pk[a] + D[0, a]
+    for nu in range(1, s):
+        for a in range(n):
+            R[nu * n + a] = D[nu, a]
+    if m > 0:
+        gj = ws.g
+        for j in range(1, J + 1):
+            for a in range(n):
+                qi[a] = qk[a]
+            for nu in range(1, s + 1):
+                cl = Lc[nu, j]
+                if cl != 0.0:
+                    off = (nu - 1) * n
+                    for a in range(n):
+                        qi[a] += cl * X[off + a]
+            fns[CON](ptr(qi), ptr(qi), ptr(prm), ptr(gj))
+            fns[CJAC](ptr(qi), ptr(qi), ptr(prm), ptr(G[j]))
+            row = sn + (j - 1) * m
+            for c in range(m):
+                R[row + c] = gj[c]
+        for j in range(J):
+            Gj = G[j]
+            col = sn + j * m
+            for nu in range(s):
+                cl = Lc[nu, j]
+                if cl == 0.0:
+                    continue
+                r0 = nu * n
+                for c in range(m):
+                    e = cl * X[col + c]
+                    for a in range(n):
+                        R[r0 + a] -= Gj[c, a] * e
+    for k in range(N):
+        if not np.isfinite(R[k]):
+            return NONFINITE
+    return OK
+
+
+@hot
+def _schur(tabs, h, ws, n, m, J):
+    """Build and factor the Schur complement ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` on the
+    impulses from ``ws.G`` and ``ws.Y``. Returns a status code."""
+    G, Y, Sc, W = ws.G, ws.Y, ws.Sc, tabs.W
+    for j in range(1, J + 1):
+        for jp in range(J):
+            w = h * W[j - 1, jp]
+            for c in range(m):
+                for e in range(m):
+                    acc = 0.0
+                    if w != 0.0:
+                        for a in range(n):
+                            acc += G[j, c, a] * Y[jp, e, a]
+                    Sc[(j - 1) * m + c, jp * m + e] = w * acc
+    if lu_factor(Sc, ws.pivs, J * m) != 0:
+        return SINGULAR
+    return OK
+
+
+@hot
+def _mech_solve(md, tabs, h, ws, n, m, s, J):
+    r"""Overwrite the residual ``ws.R`` with ``K̃⁻¹ R`` for the mechanics matrix
+
+        K̃ = [ (1/h) A ⊗ M̄    −B ]      (B δη)_ν = Σ_{j<J} ℓ_ν(d_j) G_jᵀ δη_j
+             [      C          0 ]      (C δQ)_j = Σ_μ ℓ_μ(d_j) G_j δQ^μ
+
+    by block elimination: ``t = h (A⁻¹ ⊗ M̄⁻¹) r_E``, the Schur complement
+    ``C K⁻¹ B = [h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` (factored by :func:`_schur`, once per step)
+    solved for ``δη``, then ``δQ = t + h (A⁻¹ ⊗ M̄⁻¹) B δη``. ``C`` uses the current
+    ``G_j``. Returns a status code.
+    """
+    R, Z, U, Y, G = ws.R, ws.Z, ws.U, ws.Y, ws.G
+    Ainv, Lc = tabs.Ainv, tabs.Lc
+    T = ws.fa
+    sn = s * n
+    for nu in range(s):
+        Znu = Z[nu]
+        for a in range(n):
+            Znu[a] = R[nu * n + a]
+        _minv(md, ws, Znu, n)
+    for mu in range(s):
+        for a in range(n):
+            U[mu, a] = 0.0
+        for nu in range(s):
+            c = h * Ainv[mu, nu]
+            for a in range(n):
+                U[mu, a] += c * Z[nu, a]
+    if m > 0:
+        Jm = J * m
+        for j in range(1, J + 1):
+            row = sn + (j - 1) * m
+            for a in range(n):
+                T[a] = 0.0
+            for mu in range(1, s + 1):
+                cl = Lc[mu, j]
+                if cl != 0.0:
+                    for a in range(n):
+                        T[a] += cl * U[mu - 1, a]
+            for c in range(m):
+                acc = 0.0
+                for a in range(n):
+                    acc += G[j, c, a] * T[a]
+                R[row + c] -= acc
+        lu_solve(ws.Sc, ws.pivs, R[sn:], Jm)
+        for nu in range(s):
+            for a in range(n):
+                Z[nu, a] = 0.0
+            for jp in range(J):
+                cl = Lc[nu, jp]
+                if cl != 0.0:
+                    for e in range(m):
+                        de = cl * R[sn + jp * m + e]
+                        for a in range(n):
+                            Z[nu, a] += Y[jp, e, a] * de
+        for mu in range(s):
+            for nu in range(s):
+                c = h * Ainv[mu, nu]
+                for a in range(n):
+                    U[mu, a] += c * Z[nu, a]
+    for mu in range(s):
+        for a in range(n):
+            R[mu * n + a] = U[mu, a]
+    return OK
+
+
+@hot
+def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
+    """Newton-like iteration with the mechanics matrix (see :func:`_mech_solve`).
+
+    Stops when the scaled increment of the control points is below ``tol`` (or at the
+    round-off plateau), without the contraction-based early exit of :func:`newton_full`:
+    this iteration converges linearly, so the error left after an increment is that
+    increment times the rate, and a rate estimated from the first increments (which remove
+    the predictor's error, mostly in directions the mechanics matrix treats exactly) is far
+    too optimistic. An exit at a predicted ``tol`` left errors of ~tol/h in the momentum:
+    a drift of 1e-12 in a conserved angular momentum over 5000 steps, 25× the full
+    Newton's. Returns ``NEWTON_FAILED`` as soon as the increments shrink by less than
+    ``MECH_THETA_MAX`` (the caller then takes the full Newton). ``ws.R`` ends holding the
+    last increment and ``out[S_RES]`` the max-norm of the last residual evaluated.
+    """
+    X, R = ws.X, ws.R
+    n = md.flags[F_N]
+    m = md.flags[F_M]
+    s = tabs.L.shape[0] - 1
+    J = tabs.Lc.shape[1] - 1
+    sn = s * n
+    N = sn + J * m
+    tol = opts.tol
+    qscale = _qscale(qk)
+    dprev = np.inf
+    it = 0
+    while it < opts.max_iter:
+        it += 1
+        out[S_ITERS] = it
+        st = residual(md, tabs, h, qk, pk, ws)
+        if st != OK:
+            return st
+        res = 0.0
+        for k in range(N):
+            res = max(res, abs(R[k]))
+        out[S_RES] = res
+        if it == 1 and m > 0:
+            # the Schur complement from the first iterate's G_j, kept for the step: the
+            # constraint rows use the current G_j, so the iteration still converges to the
+            # same solution, and later increments barely move the G_j
+            for j in range(1, J):
+                _mech_rows(md, ws, j, n, m)
+            st = _schur(tabs, h, ws, n, m, J)
+            if st != OK:
+                return st
+        _mech_solve(md, tabs, h, ws, n, m, s, J)
+        dn = 0.0
+        for k in range(N):
+            X[k] -= R[k]
+        for k in range(sn):
+            dn = max(dn, abs(R[k]))
+        dn /= qscale
+        if not np.isfinite(dn):
+            return NONFINITE
+        if dn <= tol:
+            return OK
+        if it >= 2:
+            theta = dn / dprev
+            if theta >= 0.5 and dn <= 100.0 * tol:
+                return OK  # round-off plateau
+            if theta > MECH_THETA_MAX:
+                return NEWTON_FAILED
+        dprev = dn
+    return NEWTON_FAILED
+
+
+@hot
+def _finish_mech(md, tabs, h, qk, ws, q1, n, m, s, J):
+    """After :func:`newton_mech`: q1, g(q1), G(q1) and ``D_s`` at the final unknowns.
+
+    ``ws.D`` was assembled one increment ``δ = ws.R`` earlier; instead of a second full
+    residual, its mass part is moved along ``δ`` exactly for a constant ``M`` (to
+    O(|δ| h |∂M/∂q|) otherwise): ``D_s −= (1/h) Σ_μ As_μ M̄ δQ^μ``. The force part moves by
+    O(h |∂F/∂q| |δ|), below round-off of the momentum. Returns max|g(q1)|.
+    """
+    fns, flags, Mc, prm = md
+    X, R, D, G = ws.X, ws.R, ws.D, ws.G
+    As = tabs.As
+    inv_h = 1.0 / h
+    for a in range(n):
+        q1[a] = qk[a] + X[(s - 1) * n + a]
+    dv = ws.fa
+    for a in range(n):
+        acc = 0.0
+        for mu in range(s):
+            acc += As[mu] * R[mu * n + a]
+        dv[a] = acc * inv_h
+    if flags[F_DIAG] != 0:
+        for a in range(n):
+            D[s, a] -= Mc[a, a] * dv[a]
+    else:
+        Mb = Mc if flags[F_MASSFN] == 0 else ws.Mi
+        if flags[F_MASSFN] != 0:
+            fns[MASS](ptr(qk), ptr(qk), ptr(prm), ptr(Mb))
+        for a in range(n):
+            acc = 0.0
+            for c in range(n):
+                acc += Mb[a, c] * dv[c]
+            D[s, a] -= acc
+    gmax = 0.0
+    if m > 0:
+        gj = ws.g
+        fns[CON](ptr(q1), ptr(q1), ptr(prm), ptr(gj))
+        fns[CJAC](ptr(q1), ptr(q1), ptr(prm), ptr(G[J]))
+        for a in range(m):
+            gmax = max(gmax, abs(gj[a]))
+    return gmax
+
+
+# ----------------------------------------------------------------------------- one step
+@hot
+def step(md, tabs, opts, h, state, ws, first, out):
+    """Advance ``state`` rows (q_k, p_k, v_k) by one step into rows 3–5 (q1, p1, v1).
+
+    ``out`` (float64, ``STEP_OUT_SIZE``) receives the Newton iterations, max|g(q1)|,
+    max|G(q1) v1|, the max-norm of the last residual and 1 if the step used the full
+    Newton as a fallback. Returns a status code (0 on success).
+    """
+    fns, flags, Mc, prm = md
+    qk, pk, vk, q1, p1, v1 = state[0], state[1], state[2], state[3], state[4], state[5]
+    X, R, D, G = ws.X, ws.R, ws.D, ws.G
+    Lc = tabs.Lc
+    n = flags[F_N]
+    m = flags[F_M]
+    s = tabs.L.shape[0] - 1
     J = Lc.shape[1] - 1
     sn = s * n
     N = sn + J * m
@@ -415,37 +760,61 @@ def step(fns, flags, Mc, prm, tabs, h, qk, pk, vk, q1, p1, v1, ws, tol, max_iter
     if m > 0:
         G0 = G[0]
         if first:
-            fns[_CJAC](ptr(qk), ptr(qk), ptr(prm), ptr(G0))
+            fns[CJAC](ptr(qk), ptr(qk), ptr(prm), ptr(G0))
         else:
             # the previous step ended with G at q(d_J) = q_k, bit for bit: reuse it
             for a in range(m):
                 for c in range(n):
                     G0[a, c] = G[J, a, c]
-    predict(tabs, n, m, s, J, h, vk, ws, first)
-    st = newton(fns, flags, Mc, prm, tabs, h, qk, pk, ws, tol, max_iter, out)
-    if st != _OK and not first:
-        # The extrapolated polynomial can be far off (stiff oscillations with ωh > 1, a
-        # sudden turn): start again from the straight line through q_k with velocity v_k.
-        used = out[0]
-        predict(tabs, n, m, s, J, h, vk, ws, True)
-        st = newton(fns, flags, Mc, prm, tabs, h, qk, pk, ws, tol, max_iter, out)
-        out[0] += used
-    if st != _OK:
-        return st
-
-    # final residual at the converged unknowns: exact D_s for the momentum, and g(q1)
-    st = assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, False)
-    if st != _OK:
-        return st
-    res = 0.0
-    for k in range(N):
-        res = max(res, abs(R[k]))
-    out[3] = res
-    for a in range(n):
-        q1[a] = qk[a] + X[(s - 1) * n + a]
+    out[S_FULL] = 0.0
+    full = opts.mode == NEWTON_FULL or ws.hold[0] > 0 or not tabs.mech
+    if ws.hold[0] > 0:
+        ws.hold[0] -= 1
+    used = 0.0
+    gmax = 0.0
+    if not full:
+        st = _mass_bar(md, qk, ws, n)
+        if st == OK:
+            if m > 0:
+                _mech_rows(md, ws, 0, n, m)
+            predict(tabs, n, m, h, vk, ws, first)
+            st = newton_mech(md, tabs, opts, h, qk, pk, ws, out)
+        if st == OK:
+            gmax = _finish_mech(md, tabs, h, qk, ws, q1, n, m, s, J)
+        else:
+            # too slow a contraction (stiff forces) or a failure: the full Newton, which
+            # then stays on for a while rather than paying this detour at every step
+            used = out[S_ITERS]
+            full = True
+            ws.hold[0] = FULL_HOLD
+            out[S_FULL] = 1.0
+    if full:
+        predict(tabs, n, m, h, vk, ws, first)
+        st = newton_full(md, tabs, opts, h, qk, pk, ws, out)
+        if st != OK and not first:
+            # The extrapolated polynomial can be far off (stiff oscillations with ωh > 1, a
+            # sudden turn): start again from the straight line through q_k with velocity v_k.
+            used += out[S_ITERS]
+            predict(tabs, n, m, h, vk, ws, True)
+            st = newton_full(md, tabs, opts, h, qk, pk, ws, out)
+        out[S_ITERS] += used
+        if st != OK:
+            return st
+        # final residual at the converged unknowns: exact D_s for the momentum, and g(q1)
+        st = assemble(md, tabs, h, qk, pk, ws, False)
+        if st != OK:
+            return st
+        res = 0.0
+        for k in range(N):
+            res = max(res, abs(R[k]))
+        out[S_RES] = res
+        for a in range(n):
+            q1[a] = qk[a] + X[(s - 1) * n + a]
+        for a in range(m):
+            gmax = max(gmax, abs(R[sn + (J - 1) * m + a]))
 
     # P = D_s − Σ_{j<J} ℓ_s(d_j) G_jᵀ η_j
-    P = ws[14]
+    P = ws.P
     for a in range(n):
         P[a] = D[s, a]
     for j in range(1, J):
@@ -456,22 +825,19 @@ def step(fns, flags, Mc, prm, tabs, h, qk, pk, vk, q1, p1, v1, ws, tol, max_iter
                 for c in range(m):
                     acc += G[j, c, a] * X[sn + j * m + c]
                 P[a] -= cl * acc
-    st = end_momentum(fns, flags, Mc, prm, q1, P, p1, v1, G[J], ws)
-    if st != _OK:
+    st = end_momentum(md, q1, P, p1, v1, G[J], ws)
+    if st != OK:
         return st
-    gmax = 0.0
-    for a in range(m):
-        gmax = max(gmax, abs(R[sn + (J - 1) * m + a]))
-    out[1] = gmax
-    out[2] = velocity_residual(G[J], v1, n, m)
+    out[S_G] = gmax
+    out[S_GV] = velocity_residual(G[J], v1, n, m)
     # keep this step's unknowns for the next predictor
-    Xp = ws[13]
+    Xp = ws.Xprev
     for k in range(N):
         Xp[k] = X[k]
-    return _OK
+    return OK
 
 
-@njit
+@hot
 def velocity_residual(G1, v1, n, m):
     """max_a |(G v)_a|."""
     gv = 0.0
@@ -483,30 +849,30 @@ def velocity_residual(G1, v1, n, m):
     return gv
 
 
-@njit
-def end_momentum(fns, flags, Mc, prm, q1, P, p1, v1, G1, ws):
+@hot
+def end_momentum(md, q1, P, p1, v1, G1, ws):
     """p1 = P − G1ᵀ η with (G M⁻¹ Gᵀ) η = G M⁻¹ P, and v1 = M⁻¹ p1 (hidden constraint)."""
-    n = flags[0]
-    m = flags[1]
-    Mlu = ws[7][0]
-    pivn = ws[12]
-    Y = ws[8][0]
-    gvec = ws[9]
-    S = ws[10]
-    pivm = ws[11]
-    diag = flags[_F_DIAG] != 0
+    fns, flags, Mc, prm = md
+    n = flags[F_N]
+    m = flags[F_M]
+    Mlu = ws.Ma
+    pivn = ws.pivp
+    Y = ws.Gp
+    S = ws.S
+    pivm = ws.pivm
+    diag = flags[F_DIAG] != 0
     if diag:
         for a in range(n):
             v1[a] = P[a] / Mc[a, a]  # z = M⁻¹ P
     else:
-        if flags[_F_MASSFN] != 0:
-            fns[_MASS](ptr(q1), ptr(q1), ptr(prm), ptr(Mlu))
+        if flags[F_MASSFN] != 0:
+            fns[MASS](ptr(q1), ptr(q1), ptr(prm), ptr(Mlu))
         else:
             for a in range(n):
                 for c in range(n):
                     Mlu[a, c] = Mc[a, c]
         if lu_factor(Mlu, pivn, n) != 0:
-            return _SING_MASS
+            return SINGULAR_MASS
         for a in range(n):
             v1[a] = P[a]
         lu_solve(Mlu, pivn, v1, n)  # z = M⁻¹ P
@@ -520,7 +886,7 @@ def end_momentum(fns, flags, Mc, prm, q1, P, p1, v1, G1, ws):
                     Yc[a] /= Mc[a, a]
             else:
                 lu_solve(Mlu, pivn, Yc, n)  # row c of (M⁻¹ Gᵀ)ᵀ
-        eta = gvec[1]
+        eta = ws.etaJ
         for c in range(m):
             acc = 0.0
             for a in range(n):
@@ -532,7 +898,7 @@ def end_momentum(fns, flags, Mc, prm, q1, P, p1, v1, G1, ws):
                     acc += G1[c, a] * Y[d, a]
                 S[c, d] = acc
         if lu_factor(S, pivm, m) != 0:
-            return _SING_CONS
+            return SINGULAR_CONSTRAINTS
         lu_solve(S, pivm, eta, m)
         for a in range(n):
             acc = 0.0
@@ -547,5 +913,5 @@ def end_momentum(fns, flags, Mc, prm, q1, P, p1, v1, G1, ws):
             p1[a] = P[a]
     for a in range(n):
         if not (np.isfinite(p1[a]) and np.isfinite(v1[a])):
-            return _NONFINITE
-    return _OK
+            return NONFINITE
+    return OK

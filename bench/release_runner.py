@@ -1,0 +1,46 @@
+"""Time ``fastvi.integrate`` on the double pendulum for whatever fastvi is on ``sys.path``.
+
+Run as a child process by ``bench/test_bench_release.py`` — once with this tree, once with a
+worktree of the previous release — so that two versions of the package can be timed in one
+benchmark session. Reads commands ``<method> <n_steps> <newton>`` from stdin, one per line;
+answers each with one line of JSON: the thread CPU seconds of the integration (no
+compile: every method is warmed up first), the Newton iterations per step and the final
+state. ``newton`` is ignored by a release that has no such option.
+"""
+
+import inspect
+import json
+import sys
+import time
+
+import numpy as np
+
+import fastvi
+
+H = 0.01
+
+
+def main() -> None:
+    model = fastvi.scenes.double_pendulum()
+    q0, v0 = model.initial_state(np.pi / 2, np.pi / 2)
+    has_newton = "newton" in inspect.signature(fastvi.integrate).parameters
+    warm = set()
+    print(json.dumps(dict(ready=fastvi.__file__)), flush=True)
+    for line in sys.stdin:
+        method, n_steps, newton = line.split()
+        n_steps = int(n_steps)
+        kw = dict(h=H, n_steps=n_steps, method=method, save_every=n_steps)
+        if has_newton:
+            kw["newton"] = newton
+        if (method, newton) not in warm:
+            fastvi.integrate(model, q0, v0, **{**kw, "n_steps": 10, "save_every": 10})
+            warm.add((method, newton))
+        t0 = time.thread_time()
+        res = fastvi.integrate(model, q0, v0, **kw)
+        cpu = time.thread_time() - t0
+        print(json.dumps(dict(cpu=cpu, iterations=res.stats["newton_iterations"] / n_steps,
+                              q=res.q[-1].tolist(), energy=float(res.energy[-1]))), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,114 @@
+"""This tree against the previous release (``v0.1.0``), side by side in one session.
+
+Two versions of ``fastvi`` cannot share a process, so each runs in a child process
+(``bench/release_runner.py``): this tree, and a git worktree of the release tag created in
+``bench/.release`` on first use (its kernels compile once, ~25 s, then load from its own
+numba cache). The children are asked in turn — release, current, current, release, … — to
+integrate the double pendulum (θ1 = θ2 = π/2 at rest, h = 0.01, ``N_STEPS`` steps, nothing
+saved but the end), each timing only the integration in its own thread CPU time. The
+per-step medians and their ratio are printed and stored in the benchmark JSON under
+``"fastvi_release"``. Skipped when git or the tag is not available (e.g. a source tarball).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+RELEASE = "v0.1.0"
+ROOT = Path(__file__).resolve().parent.parent
+WORKTREE = ROOT / "bench" / ".release"
+RUNNER = ROOT / "bench" / "release_runner.py"
+METHODS = ("P1L-Q2G", "P2L-Q3G", "P3L-Q4G")
+N_STEPS = 20_000
+ROUNDS = 6  # per contender and method, in ABBA order
+GOAL = 10.0  # issue 11: the step at least 10x cheaper than v0.1.0
+
+
+def _release_tree() -> Path:
+    if shutil.which("git") is None:
+        pytest.skip("git is needed to check out the previous release")
+    tags = subprocess.run(["git", "-C", str(ROOT), "tag", "--list", RELEASE], capture_output=True,
+                          text=True)
+    if RELEASE not in tags.stdout.split():
+        pytest.skip(f"tag {RELEASE} is not in this clone (git fetch --tags)")
+    if not (WORKTREE / "fastvi").is_dir():
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "prune"], check=True)
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "--force",
+                        str(WORKTREE), RELEASE], check=True, capture_output=True)
+    return WORKTREE
+
+
+class _Child:
+    """A runner process importing fastvi from ``tree``."""
+
+    def __init__(self, tree: Path):
+        env = dict(os.environ, PYTHONPATH=str(tree), OMP_NUM_THREADS="1",
+                   OPENBLAS_NUM_THREADS="1")
+        self.proc = subprocess.Popen([sys.executable, str(RUNNER)], cwd=str(tree), env=env,
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        ready = json.loads(self.proc.stdout.readline())
+        assert str(tree) in ready["ready"], (tree, ready)  # the intended package, not another
+
+    def run(self, method: str, n_steps: int, newton: str = "auto") -> dict:
+        self.proc.stdin.write(f"{method} {n_steps} {newton}\n")
+        self.proc.stdin.flush()
+        return json.loads(self.proc.stdout.readline())
+
+    def close(self):
+        self.proc.stdin.close()
+        self.proc.wait(timeout=60)
+
+
+@pytest.fixture(scope="module")
+def children():
+    old = _Child(_release_tree())
+    new = _Child(ROOT)
+    yield old, new
+    old.close()
+    new.close()
+
+
+_rows: list[dict] = []
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_step_cost_against_the_previous_release(benchmark, children, method, print_uncaptured):
+    old, new = children
+    times = {"release": [], "current": []}
+    iters = {}
+    for r in range(ROUNDS):
+        order = (("release", old), ("current", new)) if r % 2 == 0 else (("current", new), ("release", old))
+        for name, child in order:
+            out = child.run(method, N_STEPS)
+            times[name].append(out["cpu"] / N_STEPS)
+            iters[name] = out["iterations"]
+    med = {k: statistics.median(v) for k, v in times.items()}
+    ratio = med["release"] / med["current"]
+    row = dict(method=method, release_us=med["release"] * 1e6, current_us=med["current"] * 1e6,
+               ratio=ratio, iterations=iters, rounds=ROUNDS)
+    _rows.append(row)
+    benchmark.extra_info["fastvi_release"] = row
+    benchmark.group = f"per step vs {RELEASE}"
+    # pytest-benchmark wants a timed callable: one short current run (the table is the result)
+    benchmark.pedantic(new.run, args=(method, 100), rounds=1, iterations=1)
+
+    def report(write):
+        write.sep(f"fastvi: this tree vs {RELEASE}, double pendulum, thread CPU per step (medians)")
+        for row in _rows:
+            verdict = "met" if row["ratio"] >= GOAL else "missed"
+            write(f"{row['method']:<9} {RELEASE} {row['release_us']:7.3f} µs  current "
+                  f"{row['current_us']:7.3f} µs  speed-up {row['ratio']:5.2f}x  (goal {GOAL:g}x: "
+                  f"{verdict}; Newton iterations/step {row['iterations']['release']:.2f} -> "
+                  f"{row['iterations']['current']:.2f})")
+
+    if method == METHODS[-1]:
+        print_uncaptured(report)
+    assert ratio > 0

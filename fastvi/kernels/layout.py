@@ -1,0 +1,169 @@
+"""The data the kernels share, named once.
+
+Every layout a kernel reads — the callback slots of a model, the flags vector, the status
+integers, the counters of a run, the workspace of one trajectory — is defined here and
+imported by :mod:`fastvi.model`, the step and drive kernels, the RK4 baseline and the
+yardstick in ``bench/``. Kernels receive a handful of named tuples instead of long
+positional argument lists:
+
+``ModelData(fns, flags, Mc, prm)``
+    the model's compiled callbacks (tuple in :data:`SLOTS` order), its int64 flags vector
+    (indices ``F_*``), the constant mass matrix (zeros when ``M`` is a function) and the
+    parameter vector of this trajectory;
+``NewtonOptions(tol, max_iter, mode)``
+    the stopping tolerance, the iteration cap and the Newton variant (``NEWTON_*``);
+``Tables`` (:meth:`fastvi.tables.Method.kernel_tables`)
+    the basis and quadrature tables of the method;
+``Workspace`` (:func:`make_workspace`)
+    the scratch arrays of one trajectory, allocated once outside the time loop.
+
+numba compiles named tuples to plain structs: attribute access costs nothing.
+"""
+
+from collections import namedtuple
+
+import numpy as np
+
+from .._numba import njit
+from ..status import Status
+
+# ----------------------------------------------------------------------------- model callbacks
+#: Order of the callbacks in the tuple handed to the kernels.
+SLOTS = (
+    "mass",
+    "kinetic_grad",
+    "potential",
+    "potential_grad",
+    "constraint",
+    "constraint_jacobian",
+    "potential_hessian",
+    "constraint_hessian",
+    "kinetic_hessian",
+    "momentum_jacobian",
+)
+MASS, KGRAD, POT, PGRAD, CON, CJAC, PHESS, CHESS, KHESS, MJAC = range(len(SLOTS))
+#: the optional second derivatives, in SLOTS order (finite differences when absent)
+SECOND = SLOTS[PHESS:]
+
+# ----------------------------------------------------------------------------- flags vector
+# int64 vector built by Model._compile: sizes, which callbacks exist, structure of M
+F_N = 0  # n
+F_M = 1  # m
+F_MASSFN = 2  # M is a function of q (else the constant Mc)
+F_EX_PHESS = 3  # exact potential Hessian given
+F_EX_CHESS = 4  # exact constraint Hessian given
+F_EX_KHESS = 5  # exact kinetic Hessian given
+F_EX_MJAC = 6  # exact momentum Jacobian given
+F_DIAG = 7  # the constant M is diagonal: M v and M⁻¹ elementwise
+FLAGS_SIZE = 8
+#: flag index of each optional second derivative, in SECOND order
+F_EXACT = (F_EX_PHESS, F_EX_CHESS, F_EX_KHESS, F_EX_MJAC)
+
+# ----------------------------------------------------------------------------- status codes
+OK = int(Status.SUCCESS)
+NEWTON_FAILED = int(Status.NEWTON_NOT_CONVERGED)
+SINGULAR = int(Status.SINGULAR_JACOBIAN)
+NONFINITE = int(Status.NONFINITE)
+SINGULAR_MASS = int(Status.SINGULAR_MASS)
+SINGULAR_CONSTRAINTS = int(Status.SINGULAR_CONSTRAINTS)
+
+# ----------------------------------------------------------------------------- Newton variants
+#: full Newton: the exact Newton matrix assembled and factored at every iteration
+NEWTON_FULL = 0
+#: the mechanics matrix (mass and constraint-Jacobian blocks, Hessians dropped) solved
+#: through its Schur complement on the impulses, with the full Newton as fallback
+NEWTON_AUTO = 1
+NEWTON_MODES = {"full": NEWTON_FULL, "auto": NEWTON_AUTO}
+
+# ----------------------------------------------------------------------------- step output
+# float64 vector filled by step(): Newton iterations, max|g(q1)|, max|G v1|, last residual,
+# and whether the step fell back from the mechanics matrix to the full Newton
+S_ITERS, S_G, S_GV, S_RES, S_FULL = range(5)
+STEP_OUT_SIZE = 5
+
+# ----------------------------------------------------------------------------- run counters
+# float64 ``info`` vector of drive.run, kept across chunks
+(I_STEPS, I_ITERS, I_WIN_G, I_WIN_GV, I_WIN_IT, I_RES, I_FAILED, I_SLOT, I_FIRST, I_MAXRES,
+ I_FULL) = range(11)
+INFO_SIZE = 11
+
+# ----------------------------------------------------------------------------- ensembles
+#: save modes of ``run_ensemble``
+SAVE_FINAL, SAVE_STRIDE, SAVE_DIAGNOSTICS = 0, 1, 2
+# columns of the per-member int64 rows ``ist``
+E_STATUS, E_STEPS, E_FAILED, E_SAVED = range(4)
+E_SIZE = 4
+# columns of the per-member float64 rows ``fst``: Newton iterations (total), residual of the
+# last step tried, max residual over good steps, max |H − H0|, max |g|, max |Gv|
+F_ITERS, F_RES, F_MAXRES, F_DH, F_G, F_GV = range(6)
+F_SIZE = 6
+
+# ----------------------------------------------------------------------------- named tuples
+#: the saved samples of one trajectory (drive.run): time, q, v, p, energy, and the maxima of
+#: |g|, |G v| and the sum of Newton iterations over the steps since the previous sample
+Samples = namedtuple("Samples", ["t", "q", "v", "p", "energy", "g", "gv", "iters"])
+ModelData = namedtuple("ModelData", ["fns", "flags", "Mc", "prm"])
+NewtonOptions = namedtuple("NewtonOptions", ["tol", "max_iter", "mode"])
+Tables = namedtuple("Tables", ["b", "L", "Ld", "Lc", "E", "tau", "Ainv", "W", "As", "mech"])
+Tables.__doc__ = """Method tables read by the step kernel (see :class:`fastvi.tables.Method`).
+
+b (r,), L, Ld (s+1, r), Lc (s+1, J+1), E (s+1, s+1), tau (s+1,) as in ``Method``; for the
+mechanics Newton matrix: Ainv (s, s) the inverse of ``A[ν, μ−1] = Σ_i b_i ℓ'_ν(c_i) ℓ'_μ(c_i)``
+(ν = 0…s−1, μ = 1…s), W (J, J) ``W[j−1, j'] = Σ ℓ_μ(d_j) Ainv[μ−1, ν] ℓ_ν(d_j')`` and
+As (s,) ``As[μ−1] = Σ_i b_i ℓ'_s(c_i) ℓ'_μ(c_i)``; mech (bool) whether ``A`` is invertible
+(a quadrature with fewer points than ``s`` makes it singular: such methods use the full
+Newton only)."""
+
+Workspace = namedtuple(
+    "Workspace",
+    [
+        "X",  # (N,) unknowns (ΔQ^1 … ΔQ^s, η_0 … η_{J−1})
+        "R",  # (N,) residual, then the Newton increment
+        "A",  # (N, N) full Newton matrix, factored in place
+        "piv",  # (N,) its pivots
+        "D",  # (s+1, n) ∂S_u/∂Q^ν
+        "G",  # (J+1, m, n) G at the constraint points
+        "qi", "vi", "F", "Pm", "fa", "fb",  # (n,) q(c_i), v(c_i), force, M v, scratch
+        "Mi",  # (n, n) M(q(c_i))
+        "Aq", "Cq", "Hc", "Ma",  # (n, n) ∂F/∂q, ∂(Mv)/∂q, constraint Hessian, fd scratch
+        "Y",  # (J+1, m, n) (M̄⁻¹ G_jᵀ)ᵀ at the constraint points (row 0 also the projection's)
+        "Gp", "Gm",  # (m, n) finite-difference scratch
+        "g",  # (m,) g at a constraint point
+        "etaJ",  # (m,) the end impulse of the projection
+        "S",  # (m, m) G M⁻¹ Gᵀ of the projection, factored
+        "pivm",  # (m,)
+        "Mb",  # (n, n) M̄ = M(q_k) factored (configuration-dependent or full constant mass)
+        "pivn",  # (n,)
+        "pivp",  # (n,) pivots of M(q_{k+1}) in the end projection
+        "minv",  # (n,) 1 / diag(M) for a diagonal constant mass
+        "Sc",  # (J m, J m) Schur complement of the mechanics matrix, factored
+        "pivs",  # (J m,)
+        "Z",  # (s, n) stage scratch of the mechanics solve
+        "U",  # (s, n) stage scratch of the mechanics solve
+        "Xprev",  # (N,) the previous step's unknowns (predictor)
+        "P",  # (n,) end momentum before the projection
+        "hold",  # (2,) int64: [steps left on the full Newton after a fallback, M̄ factored]
+    ],
+)
+
+
+@njit
+def make_workspace(n, m, s, r, J):
+    """Scratch arrays for one trajectory (allocated once, outside the time loop)."""
+    N = s * n + J * m
+    mm = max(m, 1)
+    Jm = max(J * m, 1)
+    return Workspace(
+        np.zeros(N), np.zeros(N), np.zeros((N, N)), np.zeros(N, dtype=np.int64),
+        np.zeros((s + 1, n)), np.zeros((J + 1, mm, n)),
+        np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n),
+        np.zeros((n, n)),
+        np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n)),
+        np.zeros((J + 1, mm, n)),
+        np.zeros((mm, n)), np.zeros((mm, n)),
+        np.zeros(mm), np.zeros(mm), np.zeros((mm, mm)), np.zeros(mm, dtype=np.int64),
+        np.zeros((n, n)), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64), np.zeros(n),
+        np.zeros((Jm, Jm)), np.zeros(Jm, dtype=np.int64),
+        np.zeros((s, n)), np.zeros((s, n)),
+        np.zeros(N), np.zeros(n), np.zeros(2, dtype=np.int64),
+    )

@@ -211,8 +211,12 @@ def integrate(
         (``docs/method.md`` §10). It contracts like ``(ωh)²``; a step on which it contracts
         slower than ``MECH_THETA_MAX`` (a stiff spring) is redone with the full Newton, which
         then stays on for ``FULL_HOLD`` steps (``stats["full_newton_steps"]`` counts them).
-        ``"full"``: the exact Newton matrix, assembled and factored at every iteration.
-        Both solve the same equations to the same tolerance; they differ at round-off.
+        Being linearly convergent, it stops only when the increment itself is below ``tol``.
+        Methods of degree ``s = 1`` (and those whose quadrature has fewer than ``s`` points)
+        use the full Newton under ``"auto"``: measured faster there.
+        ``"full"``: the exact Newton matrix, assembled and factored at every iteration
+        (v0.1's iteration, bit for bit). Both solve the same equations to the same
+        tolerance; the trajectories differ at round-off.
     params : array_like (k,), optional
         Parameters for this run (default: the model's).
     progress : bool, default False

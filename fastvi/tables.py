@@ -324,8 +324,12 @@ class Method:
         s, J = self.s, self.J
         A = np.einsum("i,vi,ui->vu", self.b, self.Ld[:s], self.Ld[1:])
         As = np.einsum("i,i,ui->u", self.b, self.Ld[s], self.Ld[1:])
-        mech = bool(np.linalg.cond(A) < 1e12)  # r < s Gauss points make A singular
-        Ainv = np.linalg.inv(A) if mech else np.zeros((s, s))
+        invertible = bool(np.linalg.cond(A) < 1e12)  # r < s Gauss points make A singular
+        Ainv = np.linalg.inv(A) if invertible else np.zeros((s, s))
+        # s = 1: the predictor is only second order, the linear mechanics iteration needed
+        # 5.5 iterations a step against the full Newton's 3.0, which is then faster (N = n + m
+        # is small): docs/benchmarks.md
+        mech = invertible and s >= 2
         W = self.Lc[1:, 1:].T @ Ainv @ self.Lc[:s, :J]
         return Tables(self.b, self.L, self.Ld, self.Lc, self.E, self.tau,
                       np.ascontiguousarray(Ainv), np.ascontiguousarray(W), As, mech)

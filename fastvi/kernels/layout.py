@@ -110,9 +110,9 @@ Tables.__doc__ = """Method tables read by the step kernel (see :class:`fastvi.ta
 b (r,), L, Ld (s+1, r), Lc (s+1, J+1), E (s+1, s+1), tau (s+1,) as in ``Method``; for the
 mechanics Newton matrix: Ainv (s, s) the inverse of ``A[ν, μ−1] = Σ_i b_i ℓ'_ν(c_i) ℓ'_μ(c_i)``
 (ν = 0…s−1, μ = 1…s), W (J, J) ``W[j−1, j'] = Σ ℓ_μ(d_j) Ainv[μ−1, ν] ℓ_ν(d_j')`` and
-As (s,) ``As[μ−1] = Σ_i b_i ℓ'_s(c_i) ℓ'_μ(c_i)``; mech (bool) whether ``A`` is invertible
-(a quadrature with fewer points than ``s`` makes it singular: such methods use the full
-Newton only)."""
+As (s,) ``As[μ−1] = Σ_i b_i ℓ'_s(c_i) ℓ'_μ(c_i)``; mech (bool) whether ``newton="auto"``
+uses the mechanics matrix: not where ``A`` is singular (a quadrature with fewer points than
+``s``) nor for ``s = 1``, where the full Newton measured faster."""
 
 Workspace = namedtuple(
     "Workspace",

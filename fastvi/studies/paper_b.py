@@ -22,14 +22,13 @@ these numbers and writes the verdicts into the page.
 
 Usage::
 
-    python -m fastvi paper-b              # full study (T = 100 s), writes docs/
+    python -m fastvi paper-b              # full study (T = 100 s), writes ./fastvi-study-paper-b/
     python -m fastvi paper-b --quick      # T = 2 s, for tests and a first look
     python -m fastvi paper-b --out DIR    # write DIR/paper-b.md and DIR/figures/
 """
 
 from __future__ import annotations
 
-import argparse
 import os
 import platform
 import sys
@@ -37,6 +36,8 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+
+from ._cli import default_out, study_parser
 
 import fastvi
 from fastvi.baselines import rk4
@@ -536,9 +537,10 @@ def why(diffs: dict, t_same: float) -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m fastvi paper-b", description=__doc__.splitlines()[0])
+    parser = study_parser("python -m fastvi paper-b", __doc__)
     parser.add_argument("--quick", action="store_true", help=f"T = {QUICK_T_END:g} s instead of {T_END:g} s")
-    parser.add_argument("--out", default="docs", help="directory for paper-b.md and figures/ (default: docs)")
+    parser.add_argument("--out", default=default_out("paper-b"), help="directory for paper-b.md and "
+                        "figures/ (the package's own page: --out docs, from the repository root)")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     args = parser.parse_args(argv)

@@ -236,6 +236,7 @@ def _run(code, cwd, env_extra=None):
 
 
 _USER_MODULE = '''
+# {nonce}: a file never seen before, so that the first process really compiles
 def V(q, p):
     return {c} * p[0] * q[0] * q[0]
 
@@ -253,14 +254,18 @@ print(time.perf_counter() - t0, m.potential_energy(np.array([1.0])))
 
 
 def test_importable_callbacks_are_cached_on_disk_and_invalidated_by_edits(tmp_path):
-    (tmp_path / "usermod.py").write_text(_USER_MODULE.format(c="0.5"))
-    cold, v1 = map(float, _run(_PROBE, tmp_path).split())
-    warm, v2 = map(float, _run(_PROBE, tmp_path).split())
+    nonce = f"{os.getpid()} {time.time_ns()}"
+    (tmp_path / "usermod.py").write_text(_USER_MODULE.format(c="0.5", nonce=nonce))
+    # a private cache directory: nothing accumulates in the checkout's __pycache__
+    env = {"NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    cold, v1 = map(float, _run(_PROBE, tmp_path, env).split())
+    warm, v2 = map(float, _run(_PROBE, tmp_path, env).split())
     assert v1 == v2 == 0.5
     assert warm < 0.3 * cold, (cold, warm)
     # an edit of the user's file must never load the stale compiled code
-    (tmp_path / "usermod.py").write_text(_USER_MODULE.format(c="4.0"))
-    _, v3 = map(float, _run(_PROBE, tmp_path).split())
+    (tmp_path / "usermod.py").write_text(_USER_MODULE.format(c="4.0", nonce=nonce))
+    _, v3 = map(float, _run(_PROBE, tmp_path, env).split())
+    assert list((tmp_path / "cache").rglob("*.nbi"))  # the cache was really used
     assert v3 == 4.0
 
 

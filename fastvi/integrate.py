@@ -235,9 +235,11 @@ def _dispatch_time(kernel, *args) -> float:
     """Seconds to make ``kernel`` ready for ``args`` (compile, or load from numba's cache).
 
     The types are computed as numba's dispatcher computes them for a call, so the call that
-    follows finds the compiled version and the loop's timing holds the loop only.
+    follows finds the compiled version and the loop's timing holds the loop only. Typing
+    the arguments costs ≈ 0.5 ms (the tuple of callbacks), so it is skipped once the kernel
+    has a compiled version: the kernels are called with the same types for every model.
     """
-    if not hasattr(kernel, "compile"):  # NUMBA_DISABLE_JIT: a plain Python function
+    if not hasattr(kernel, "compile") or kernel.overloads:  # NUMBA_DISABLE_JIT, or ready
         return 0.0
     t = time.perf_counter()
     with quiet():

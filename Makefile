@@ -25,13 +25,13 @@ bench: $(STAMP)
 	$(BIN)/python -m pytest bench -q --benchmark-only --benchmark-json=bench/results.json
 
 paper-b: $(STAMP)
-	$(BIN)/python -m fastvi paper-b
+	$(BIN)/python -m fastvi paper-b --out docs
 
 orders: $(STAMP)
-	$(BIN)/python -m fastvi orders
+	$(BIN)/python -m fastvi orders --out docs/orders.md
 
 wpd: $(STAMP)
-	$(BIN)/python -m fastvi wpd
+	$(BIN)/python -m fastvi wpd --out docs
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache

@@ -1,4 +1,4 @@
-"""Command line: ``python -m fastvi <command> [options]``.
+"""Command line: python -m fastvi <command> [options].
 
 Each command is a function ``main(argv) -> int`` in a study module, imported only when used
 (so optional extras such as matplotlib are needed only by the commands that plot).
@@ -21,9 +21,11 @@ COMMANDS = {
 
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = argparse.ArgumentParser(prog="python -m fastvi", description=__doc__.splitlines()[0])
-    parser.add_argument("command", choices=sorted(COMMANDS),
-                        help="; ".join(f"{k}: {v[1]}" for k, v in sorted(COMMANDS.items())))
+    epilog = "commands:\n" + "\n".join(f"  {k:9s} {v[1]}" for k, v in sorted(COMMANDS.items()))
+    epilog += "\n\n'python -m fastvi <command> --help' lists a command's options and their defaults."
+    parser = argparse.ArgumentParser(prog="python -m fastvi", description=__doc__.splitlines()[0],
+                                     epilog=epilog, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("command", choices=sorted(COMMANDS), help="what to run (see below)")
     if not argv or argv[0] in ("-h", "--help"):
         parser.print_help()
         return 0 if argv else 2

@@ -118,7 +118,7 @@ def integrate_ensemble(
     wall = time.perf_counter() - t0
     result = EnsembleResult.concatenate(parts)
     result.method = opts["method"]  # the client's (memoised) Method, not a worker's copy
-    result.stats.update(wall_time=wall, worker_time=sum(p.stats["wall_time"] for p in parts),
+    result.stats.update(wall_time=wall, worker_time=sum(p.stats["integration_time"] for p in parts),
                         chunks=len(parts))
     return result
 

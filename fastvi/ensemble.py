@@ -19,11 +19,12 @@ import numba
 import numpy as np
 
 from . import _validate as check
-from .integrate import Result
+from .integrate import Result, _dispatch_time, _timed
 from .kernels import drive
 from .kernels import layout as lay
 from .kernels.step import velocity_residual
 from .model import Model
+from .results import ResultBase, _finish_figure, _new_figure
 from .status import MESSAGES, Status
 from .tables import Method
 
@@ -40,11 +41,11 @@ _PARALLEL_LOCK = threading.Lock()
 _MEMBER_FIELDS = ("q", "v", "p", "energy", "constraint_residual", "velocity_residual",
                   "newton_iterations", "max_energy_error", "max_constraint_residual",
                   "max_velocity_residual", "iterations", "max_residual", "residual", "status",
-                  "failed_step", "steps", "n_saved")
+                  "failed_step", "steps", "n_saved", "initial_energy")
 
 
-@dataclass
-class EnsembleResult:
+@dataclass(repr=False)
+class EnsembleResult(ResultBase):
     """What :func:`integrate_ensemble` kept of its ``N`` members.
 
     Member arrays are indexed by member first. Which of them are filled depends on ``save``:
@@ -99,8 +100,12 @@ class EnsembleResult:
     save : str or int
     stats : dict
         ``members``, ``member_steps`` (completed, all members), ``newton_iterations``,
-        ``wall_time`` (s, the compiled loop), ``setup_time`` (s, validation and projection),
-        ``threads``.
+        ``threads``, and times in seconds: ``integration_time`` (the compiled loop),
+        ``setup_time`` (validation, first-use check, projection of the initial states,
+        compiling the callbacks and loading or compiling the kernel), of which
+        ``compile_time``, and ``wall_time`` (the total).
+    initial_energy : ndarray (N,) or None
+        ``H`` of each member's (projected) initial state.
     """
 
     t: np.ndarray | None
@@ -127,6 +132,7 @@ class EnsembleResult:
     save: str | int
     stats: dict
     model_name: str = field(default="model")
+    initial_energy: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.status.shape[0])
@@ -135,6 +141,84 @@ class EnsembleResult:
     def success(self) -> np.ndarray:
         """(N,) bool: the member reached the final time."""
         return self.status >= 0
+
+    def _label(self) -> str:
+        return self.method.name
+
+    def _repr_items(self) -> list[str]:
+        items = [f"model={self.model_name!r}", f"method={self._label()!r}", f"h={self.h:g}",
+                 f"members={len(self)}", f"steps={self.n_steps}", f"save={self.save!r}",
+                 f"status={self._status_text()}"]
+        err = self.member_energy_error()
+        if err is not None and np.isfinite(err).any():
+            items.append(f"max|ΔH|={np.nanmax(err):.2g}")
+        return items
+
+    def final_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(q, v)``, each (N, n): every member's last good state, whatever ``save``."""
+        if self.t is None:
+            return self.q, self.v
+        last = np.maximum(self.n_saved - 1, 0)
+        rows = np.arange(len(self))
+        return self.q[rows, last], self.v[rows, last]
+
+    def member_energy_error(self) -> np.ndarray | None:
+        """(N,) energy error per member: ``max |ΔH|`` over every step (``"diagnostics"``),
+        over the samples (stride), or at the final state (``"final"``); None if unknown."""
+        if self.max_energy_error is not None:
+            return self.max_energy_error
+        if self.t is not None:
+            with np.errstate(invalid="ignore"):
+                return np.nanmax(np.abs(self.energy - self.energy[:, :1]), axis=1)
+        if self.initial_energy is not None:
+            return np.abs(self.energy - self.initial_energy)
+        return None
+
+    def plot(self, path=None, *, coordinates=(0, 1)):
+        """Final states of the members and the distribution of their energy errors.
+
+        Parameters
+        ----------
+        path : str or path-like, optional
+            Save the figure there; drawn on its own canvas (the matplotlib backend of the
+            process is never changed).
+        coordinates : (int, int), default (0, 1)
+            The components of ``q`` on the axes of the final-state scatter.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+            Left: ``q[i]`` against ``q[j]`` at each member's last good state (failed
+            members as red crosses). Right: histogram of ``log10`` of each member's energy
+            error (see :meth:`member_energy_error`; exact zeros are counted at the left edge).
+        """
+        i, j = (int(c) for c in coordinates)
+        q, _ = self.final_state()
+        ok = np.asarray(self.success)
+        fig = _new_figure(path, figsize=(10, 4.2))
+        a1, a2 = fig.subplots(1, 2)
+        a1.scatter(q[ok, i], q[ok, j], s=6, label="reached t_end")
+        if (~ok).any():
+            a1.scatter(q[~ok, i], q[~ok, j], s=18, marker="x", color="tab:red", label="failed (last good state)")
+        a1.set_xlabel(f"q[{i}]")
+        a1.set_ylabel(f"q[{j}]")
+        a1.set_title(f"final states, {len(self)} members")
+        a1.legend(fontsize="small")
+        err = self.member_energy_error()
+        if err is None:
+            a2.text(0.5, 0.5, "energy error not recorded", ha="center", transform=a2.transAxes)
+        else:
+            err = err[np.isfinite(err)]
+            positive = err[err > 0]
+            floor = np.log10(positive.min()) if positive.size else -16.0
+            logs = np.where(err > 0, np.log10(np.where(err > 0, err, 1.0)), floor)
+            a2.hist(logs, bins=min(40, max(5, int(np.sqrt(max(logs.size, 1))))))
+            a2.set_xlabel("log10 |ΔH| per member")
+            a2.set_ylabel("members")
+            a2.set_title("energy error")
+        fig.suptitle(f"{self.model_name}, {self._label()}, h = {self.h:g}, {self.n_steps} steps")
+        fig.tight_layout()
+        return _finish_figure(fig, path)
 
     @property
     def failed(self) -> np.ndarray:
@@ -159,12 +243,12 @@ class EnsembleResult:
         """One paragraph: sizes, speed, failures by cause."""
         N = len(self)
         st = self.stats
-        rate = st["member_steps"] / max(st["wall_time"], 1e-12)
+        # the rate of the compiled loop alone: a first run's compile says nothing about speed
+        rate = st["member_steps"] / max(st.get("integration_time", st["wall_time"]), 1e-12)
         lines = [
             f"{self.model_name}: {N} members × {self.n_steps} steps, method {self.method.name}, "
             f"h = {self.h:g}, save = {self.save!r}, {st['threads']} thread(s), "
-            f"wall time = {st['wall_time']:.3f} s (+ {st['setup_time']:.3f} s setup), "
-            f"{rate:.3g} member-steps/s, "
+            f"{self._timing()}, {rate:.3g} member-steps/s, "
             f"Newton iterations/step = {st['newton_iterations'] / max(1, st['member_steps']):.2f}",
         ]
         if self.max_energy_error is not None:
@@ -185,7 +269,8 @@ class EnsembleResult:
         """Member ``i`` as a :class:`fastvi.Result` (stride mode only).
 
         Equal, array for array, to ``integrate(..., save_every=k, on_failure="return")`` of
-        that member (``stats["wall_time"]`` is NaN: members share the clock).
+        that member (the times in ``stats`` are NaN: members share the clock; the
+        summary says "time not measured").
         """
         if self.t is None:
             raise ValueError(f"member trajectories need `save` = an integer stride; this ensemble "
@@ -199,7 +284,8 @@ class EnsembleResult:
             velocity_residual=self.velocity_residual[i, :J].copy(),
             newton_iterations=self.newton_iterations[i, :J].copy(),
             stats=dict(steps=int(self.steps[i]), newton_iterations=int(self.iterations[i]),
-                       wall_time=float("nan"), max_residual=float(self.max_residual[i])),
+                       max_residual=float(self.max_residual[i]), recovered_steps=[],
+                       wall_time=float("nan")),
             status=status, method=self.method, h=self.h, model_name=self.model_name,
             failed_step=None if status >= 0 else int(self.failed_step[i]),
         )
@@ -227,14 +313,10 @@ class EnsembleResult:
         joined = {k: (None if getattr(first, k) is None
                       else np.concatenate([getattr(p, k) for p in parts], axis=0))
                   for k in _MEMBER_FIELDS}
-        stats = dict(
-            members=sum(p.stats["members"] for p in parts),
-            member_steps=sum(p.stats["member_steps"] for p in parts),
-            newton_iterations=sum(p.stats["newton_iterations"] for p in parts),
-            wall_time=sum(p.stats["wall_time"] for p in parts),
-            setup_time=sum(p.stats["setup_time"] for p in parts),
-            threads=max(p.stats["threads"] for p in parts),
-        )
+        summed = ("members", "member_steps", "newton_iterations", "wall_time", "setup_time",
+                  "integration_time", "compile_time", "check_time")
+        stats = {k: sum(p.stats[k] for p in parts) for k in summed if all(k in p.stats for p in parts)}
+        stats["threads"] = max(p.stats["threads"] for p in parts)
         return cls(t=first.t, method=first.method, h=first.h, n_steps=first.n_steps,
                    save=first.save, stats=stats, model_name=first.model_name, **joined)
 
@@ -308,7 +390,7 @@ def integrate_ensemble(
     -----
     The members are scheduled dynamically in chunks of ``N / (8 · threads)``. Validation and
     projection of the initial states run in Python before the compiled loop (a few hundred
-    microseconds per member; ``stats["setup_time"]``). Only one ensemble runs at a time per
+    microseconds per member; in ``stats["setup_time"]``, with the first call's compile). Only one ensemble runs at a time per
     process (numba's default threading layer is not re-entrant); for more than one machine
     see :func:`fastvi.distributed.integrate_ensemble`.
 
@@ -354,10 +436,11 @@ def _members(model: Model, Q0, V0, params):
 def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -> EnsembleResult:
     t_setup = time.perf_counter()
     Q0, V0, P = _members(model, Q0, V0, params)
+    compile_time = _timed(model._compile)
+    check_time = 0.0
     if run_check and not getattr(model, "_checked", True):  # as integrate: before the projection
-        model.check(Q0[0], V0[0], params=P[0], n_random=1)
+        check_time = _timed(lambda: model.check(Q0[0], V0[0], params=P[0], n_random=1))
     X0, H0, g0, gv0 = _initial_states(model, Q0, V0, P, first_member)
-    setup = time.perf_counter() - t_setup
 
     N, n = Q0.shape
     h, total, meth, save = opts["h"], opts["total"], opts["method"], opts["save"]
@@ -387,11 +470,13 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -
                 numba.set_num_threads(threads)
             used = numba.get_num_threads()
             numba.set_parallel_chunksize(max(1, N // (CHUNKS_PER_THREAD * used)))
+            args = (fns, flags, Mc, P, meth.kernel_tables, opts["newton"], h,
+                    meth.s, meth.r, meth.J, X0, total, mode, every, H0,
+                    Qs, Vs, Ps, En, Gr, GVr, It, ist, fst)
+            compile_time += _dispatch_time(drive.run_ensemble, *args)
             t0 = time.perf_counter()
-            drive.run_ensemble(fns, flags, Mc, P, meth.kernel_tables, opts["newton"], h,
-                               meth.s, meth.r, meth.J, X0, total, mode, every, H0,
-                               Qs, Vs, Ps, En, Gr, GVr, It, ist, fst)
-            wall = time.perf_counter() - t0
+            drive.run_ensemble(*args)
+            t1 = time.perf_counter()
         finally:
             numba.set_parallel_chunksize(prev_chunk)
             numba.set_num_threads(prev_threads)
@@ -399,7 +484,8 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -
     steps = ist[:, lay.E_STEPS].copy()
     iterations = fst[:, lay.F_ITERS].astype(np.int64)
     stats = dict(members=N, member_steps=int(steps.sum()), newton_iterations=int(iterations.sum()),
-                 wall_time=wall, setup_time=setup, threads=used)
+                 threads=used, integration_time=t1 - t0, setup_time=t0 - t_setup,
+                 compile_time=compile_time, check_time=check_time, wall_time=t1 - t_setup)
     diag = mode == lay.SAVE_DIAGNOSTICS
     stride = mode == lay.SAVE_STRIDE
     if stride:
@@ -422,6 +508,7 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -
         residual=fst[:, lay.F_RES].copy(), status=ist[:, lay.E_STATUS].copy(),
         failed_step=ist[:, lay.E_FAILED].copy(), steps=steps, n_saved=ist[:, lay.E_SAVED].copy(),
         method=meth, h=h, n_steps=total, save=save, stats=stats, model_name=model.name,
+        initial_energy=H0.copy(),
     )
 
 

@@ -1,11 +1,12 @@
-"""The Python driver: validate, allocate, call the compiled loop, build the :class:`Result`."""
+"""The Python driver: validate, allocate, call the compiled loop, build the :class:`Result`.
+
+:class:`Result` is defined in :mod:`fastvi.results` and re-exported here.
+"""
 
 from __future__ import annotations
 
-import sys
 import time
 import warnings
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -16,111 +17,17 @@ from .kernels import layout as lay
 from .kernels.layout import ModelData, Samples, make_workspace
 from .kernels.step import velocity_residual
 from .model import Model
+from .results import ProgressBar, Result
 from .status import MESSAGES, Status
 from .tables import Method
 
 __all__ = ["integrate", "Result", "IntegrationError"]
 
-_PROGRESS_CHUNKS = 50  # progress lines per run when progress=True
+_PROGRESS_CHUNKS = 50  # progress updates per run when progress=True
 #: growth of the energy error (last tenth of the samples over the first) that no bounded,
 #: oscillating error reaches: round-off grows like √steps, chaos by a small factor, while a
 #: step beyond a method's stability limit grows exponentially (docs/robustness.md)
 ENERGY_GROWTH_ALARM = 1e6
-
-
-@dataclass
-class Result:
-    """Trajectory of :func:`integrate` at the saved steps.
-
-    Attributes
-    ----------
-    t : ndarray (K,)
-        Times of the samples; ``t[0] = 0`` is the (projected) initial state.
-    q, v, p : ndarray (K, n)
-        Positions, velocities ``v = M⁻¹p`` and momenta.
-    energy : ndarray (K,)
-        ``H = ½ vᵀ M v + V``.
-    constraint_residual, velocity_residual : ndarray (K,)
-        ``max |g(q_k)|`` and ``max |G(q_k) v_k|`` over the steps since the previous sample.
-    newton_iterations : ndarray (K,)
-        Newton iterations spent since the previous sample.
-    stats : dict
-        ``steps``, ``newton_iterations`` (total), ``wall_time`` (s), ``max_residual``.
-    status : Status
-        ``Status.SUCCESS`` or the reason the run stopped early.
-    method : Method
-    h : float
-    """
-
-    t: np.ndarray
-    q: np.ndarray
-    v: np.ndarray
-    p: np.ndarray
-    energy: np.ndarray
-    constraint_residual: np.ndarray
-    velocity_residual: np.ndarray
-    newton_iterations: np.ndarray
-    stats: dict
-    status: Status
-    method: Method
-    h: float
-    failed_step: int | None = None
-    model_name: str = field(default="model")
-
-    @property
-    def success(self) -> bool:
-        return self.status >= 0
-
-    @property
-    def message(self) -> str:
-        return MESSAGES[self.status]
-
-    @property
-    def energy_error(self) -> np.ndarray:
-        """``H(t) − H(0)``."""
-        return self.energy - self.energy[0]
-
-    def summary(self) -> str:
-        """One line per figure a user checks first."""
-        return (
-            f"{self.model_name}: method {self.method.name}, h = {self.h:g}, "
-            f"steps = {self.stats['steps']}, wall time = {self.stats['wall_time']:.3f} s, "
-            f"max |ΔH| = {np.max(np.abs(self.energy_error)):.3e}, "
-            f"max |g| = {np.max(self.constraint_residual):.3e}, "
-            f"max |Gv| = {np.max(self.velocity_residual):.3e}, "
-            f"Newton iterations/step = {self.stats['newton_iterations'] / max(1, self.stats['steps']):.2f}"
-        )
-
-    def save(self, path) -> None:
-        """Write the arrays and stats to a ``.npz`` file (read back with ``numpy.load``)."""
-        np.savez_compressed(
-            path, t=self.t, q=self.q, v=self.v, p=self.p, energy=self.energy,
-            constraint_residual=self.constraint_residual, velocity_residual=self.velocity_residual,
-            newton_iterations=self.newton_iterations, h=self.h, method=self.method.name,
-            status=int(self.status), **{f"stats_{k}": v for k, v in self.stats.items()},
-        )
-
-    def plot(self, path=None):
-        """Energy error and constraint residual against time (needs matplotlib)."""
-        import matplotlib
-
-        if path is not None:
-            matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        fig, (a1, a2) = plt.subplots(2, 1, sharex=True, figsize=(7, 5))
-        a1.plot(self.t, self.energy_error)
-        a1.set_ylabel("H(t) − H(0)")
-        a2.semilogy(self.t[1:], np.maximum(self.constraint_residual[1:], 1e-300), label="max|g|")
-        a2.semilogy(self.t[1:], np.maximum(self.velocity_residual[1:], 1e-300), label="max|Gv|")
-        a2.set_xlabel("t")
-        a2.legend()
-        a1.set_title(f"{self.model_name}, {self.method.name}, h = {self.h:g}")
-        fig.tight_layout()
-        if path is not None:
-            fig.savefig(path, dpi=120)
-            plt.close(fig)
-        return fig
 
 
 class IntegrationError(RuntimeError):
@@ -220,7 +127,8 @@ def integrate(
     params : array_like (k,), optional
         Parameters for this run (default: the model's).
     progress : bool, default False
-        Print progress lines to stderr (the run is split into chunks; results are identical).
+        Show progress on stderr: one updating line on a terminal, a plain line every few
+        seconds otherwise (the run is split into chunks; results are identical).
     on_failure : {"raise", "return"}
         On a failed step raise :class:`IntegrationError` (carrying the partial result), or
         return the partial :class:`Result` with its ``status`` set.
@@ -248,6 +156,7 @@ def integrate(
     with constraints. Both in ``shared/seeds``; the method is written out in
     ``docs/method.md``.
     """
+    t_start = time.perf_counter()
     if not isinstance(model, Model):
         raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
     if on_failure not in ("raise", "return"):
@@ -262,8 +171,10 @@ def integrate(
     opts = valid.newton_options(tol, max_iter, newton)
     recover = valid.recover(recover)
     meth = valid.method(method)
+    compile_time = _timed(model._compile)
+    check_time = 0.0
     if check and not model._checked:  # before the projection, which trusts G(q)
-        model.check(q0, v0, params=prm, n_random=1)
+        check_time = _timed(lambda: model.check(q0, v0, params=prm, n_random=1))
     q0, v0 = valid.initial_state(model, q0, v0, prm)
 
     md = ModelData(*model.kernel_arguments(), prm)
@@ -284,6 +195,9 @@ def integrate(
     tabs = meth.kernel_tables
 
     chunk = total if not progress else max(1, total // _PROGRESS_CHUNKS)
+    compile_time += _dispatch_time(drive.run, md, tabs, opts, h, state, ws, chunk, total, every,
+                                   smp, info)
+    bar = ProgressBar(total) if progress else None
     t0 = time.perf_counter()
     status = 0
     recovered = []
@@ -297,14 +211,12 @@ def integrate(
                 recovered.append((int(info[lay.I_STEPS]) - 1, sub))
                 status = 0
                 continue
-        if progress:
+        if bar is not None:
             done = int(info[lay.I_STEPS])
-            el = time.perf_counter() - t0
-            print(f"fastvi: {done}/{total} steps ({100 * done / total:.0f}%), t = {done * h:.6g}, "
-                  f"{el:.1f} s elapsed, {done / max(el, 1e-9):.3g} steps/s", file=sys.stderr, flush=True)
+            bar.update(done, f"t = {done * h:.6g}", final=status != 0 or done >= total)
         if status != 0:
             break
-    wall = time.perf_counter() - t0
+    t_end_loop = time.perf_counter()
     J = int(info[lay.I_SLOT])
     status = Status(status)
     result = Result(
@@ -312,8 +224,10 @@ def integrate(
         energy=smp.energy[:J].copy(), constraint_residual=smp.g[:J].copy(),
         velocity_residual=smp.gv[:J].copy(), newton_iterations=smp.iters[:J].copy(),
         stats=dict(steps=int(info[lay.I_STEPS]), newton_iterations=int(info[lay.I_ITERS]),
-                   wall_time=wall, max_residual=float(info[lay.I_MAXRES]),
-                   full_newton_steps=int(info[lay.I_FULL]), recovered_steps=recovered),
+                   max_residual=float(info[lay.I_MAXRES]), full_newton_steps=int(info[lay.I_FULL]),
+                   recovered_steps=recovered, integration_time=t_end_loop - t0,
+                   setup_time=t0 - t_start, compile_time=compile_time, check_time=check_time,
+                   wall_time=t_end_loop - t_start),
         status=status, method=meth, h=h, model_name=model.name,
         failed_step=None if status == 0 else int(info[lay.I_FAILED]),
     )
@@ -323,6 +237,28 @@ def integrate(
         culprit = _nonfinite_callback(model, prm, state, ws) if status == Status.NONFINITE else None
         raise IntegrationError(status, k, k * h, float(info[lay.I_RES]), result, culprit)
     return result
+
+
+def _timed(fn) -> float:
+    t = time.perf_counter()
+    fn()
+    return time.perf_counter() - t
+
+
+def _dispatch_time(kernel, *args) -> float:
+    """Seconds to make ``kernel`` ready for ``args`` (compile, or load from numba's cache).
+
+    The types are computed as numba's dispatcher computes them for a call, so the call that
+    follows finds the compiled version and the loop's timing holds the loop only. Typing
+    the arguments costs ≈ 0.5 ms (the tuple of callbacks), so it is skipped once the kernel
+    has a compiled version: the kernels are called with the same types for every model.
+    """
+    if not hasattr(kernel, "compile") or kernel.overloads:  # NUMBA_DISABLE_JIT, or ready
+        return 0.0
+    t = time.perf_counter()
+    with quiet():
+        kernel.compile(tuple(kernel.typeof_pyval(a) for a in args))
+    return time.perf_counter() - t
 
 
 def _warn_if_energy_explodes(result: Result) -> None:

@@ -42,6 +42,9 @@ the Newton matrix, so they change the Newton convergence rate, not the solution.
 
 from __future__ import annotations
 
+import hashlib
+import os
+import types as types_module
 import warnings
 from typing import Callable
 
@@ -75,56 +78,171 @@ def _call(fn, q, v, params, out):
     fn(ptr(q), ptr(v), ptr(params), ptr(out))
 
 
-def _wrap(kind: str, fn: Callable, n: int, m: int, k: int):
-    """Compile ``fn`` into a cfunc of :data:`CALLBACK_SIGNATURE` (sizes baked in)."""
-    jf = fn if isinstance(fn, nb.core.dispatcher.Dispatcher) else nb.njit(fn)
+# --------------------------------------------------------------------------- callback compile
+# Compiling a callback costs ~0.1 s (numba typing + LLVM), several per model: ≈ 0.5–1 s per
+# Model and per process. Two caches cut it: compiled callbacks are reused within the process
+# for the same function object and sizes (_CALLBACKS), and the wrappers of importable
+# functions are cached on disk by numba (the cache key includes a fingerprint of the
+# function's source, see _fingerprint).
+
+#: (kind, function, n, m, k) -> cfunc, most recent last; bounded so that a loop creating
+#: models from fresh lambdas does not keep every compiled module alive.
+_CALLBACKS: dict = {}
+_CALLBACKS_MAX = 512
+
+
+def _templates(n, m, k, tag):
+    """One wrapper per callback kind around the global ``jf`` (the user's jitted function).
+
+    ``jf`` is deliberately a global, not a closure variable: numba keys its on-disk cache
+    on the closure's values, and a dispatcher pickles with a per-process id, which would
+    make every process miss. The closure holds only the sizes and ``tag`` (the source
+    fingerprint), so the key identifies the user's function across processes.
+    """
     nn = (n, n)
-    if kind == "potential":
 
-        def cb(q, v, p, out):
-            out[0] = jf(carray(q, (n,)), carray(p, (k,)))
+    def potential(q, v, p, out):
+        tag  # noqa: B018 - part of the cache key
+        out[0] = jf(carray(q, (n,)), carray(p, (k,)))  # noqa: F821
 
-    elif kind in ("mass", "potential_hessian"):
+    def matrix(q, v, p, out):  # mass, potential_hessian
+        tag  # noqa: B018
+        jf(carray(q, (n,)), carray(p, (k,)), carray(out, nn))  # noqa: F821
 
-        def cb(q, v, p, out):
-            jf(carray(q, (n,)), carray(p, (k,)), carray(out, nn))
+    def potential_grad(q, v, p, out):
+        tag  # noqa: B018
+        jf(carray(q, (n,)), carray(p, (k,)), carray(out, (n,)))  # noqa: F821
 
-    elif kind == "potential_grad":
+    def constraint(q, v, p, out):
+        tag  # noqa: B018
+        jf(carray(q, (n,)), carray(p, (k,)), carray(out, (m,)))  # noqa: F821
 
-        def cb(q, v, p, out):
-            jf(carray(q, (n,)), carray(p, (k,)), carray(out, (n,)))
+    def constraint_jacobian(q, v, p, out):
+        tag  # noqa: B018
+        jf(carray(q, (n,)), carray(p, (k,)), carray(out, (m, n)))  # noqa: F821
 
-    elif kind == "constraint":
+    def constraint_hessian(q, v, p, out):
+        tag  # noqa: B018
+        jf(carray(q, (n,)), carray(v, (m,)), carray(p, (k,)), carray(out, nn))  # noqa: F821
 
-        def cb(q, v, p, out):
-            jf(carray(q, (n,)), carray(p, (k,)), carray(out, (m,)))
+    def kinetic_grad(q, v, p, out):
+        tag  # noqa: B018
+        jf(carray(q, (n,)), carray(v, (n,)), carray(p, (k,)), carray(out, (n,)))  # noqa: F821
 
-    elif kind == "constraint_jacobian":
+    def velocity_matrix(q, v, p, out):  # kinetic_hessian, momentum_jacobian
+        tag  # noqa: B018
+        jf(carray(q, (n,)), carray(v, (n,)), carray(p, (k,)), carray(out, nn))  # noqa: F821
 
-        def cb(q, v, p, out):
-            jf(carray(q, (n,)), carray(p, (k,)), carray(out, (m, n)))
+    return dict(potential=potential, mass=matrix, potential_hessian=matrix,
+                potential_grad=potential_grad, constraint=constraint,
+                constraint_jacobian=constraint_jacobian, constraint_hessian=constraint_hessian,
+                kinetic_grad=kinetic_grad, kinetic_hessian=velocity_matrix,
+                momentum_jacobian=velocity_matrix)
 
-    elif kind == "constraint_hessian":
 
-        def cb(q, v, p, out):
-            jf(carray(q, (n,)), carray(v, (m,)), carray(p, (k,)), carray(out, nn))
+def _source_digest(path: str, memo: dict) -> bytes:
+    if path not in memo:
+        try:
+            with open(path, "rb") as f:
+                memo[path] = hashlib.sha256(f.read()).digest()
+        except OSError:
+            memo[path] = b""
+    return memo[path]
 
-    elif kind == "kinetic_grad":
 
-        def cb(q, v, p, out):
-            jf(carray(q, (n,)), carray(v, (n,)), carray(p, (k,)), carray(out, (n,)))
+def _fingerprint(fn) -> int | None:
+    """A 62-bit fingerprint of ``fn``'s compiled meaning, or None if it cannot be cached.
 
-    else:  # kinetic_hessian, momentum_jacobian
+    It hashes the source files of ``fn`` and of the functions, dispatchers and modules its
+    code names (recursively), the values of the plain constants it reads from globals, and
+    the jit options. Functions without a source file (interactive sessions, ``python -c``),
+    closures and lambdas are not cached on disk: their meaning is not in a file.
+    """
+    py = getattr(fn, "py_func", fn)
+    code = getattr(py, "__code__", None)
+    if code is None or py.__closure__ or "<" in getattr(py, "__qualname__", "<"):
+        return None
+    if not os.path.isfile(code.co_filename):
+        return None
+    h = hashlib.sha256()
+    h.update(repr(sorted(getattr(fn, "targetoptions", {}).items())).encode())
+    memo: dict = {}
+    seen = set()
 
-        def cb(q, v, p, out):
-            jf(carray(q, (n,)), carray(v, (n,)), carray(p, (k,)), carray(out, nn))
+    def visit(f):
+        f = getattr(f, "py_func", f)
+        c = getattr(f, "__code__", None)
+        if c is None or id(f) in seen:
+            return
+        seen.add(id(f))
+        h.update(f"{f.__module__}.{f.__qualname__}".encode())
+        h.update(_source_digest(c.co_filename, memo))
+        h.update(c.co_code)
+        g = getattr(f, "__globals__", {})
+        codes = [c] + [x for x in c.co_consts if hasattr(x, "co_names")]
+        for cc in codes:
+            for name in cc.co_names:
+                value = g.get(name)
+                if value is None:
+                    continue
+                if isinstance(value, (int, float, complex, bool, str, bytes, tuple)):
+                    h.update(f"{name}={value!r}".encode())
+                elif isinstance(value, np.ndarray):
+                    h.update(name.encode() + value.tobytes())
+                elif isinstance(value, types_module.ModuleType):
+                    h.update(_source_digest(getattr(value, "__file__", None) or "", memo))
+                elif callable(value):
+                    visit(value)
 
+    visit(py)
+    return int.from_bytes(h.digest()[:8], "little") >> 2
+
+
+def _wrap(kind: str, fn: Callable, n: int, m: int, k: int):
+    """The cfunc of :data:`CALLBACK_SIGNATURE` for ``fn`` (sizes baked in), compiled once.
+
+    Reused for the same function object and sizes within the process; loaded from numba's
+    on-disk cache when ``fn`` lives in a source file (see :func:`_fingerprint`).
+    """
     try:
-        return nb.cfunc(CALLBACK_SIGNATURE)(cb)
-    except nb.core.errors.TypingError as exc:
+        key = (kind, fn, n, m, k)
+        cached = _CALLBACKS.pop(key, None)
+    except TypeError:  # an unhashable callable object: compile every time
+        key, cached = None, None
+    if cached is None:
+        cached = _compile_callback(kind, fn, n, m, k)
+    if key is not None:
+        _CALLBACKS[key] = cached  # re-inserted: most recently used last
+        while len(_CALLBACKS) > _CALLBACKS_MAX:
+            del _CALLBACKS[next(iter(_CALLBACKS))]
+    return cached
+
+
+def _compile_callback(kind: str, fn: Callable, n: int, m: int, k: int):
+    tag = _fingerprint(fn)
+    jf = fn if isinstance(fn, nb.core.dispatcher.Dispatcher) else nb.njit(fn)
+    template = _templates(n, m, k, 0 if tag is None else tag)[kind]
+    # __name__: numba rebuilds a cached function's environment by importing that module
+    namespace = {"__name__": __name__, "jf": jf, "carray": carray}
+    cb = types_module.FunctionType(template.__code__, namespace,
+                                   template.__name__, None, template.__closure__)
+    try:
+        return nb.cfunc(CALLBACK_SIGNATURE, cache=tag is not None)(cb)
+    except Exception as exc:  # numba raises many types (TypingError, UnsupportedBytecodeError, …)
+        name = getattr(getattr(fn, "py_func", fn), "__qualname__", repr(fn))
+        lines = []
+        for ln in str(exc).splitlines():
+            if __file__ in ln or os.path.basename(__file__) + '"' in ln:
+                break  # from here on numba describes fastvi's wrapper, not the user's code
+            if ln.strip() and (not lines or ln != lines[-1]):
+                lines.append(ln)
+        detail = "\n".join("    " + ln for ln in lines[:12])
         raise TypeError(
-            f"`{kind}` could not be compiled by numba with the documented signature "
-            f"(see fastvi.model): {exc}"
+            f"callback `{kind}` (function `{name}`) could not be compiled by numba in nopython "
+            f"mode. Everything a callback calls must be compiled too: decorate helper functions "
+            f"with `@numba.njit`, and use only numba's subset of Python and NumPy (no f-string "
+            f"format specs, no Python objects); the documented signature is in "
+            f"`fastvi.model`. numba said ({type(exc).__name__}):\n{detail}"
         ) from None
 
 
@@ -179,8 +297,14 @@ class Model:
 
     Notes
     -----
-    The callbacks are compiled once per ``Model`` (a fraction of a second each); the
-    integration kernels are compiled once for all models and cached on disk.
+    The callbacks are compiled on first use (≈ 0.1 s each). A compiled callback is reused
+    by every ``Model`` built from the same function object with the same sizes in the
+    process, and, for functions defined in a source file, cached on disk by numba, so a
+    new process loads it in milliseconds (the cache is invalidated when the file of the
+    function, or of the functions and modules its code names, changes). As with
+    ``numba.njit``, global values a function reads are frozen when it is compiled: pass
+    values that change through ``params``. The integration kernels are compiled once for
+    all models and cached on disk.
     """
 
     def __init__(
@@ -260,6 +384,7 @@ class Model:
         if self._recipe is not None:
             scene, kwargs = self._recipe
             return (_scene_from_recipe, (scene, kwargs, self.params))
+        in_main = []
         for key, fn in self._functions.items():
             qual = getattr(fn, "__qualname__", "")
             if "<locals>" in qual or "<lambda>" in qual:
@@ -267,6 +392,18 @@ class Model:
                     f"this Model cannot be pickled: `{key}` is {qual!r}, not a module-level "
                     "function; define the model's functions at module level so workers can import them"
                 )
+            if getattr(getattr(fn, "py_func", fn), "__module__", None) == "__main__":
+                in_main.append(f"`{key}` ({qual})")
+        if in_main:
+            # pickle stores a reference `__main__.name`: it resolves only in a process that
+            # runs the same script, never in a Dask worker, which then fails far from here
+            warnings.warn(
+                f"model {self.name!r} is pickled with functions defined in `__main__` (the "
+                f"script being run): {', '.join(in_main)}. A Dask or process-pool worker cannot "
+                "import them and will fail to load the model; move the model's functions into a "
+                "module (a .py file next to the script) and import them from there",
+                RuntimeWarning, stacklevel=2,
+            )
         funcs = {k: v for k, v in self._functions.items() if k != "mass"}
         kwargs = dict(params=self.params, mass=self._mass_arg, name=self.name, **funcs)
         return (_model_from_kwargs, (self.n, self.m, kwargs))

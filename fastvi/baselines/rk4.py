@@ -36,6 +36,7 @@ from .. import _validate as check
 from .._numba import njit, ptr
 from ..kernels.linalg import lu_factor, lu_solve
 from ..model import SLOTS, Model
+from ..results import TrajectoryResult
 from ..status import MESSAGES, Status
 
 __all__ = ["rk4", "BaselineResult", "acceleration", "make_workspace"]
@@ -63,8 +64,8 @@ from ..kernels.layout import OK as _OK  # noqa: E402
 from ..kernels.layout import SINGULAR_CONSTRAINTS as _SINGULAR  # noqa: E402
 
 
-@dataclass
-class BaselineResult:
+@dataclass(repr=False)
+class BaselineResult(TrajectoryResult):
     """Trajectory of a baseline integrator, with the fields of :class:`fastvi.Result` it shares.
 
     Attributes
@@ -97,23 +98,8 @@ class BaselineResult:
     model_name: str = field(default="model")
     failed_step: int | None = None
 
-    @property
-    def success(self) -> bool:
-        return self.status >= 0
-
-    @property
-    def energy_error(self) -> np.ndarray:
-        """``H(t) − H(0)``."""
-        return self.energy - self.energy[0]
-
-    def summary(self) -> str:
-        return (
-            f"{self.model_name}: {self.name}, h = {self.h:g}, steps = {self.stats['steps']}, "
-            f"wall time = {self.stats['wall_time']:.3f} s, "
-            f"max |ΔH| = {np.max(np.abs(self.energy_error)):.3e}, "
-            f"max |g| = {np.max(self.constraint_residual):.3e}, "
-            f"max |Gv| = {np.max(self.velocity_residual):.3e}"
-        )
+    def _label(self) -> str:
+        return self.name
 
 
 @njit

@@ -25,14 +25,14 @@ reference's own error and round-off) and still decreasing, at least ``MIN_POINTS
 The error constant is ``e_q`` at the fixed ``h = 1/N_FIX[s]``, reported with the mean Newton
 iterations per step there.
 
-Writes ``docs/orders.md`` (or ``--out``). ``--quick`` measures two combinations for
+Writes ``./fastvi-study-orders/orders.md``; ``--out docs/orders.md`` (from the repository
+root) regenerates the package's page. ``--quick`` measures two combinations for
 ``s = 1, 2`` on a short ``h`` range (seconds; the test suite runs it). The full study takes
 a few minutes on two cores.
 """
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 import time
@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._cli import default_out, study_parser
 from .convergence import observed_order
 from .reference import REF_TOL, chain_cartesian, chain_pendulum_reference
 
@@ -64,7 +65,7 @@ N_FIX = {1: 64, 2: 32, 3: 16, 4: 16, 5: 16}
 DEGREES = (1, 2, 3, 4, 5)
 QUICK_DEGREES = (1, 2)
 QUICK_SEQUENCE = tuple(n for n in N_SEQUENCE if 16 <= n <= 64)
-DEFAULT_OUT = Path(__file__).resolve().parents[2] / "docs" / "orders.md"
+DEFAULT_OUT = f"{default_out('orders')}/orders.md"
 COMMAND = "python -m fastvi orders"
 
 
@@ -808,12 +809,13 @@ def _defaults_text(study: dict) -> str:
 
 # --------------------------------------------------------------------------- CLI
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog=COMMAND, description=__doc__.splitlines()[0])
+    parser = study_parser(COMMAND, __doc__)
     parser.add_argument("--quick", action="store_true",
                         help="two combinations for s = 1, 2 on a short h range (seconds)")
-    parser.add_argument("--out", default=str(DEFAULT_OUT), help="markdown file to write")
+    parser.add_argument("--out", default=DEFAULT_OUT, help="markdown file to write (the package's own "
+                        "page: --out docs/orders.md, from the repository root)")
     parser.add_argument("--degrees", default=None,
-                        help="comma-separated degrees (default 1,2,3,4,5; quick: 1,2)")
+                        help="comma-separated degrees; None: 1,2,3,4,5 (with --quick: 1,2)")
     args = parser.parse_args(argv)
     try:
         degrees = (tuple(int(x) for x in args.degrees.split(",")) if args.degrees

@@ -37,7 +37,7 @@ from one process, one run of this command.
 
 Usage::
 
-    python -m fastvi wpd                 # full study (≈ 4–10 min on 2 cores), writes docs/
+    python -m fastvi wpd                 # full study (≈ 4–10 min on 2 cores), writes ./fastvi-study-wpd/
     python -m fastvi wpd --quick         # T = 1 s and 10 s, few points (tests, a first look)
     python -m fastvi wpd --out DIR       # write DIR/wpd.md and DIR/figures/wpd-*.png
 """
@@ -1098,10 +1098,13 @@ def run_study(cfg, outdir: str, log, command: str, figures_on: bool = True, prof
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m fastvi wpd", description=__doc__.splitlines()[0])
+    from ._cli import default_out, study_parser
+
+    parser = study_parser("python -m fastvi wpd", __doc__)
     parser.add_argument("--quick", action="store_true",
                         help=f"T = {QUICK['T_error']:g} s and {QUICK['T_long']:g} s, few points, single runs")
-    parser.add_argument("--out", default="docs", help="directory for wpd.md and figures/ (default: docs)")
+    parser.add_argument("--out", default=default_out("wpd"), help="directory for wpd.md and figures/ "
+                        "(the package's own page: --out docs, from the repository root)")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     parser.add_argument("--no-profile", action="store_true", help="skip the per-step profile")
     parser.add_argument("--no-growth", action="store_true", help="skip the chain(N) cost-growth table")

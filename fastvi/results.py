@@ -1,0 +1,353 @@
+"""What the integrators return: :class:`Result` and the base shared with the other results.
+
+:class:`ResultBase` holds what :class:`Result`, :class:`fastvi.EnsembleResult` and
+:class:`fastvi.baselines.BaselineResult` have in common (success, message, timing text, a
+short ``repr``); :class:`TrajectoryResult` adds what the two single-trajectory results share
+(energy error, residual summary, plot). The progress bar of :func:`fastvi.integrate` lives
+here too, since it formats what a result later reports.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .status import MESSAGES, Status
+from .tables import Method, method as _method
+
+__all__ = ["ResultBase", "TrajectoryResult", "Result", "ProgressBar"]
+
+
+def _seconds(x) -> str:
+    """``0.0712 s`` / ``24.4 s``: three significant digits, whatever the magnitude."""
+    return f"{x:.3g} s" if x == x else "n/a"
+
+
+class ResultBase:
+    """Shared behaviour of every fastvi result (a mixin for dataclasses).
+
+    Subclasses have the fields ``status``, ``stats``, ``h`` and ``model_name`` and define
+    :meth:`_label` (the method's name) and :meth:`_repr_items`.
+    """
+
+    @property
+    def success(self):
+        """``status >= 0`` (a bool, or an (N,) bool array for an ensemble)."""
+        return self.status >= 0
+
+    @property
+    def message(self) -> str:
+        """The words for :attr:`status`."""
+        status = np.asarray(self.status)
+        if status.ndim:  # an ensemble: the message of its worst member
+            failed = status[status < 0]
+            code = int(failed[0]) if failed.size else int(Status.SUCCESS)
+            return MESSAGES[Status(code)]
+        return MESSAGES[Status(int(status))]
+
+    def _label(self) -> str:  # pragma: no cover - every subclass overrides it
+        raise NotImplementedError
+
+    def _timing(self) -> str:
+        """``integration 0.07 s, setup 0.8 s (compile 0.7 s)``, from what ``stats`` holds.
+
+        Results built before the split (or by the baselines) only have ``wall_time``.
+        """
+        st = self.stats
+        if "integration_time" not in st:
+            wall = st.get("wall_time", float("nan"))
+            return f"wall time {_seconds(wall)}" if wall == wall else "time not measured"
+        text = f"integration {_seconds(st['integration_time'])}"
+        setup = st.get("setup_time", float("nan"))
+        if setup == setup:
+            compile_ = st.get("compile_time", 0.0)
+            text += f", setup {_seconds(setup)}"
+            if compile_ == compile_ and compile_ > 0.01:  # below: a cache hit, not news
+                text += f" (compile {_seconds(compile_)})"
+        return text
+
+    def _status_text(self) -> str:
+        status = np.asarray(self.status)
+        if status.ndim:
+            bad = int(np.count_nonzero(status < 0))
+            return "SUCCESS" if bad == 0 else f"{bad} of {status.size} FAILED"
+        return Status(int(status)).name
+
+    def _repr_items(self) -> list[str]:  # pragma: no cover - every subclass overrides it
+        raise NotImplementedError
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({', '.join(self._repr_items())})"
+
+
+class TrajectoryResult(ResultBase):
+    """A single trajectory sampled at ``t``: :class:`Result` and ``BaselineResult``."""
+
+    @property
+    def energy_error(self) -> np.ndarray:
+        """``H(t) − H(0)``."""
+        return self.energy - self.energy[0]
+
+    def _repr_items(self) -> list[str]:
+        t = self.t
+        span = f"[{t[0]:g}, {t[-1]:g}]" if t.size else "[]"
+        err = np.abs(self.energy_error) if self.energy.size else np.zeros(1)
+        return [f"model={self.model_name!r}", f"method={self._label()!r}", f"h={self.h:g}",
+                f"steps={self.stats.get('steps', '?')}", f"t={span}", f"status={self._status_text()}",
+                f"max|ΔH|={np.max(err):.2g}"]
+
+    def summary(self) -> str:
+        """One line with the figures a user checks first."""
+        text = (
+            f"{self.model_name}: {self._label()}, h = {self.h:g}, steps = {self.stats['steps']}, "
+            f"{self._timing()}, "
+            f"max |ΔH| = {np.max(np.abs(self.energy_error)):.3e}, "
+            f"max |g| = {np.max(self.constraint_residual):.3e}, "
+            f"max |Gv| = {np.max(self.velocity_residual):.3e}"
+        )
+        if "newton_iterations" in self.stats:
+            text += (f", Newton iterations/step = "
+                     f"{self.stats['newton_iterations'] / max(1, self.stats['steps']):.2f}")
+        return text
+
+    def plot(self, path=None, *, coordinates=None):
+        """Motion, energy error and constraint residuals against time (needs matplotlib).
+
+        Parameters
+        ----------
+        path : str or path-like, optional
+            Save the figure there (PNG, PDF, … by extension). Drawn on its own canvas:
+            the process's matplotlib backend is never changed.
+        coordinates : sequence of int, optional
+            Which components of ``q`` to draw in the top panel (default: the first six).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+
+        Notes
+        -----
+        Residuals are drawn on a log axis whose range comes from the nonzero values;
+        samples that are exactly zero (a constraint met to the last bit) are drawn on the
+        bottom edge as open markers labelled "exact 0", instead of at a fake 1e-300.
+        """
+        fig = _new_figure(path, figsize=(7, 7.5))
+        a0, a1, a2 = fig.subplots(3, 1, sharex=True)
+        n = self.q.shape[1] if self.q.ndim == 2 else 0
+        idx = list(range(min(n, 6))) if coordinates is None else [int(i) for i in coordinates]
+        for i in idx:
+            a0.plot(self.t, self.q[:, i], lw=0.8, label=f"q[{i}]")
+        a0.set_ylabel("q(t)")
+        if idx and len(idx) <= 8:
+            a0.legend(fontsize="small", ncol=min(len(idx), 4), loc="upper right")
+        a1.plot(self.t, self.energy_error, lw=0.8)
+        a1.set_ylabel("H(t) − H(0)")
+        _residual_panel(a2, self.t[1:], {"max|g|": self.constraint_residual[1:],
+                                          "max|Gv|": self.velocity_residual[1:]})
+        a2.set_xlabel("t")
+        a0.set_title(f"{self.model_name}, {self._label()}, h = {self.h:g}")
+        fig.tight_layout()
+        return _finish_figure(fig, path)
+
+
+@dataclass(repr=False)
+class Result(TrajectoryResult):
+    """Trajectory of :func:`fastvi.integrate` at the saved steps.
+
+    Attributes
+    ----------
+    t : ndarray (K,)
+        Times of the samples; ``t[0] = 0`` is the (projected) initial state.
+    q, v, p : ndarray (K, n)
+        Positions, velocities ``v = M⁻¹p`` and momenta.
+    energy : ndarray (K,)
+        ``H = ½ vᵀ M v + V``.
+    constraint_residual, velocity_residual : ndarray (K,)
+        ``max |g(q_k)|`` and ``max |G(q_k) v_k|`` over the steps since the previous sample.
+    newton_iterations : ndarray (K,)
+        Newton iterations spent since the previous sample.
+    stats : dict
+        ``steps``; ``newton_iterations`` (total); ``max_residual``; ``recovered_steps``;
+        times in seconds: ``integration_time`` (the compiled loop), ``setup_time``
+        (validation, the first-use model check, compiling the model's callbacks and
+        loading or compiling the kernels), of which ``compile_time`` (callbacks and
+        kernels), and ``wall_time`` (the total, as before the split).
+    status : Status
+        ``Status.SUCCESS`` or the reason the run stopped early.
+    method : Method
+    h : float
+    failed_step : int or None
+    model_name : str
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    p: np.ndarray
+    energy: np.ndarray
+    constraint_residual: np.ndarray
+    velocity_residual: np.ndarray
+    newton_iterations: np.ndarray
+    stats: dict
+    status: Status
+    method: Method
+    h: float
+    failed_step: int | None = None
+    model_name: str = field(default="model")
+
+    def _label(self) -> str:
+        return self.method.name
+
+    def summary(self) -> str:
+        """One line with the figures a user checks first."""
+        return super().summary().replace(f": {self._label()},", f": method {self._label()},", 1)
+
+    def save(self, path) -> None:
+        """Write the arrays, stats and method to a ``.npz`` file (read back by :meth:`load`)."""
+        stats = dict(self.stats)
+        rec = stats.pop("recovered_steps", [])
+        np.savez_compressed(
+            path, t=self.t, q=self.q, v=self.v, p=self.p, energy=self.energy,
+            constraint_residual=self.constraint_residual, velocity_residual=self.velocity_residual,
+            newton_iterations=self.newton_iterations, h=self.h, method=self.method.name,
+            status=int(self.status), model_name=self.model_name,
+            failed_step=-1 if self.failed_step is None else int(self.failed_step),
+            stats_recovered_steps=np.asarray(rec, dtype=np.int64).reshape(-1, 2),
+            **{f"stats_{k}": v for k, v in stats.items()},
+        )
+
+    @classmethod
+    def load(cls, path) -> "Result":
+        """Read a :class:`Result` written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : str or path-like
+            A ``.npz`` file from :meth:`save` (files from fastvi 0.1, which lack the model
+            name and failed step, load too).
+
+        Returns
+        -------
+        Result
+        """
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in ("t", "q", "v", "p", "energy", "constraint_residual",
+                                           "velocity_residual", "newton_iterations")}
+            stats = {}
+            for key in data.files:
+                if key.startswith("stats_"):
+                    value = data[key]
+                    stats[key[6:]] = value.item() if value.ndim == 0 else value
+            rec = stats.get("recovered_steps")
+            stats["recovered_steps"] = ([] if rec is None or np.size(rec) == 0
+                                        else [tuple(int(x) for x in row) for row in np.reshape(rec, (-1, 2))])
+            failed = int(data["failed_step"]) if "failed_step" in data.files else -1
+            name = str(data["model_name"]) if "model_name" in data.files else "model"
+            return cls(**arrays, stats=stats, status=Status(int(data["status"])),
+                       method=_method(str(data["method"])), h=float(data["h"]),
+                       failed_step=None if failed < 0 else failed, model_name=name)
+
+
+# ---------------------------------------------------------------------------- plotting helpers
+def _new_figure(path, figsize):
+    """A figure that does not touch pyplot's state when it is only saved to ``path``.
+
+    With a path the figure gets its own Agg canvas (``matplotlib.use`` would switch the
+    backend for the whole process, breaking the caller's interactive windows); without
+    one it comes from pyplot, so that notebooks and ``plt.show()`` display it.
+    """
+    if path is not None:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=figsize)
+        FigureCanvasAgg(fig)
+        return fig
+    import matplotlib.pyplot as plt
+
+    return plt.figure(figsize=figsize)
+
+
+def _finish_figure(fig, path):
+    if path is not None:
+        fig.savefig(path, dpi=120)
+    return fig
+
+
+def _residual_panel(ax, t, series: dict) -> None:
+    """Log-scale residuals with exact zeros shown at the bottom edge, labelled as such."""
+    nonzero = [np.asarray(y)[np.asarray(y) > 0] for y in series.values()]
+    nonzero = np.concatenate(nonzero) if nonzero else np.zeros(0)
+    if nonzero.size:
+        lo, hi = float(nonzero.min()), float(nonzero.max())
+    else:
+        lo, hi = 1e-16, 1e-15
+    lo_lim, hi_lim = 10 ** (math.floor(math.log10(lo)) - 0.5), 10 ** (math.ceil(math.log10(hi)) + 0.5)
+    for label, y in series.items():
+        y = np.asarray(y, dtype=float)
+        line, = ax.semilogy(t, np.where(y > 0, y, np.nan), lw=0.8, label=label)
+        zeros = y == 0
+        if zeros.any():
+            ax.plot(t[zeros], np.full(int(zeros.sum()), lo_lim * 1.5), ls="none", marker="o", ms=3,
+                    mfc="none", color=line.get_color(), label=f"{label} exact 0")
+    ax.set_ylim(lo_lim, hi_lim)
+    ax.set_ylabel("residual")
+    ax.legend(fontsize="small", loc="upper right")
+
+
+# ---------------------------------------------------------------------------- progress
+class ProgressBar:
+    """One updating progress line on a terminal; plain lines otherwise.
+
+    On a TTY the line is rewritten in place with ``\\r`` (and ended with a newline when the
+    run finishes); when the stream is a file or a pipe (a log, CI), a full line is written
+    at most every ``interval`` seconds and at the end, so logs stay readable.
+
+    Parameters
+    ----------
+    total : int
+        Units of work (steps, or member-steps).
+    unit : str
+        What is counted.
+    stream : file-like, default ``sys.stderr``
+    interval : float
+        Minimum seconds between plain lines (TTY updates are throttled to 0.1 s).
+    """
+
+    def __init__(self, total: int, unit: str = "steps", stream=None, interval: float = 5.0,
+                 label: str = "fastvi"):
+        self.total, self.unit, self.label = max(int(total), 1), unit, label
+        self.stream = sys.stderr if stream is None else stream
+        isatty = getattr(self.stream, "isatty", None)
+        self.tty = bool(isatty()) if callable(isatty) else False
+        self.interval = 0.1 if self.tty else float(interval)
+        self.t0 = time.perf_counter()
+        self._last = -math.inf
+        self._width = 0
+
+    def update(self, done: int, extra: str = "", final: bool = False) -> None:
+        now = time.perf_counter()
+        if not final and now - self._last < self.interval:
+            return
+        self._last = now
+        el = now - self.t0
+        frac = min(1.0, done / self.total)
+        rate = done / max(el, 1e-9)
+        text = (f"{self.label}: {done}/{self.total} {self.unit} ({100 * frac:3.0f}%)"
+                + (f", {extra}" if extra else "") + f", {el:.1f} s, {rate:.3g} {self.unit}/s")
+        if self.tty:
+            bar = "#" * int(20 * frac) + "-" * (20 - int(20 * frac))
+            line = f"[{bar}] {text}"
+            pad = " " * max(0, self._width - len(line))
+            self._width = len(line)
+            self.stream.write("\r" + line + pad + ("\n" if final else ""))
+        else:
+            self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def close(self, done: int, extra: str = "") -> None:
+        self.update(done, extra, final=True)

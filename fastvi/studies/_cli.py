@@ -1,0 +1,29 @@
+"""Argument parsers of the ``python -m fastvi`` commands: plain-text help with defaults."""
+
+from __future__ import annotations
+
+import argparse
+import re
+
+__all__ = ["study_parser", "default_out", "plain"]
+
+
+def plain(text: str) -> str:
+    """``text`` without reST markup (roles, literals, ``::``), for terminal help."""
+    text = re.sub(r":[a-z]+:`~?([^`]+)`", r"\1", text)
+    text = text.replace("``", "").replace("`", "")
+    return re.sub(r"::$", ":", text, flags=re.M)
+
+
+def default_out(name: str) -> str:
+    """Where a study writes unless told otherwise: a directory of the user's, in the current
+    directory; the package's own ``docs/`` only with ``--out docs`` (the Makefile does that)."""
+    return f"fastvi-study-{name}"
+
+
+def study_parser(prog: str, doc: str) -> argparse.ArgumentParser:
+    """A parser whose description is the first paragraph of ``doc`` as plain text and whose
+    ``--help`` shows every option's default."""
+    first = plain(doc.strip().split("\n\n")[0])
+    return argparse.ArgumentParser(prog=prog, description=" ".join(first.split()),
+                                   formatter_class=argparse.ArgumentDefaultsHelpFormatter)

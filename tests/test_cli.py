@@ -1,0 +1,71 @@
+"""``python -m fastvi``: plain-text help with defaults; studies write where they are told."""
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from fastvi.__main__ import COMMANDS, main
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _help(args, capsys):
+    with pytest.raises(SystemExit) as info:
+        import importlib
+
+        importlib.import_module(COMMANDS[args[0]][0]).main(args[1:])
+    assert info.value.code == 0
+    return capsys.readouterr().out
+
+
+def _no_markup(text):
+    assert "`" not in text and "::" not in text and ":func:" not in text and ":mod:" not in text, text
+
+
+def test_top_level_help_is_plain_and_lists_every_command(capsys):
+    assert main(["--help"]) == 0
+    out = capsys.readouterr().out
+    _no_markup(out)
+    for name, (_, what) in COMMANDS.items():
+        assert f"{name}" in out and what in out
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_command_help_is_plain_with_defaults(command, capsys):
+    out = _help([command, "--help"], capsys)
+    _no_markup(out)
+    options = [ln for ln in out.splitlines() if ln.startswith("  --")]  # not continuation lines
+    assert options
+    # every option (not -h) states its default, possibly on a continuation line
+    body = out.split("options:", 1)[1]
+    assert body.count("(default:") == len(options), out
+
+
+@pytest.mark.parametrize("command, default", [("paper-b", "fastvi-study-paper-b"),
+                                              ("wpd", "fastvi-study-wpd"),
+                                              ("orders", "fastvi-study-orders/orders.md")])
+def test_studies_do_not_default_to_the_package_docs(command, default, capsys):
+    # argparse wraps long values after a hyphen: undo that before comparing
+    out = " ".join(_help([command, "--help"], capsys).split()).replace("- ", "-")
+    assert f"(default: {default})" in out
+    assert "(default: docs" not in out
+
+
+def test_makefile_regenerates_the_package_docs_explicitly():
+    with open(os.path.join(ROOT, "Makefile"), encoding="utf-8") as fh:
+        text = fh.read()
+    assert "-m fastvi paper-b --out docs" in text
+    assert "-m fastvi wpd --out docs" in text
+    assert "-m fastvi orders --out docs/orders.md" in text
+
+
+@pytest.mark.slow
+def test_paper_b_without_out_writes_into_the_current_directory(tmp_path):
+    env = {**os.environ, "PYTHONPATH": ROOT}
+    out = subprocess.run([sys.executable, "-m", "fastvi", "paper-b", "--quick", "--quiet", "--no-figures"],
+                         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "fastvi-study-paper-b" / "paper-b.md").is_file()
+    assert not (tmp_path / "docs").exists()

@@ -493,8 +493,8 @@ class _Callbacks:
             hint = "start with `out[:, :] = 0.0` if most entries vanish"
         return (f"`{slot}` never wrote entr{'y' if unset.size == 1 else 'ies'} "
                 f"{', '.join(map(str, idx))}{more} of its output (out shape {shape}, the model declares "
-                f"{self._declares(slot)}); `out` is not zeroed for you, every entry must be set on "
-                f"every call: {hint}")
+                f"{self._declares(slot)}), or only updated it (`out[i] += …`); `out` is not zeroed "
+                f"for you, every entry must be set on every call: {hint}")
 
 
 def _fd(f, q: np.ndarray):

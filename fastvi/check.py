@@ -348,7 +348,7 @@ class _Callbacks:
         cfs = model.kernel_arguments()[0]
         self.fn = dict(zip(SLOTS, cfs))
         self.present = set(model._functions)
-        self.p = params
+        self.p = np.ascontiguousarray(params, dtype=np.float64)
         self.n, self.m, self.k = model.n, model.m, params.shape[0]
         self.report = report
         self.count = 0
@@ -375,7 +375,10 @@ class _Callbacks:
         """One guarded evaluation: ``(status, buffer as float64, as uint64)``."""
         f, u = self.buf[slot]
         lay = self.layout[slot]
-        args = (self.fn[slot], f, u, q, (q if v is None else v)[:lay[2]], self.p, lay, _FILL[fill])
+        # the entry point below takes these as C-contiguous float64 vectors without checking
+        q = np.ascontiguousarray(q, dtype=np.float64)
+        v = q if v is None else np.ascontiguousarray(v, dtype=np.float64)
+        args = (self.fn[slot], f, u, q, v[:lay[2]], self.p, lay, _FILL[fill])
         if _ENTRY:
             status = _ENTRY[0](*args)
         else:

@@ -10,6 +10,7 @@ Optional: :mod:`fastvi.baselines` (RK4, SciPy), :mod:`fastvi.distributed` (Dask)
 from . import _numba  # noqa: F401  (numba settings first)
 from . import scenes
 from .check import ModelCheckError
+from .consistent import consistent_state
 from .integrate import IntegrationError, Result, integrate
 from .ensemble import EnsembleResult, integrate_ensemble
 from .model import CALLBACK_SIGNATURE, Model
@@ -26,6 +27,7 @@ __all__ = [
     "integrate_ensemble",
     "EnsembleResult",
     "ModelCheckError",
+    "consistent_state",
     "Status",
     "Method",
     "method",

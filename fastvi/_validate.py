@@ -180,7 +180,9 @@ def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray):
     if gmax > CONSISTENCY_TOL * scale:
         raise ValueError(
             f"`q0` violates the constraints: max|g(q0)| = {gmax:.3e} > {CONSISTENCY_TOL:.0e}·{scale:g}; "
-            "start from a consistent state (the scenes' `initial_state` helpers give one)"
+            "start from a consistent state: `fastvi.consistent_state(model, q0, v0, fixed=...)` builds one "
+            "from this guess (keeping the coordinates you list in `fixed`), and the scenes' "
+            "`initial_state` helpers give one from natural coordinates"
         )
     sv = np.linalg.svd(G, compute_uv=False)
     if sv.size < model.m or sv[-1] <= 1e-14 * max(sv[0], 1e-300):
@@ -209,7 +211,9 @@ def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray):
     if gvmax > CONSISTENCY_TOL * vscale * max(1.0, scale):
         raise ValueError(
             f"`v0` violates the hidden constraint G(q0) v0 = 0: max|G v0| = {gvmax:.3e}; "
-            "start from a consistent state"
+            "start from a consistent state: `fastvi.consistent_state(model, q0, v0, fixed=...)` "
+            "changes the velocities you do not list in `fixed` (least, in the metric of M) so "
+            "that G v0 = 0"
         )
     v = v0 - Minv_Gt @ _min_norm_solve(G @ Minv_Gt, G @ v0)
     if gvmax > SILENT_PROJECTION * vscale * max(1.0, scale):

@@ -1,7 +1,22 @@
-r"""Derivative checks: compare every derivative a model supplies with finite differences.
+r"""Model checks: output sizes first, then every derivative against finite differences.
 
-A variational integrator with a wrong gradient is not unstable, it is *silently wrong*: it
-conserves the energy of a different Lagrangian. :func:`check_model` (also
+**Sizes.** The callbacks are compiled with their array sizes baked in and without bounds
+checks, so a callback that writes more entries than its declared output (``Model(4, 1, …)``
+whose constraint writes two values, a gradient writing ``out[n]``, a Jacobian written as
+``(n, m)``) would write into whatever memory follows it, and one that leaves an entry unset
+hands the kernels stale values. Before anything else, :func:`check_model` therefore calls
+every callback twice at the given state inside one buffer of its own, laid out as
+``out | guard | q | guard | v | guard | params | guard`` and filled with a NaN of a payload no
+computation produces (a different one in each call). It then requires that exactly the
+declared entries of ``out`` changed, both times, to the same values: a write past the end, a
+write into an input, an entry never set, and an entry read before it was set (``out[i] += …``)
+each raise :class:`ModelCheckError` naming the callback, the declared shape and what was
+written. The guard (``n² + 2n + 64`` entries) is longer than what the usual mistakes reach (a
+transposed ``(n, m)`` write into an ``(m, n)`` output reaches flat index ``n² − 1`` at most). Every
+later evaluation of the check goes through the same guarded buffers.
+
+**Derivatives.** A variational integrator with a wrong gradient is not unstable, it is
+*silently wrong*: it conserves the energy of a different Lagrangian. :func:`check_model` (also
 :meth:`fastvi.Model.check`) therefore compares every supplied derivative callback with
 finite differences of the callback it differentiates,
 
@@ -18,7 +33,11 @@ callback                    compared with finite differences of
                             for ``η = e_1 … e_m`` and a random ``η``
 ==========================  ================================================
 
-and checks that a ``mass`` callback returns a symmetric matrix. The comparison runs at the
+and checks that a ``mass`` callback returns a symmetric matrix. The checks run in dependency
+order: first derivatives (against the functions they differentiate) at every state, then
+second derivatives, each only if the first derivative it is compared with passed at every
+state (otherwise it is reported as *skipped*, "not checked: depends on …"), so the callback
+blamed first is the first wrong one, from any state. The comparison runs at the
 given state and at a few random nearby states (a wrong derivative can agree by accident at a
 special point, e.g. ``x = 0``). The callbacks are evaluated through the compiled cfuncs, so
 what is checked is exactly what the kernels call.
@@ -37,7 +56,8 @@ differencing ``f``. With the default ``rtol = 1e-6`` a genuine mistake (a sign, 
 a transposed index, a missing term) fails by many orders of magnitude.
 
 :func:`fastvi.integrate` runs a cheap version (the initial state and one nearby state) the
-first time a model is integrated; pass ``check=False`` to skip it.
+first time a model is integrated (sizes included: a few milliseconds); pass ``check=False``
+to skip it, at your own risk.
 """
 
 from __future__ import annotations
@@ -47,7 +67,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .model import SLOTS, Model, _call
+from ._numba import njit, ptr, quiet
+from .model import SLOTS, Model
 
 __all__ = ["check_model", "CheckReport", "CheckRow", "ModelCheckError", "DEFAULT_RTOL"]
 
@@ -206,22 +227,33 @@ class CheckReport:
 
 
 class ModelCheckError(ValueError):
-    """A model callback disagrees with finite differences of the function it differentiates.
+    """A model callback writes outside its declared output, or disagrees with its reference.
+
+    Sizes are checked first (a write past the end of ``out`` or into an input, an entry of
+    ``out`` never set), then derivatives against finite differences of the functions they
+    differentiate.
 
     Attributes
     ----------
     callback : str
-        The first wrong callback, in check order (first derivatives before second ones).
+        The first wrong callback, in check order (sizes first, then first derivatives, then
+        second ones).
     callbacks : list of str
         Every wrong callback.
     report : CheckReport
-        The full comparison table.
+        The comparison table up to the failure.
     """
 
     def __init__(self, report: CheckReport):
         self.report = report
         self.callbacks = report.failures
         self.callback = self.callbacks[0]
+        size = [r for r in report.rows if r.status == "wrong" and r.reference.startswith(_SIZE_REFERENCE)]
+        if size:  # a size / unset-entry error: the check stopped there
+            super().__init__(
+                f"model {report.model_name!r}: {size[0].note}. (Raised before any kernel ran; "
+                "`check=False` would skip this check and let the kernels write out of bounds.)")
+            return
         w = report.worst(self.callback)
         where = "the given state" if w.state == 0 else f"random nearby state {w.state}"
         detail = f"; {w.note}" if w.note else ""
@@ -242,29 +274,234 @@ def _badness(row: CheckRow) -> float:
     return row.error / row.allowed if row.allowed > 0 else (np.inf if row.error > 0 else 0.0)
 
 
-class _Callbacks:
-    """The model's compiled callbacks, evaluated from Python (counting evaluations)."""
+# ----------------------------------------------------------------------------- guarded evaluation
+# The callbacks are compiled with their output sizes baked in and no bounds checks, so a
+# callback that writes past its declared output writes into whatever memory follows. Here
+# every evaluation gets one buffer laid out as
+#
+#     out (declared size) | guard | q | guard | v | guard | params | guard
+#
+# filled with a NaN whose payload no computation produces: anything the callback writes
+# outside the declared `out` lands in a guard zone (or an input) of our own buffer and shows
+# up as a changed bit pattern, instead of corrupting the heap. The guard is longer than any
+# plausible mistake: a transposed (n, m) write into an (m, n) output reaches flat index
+# (n−1)·n + m − 1 < n², a loop over the wrong count at most n² as well.
+_FILL = np.array([0x7FF80BADF00D0001, 0x7FF80BADF00D0002], dtype=np.uint64)
+_GUARD_MARGIN = 64
+_OK, _UNSET, _OUTSIDE = 0, 1, 2
+_ENTRY: list = []  # compiled entry point of _guarded_call, once known
 
-    def __init__(self, model: Model, params: np.ndarray):
+_DIMS = dict(mass=("n", "n"), kinetic_grad=("n",), potential=(), potential_grad=("n",),
+             constraint=("m",), constraint_jacobian=("m", "n"), potential_hessian=("n", "n"),
+             constraint_hessian=("n", "n"), kinetic_hessian=("n", "n"), momentum_jacobian=("n", "n"))
+_MEANING = dict(constraint_jacobian="out[a, b] = ∂g_a/∂q_b", momentum_jacobian="out[a, b] = ∂(M v)_a/∂q_b")
+_SIZE_REFERENCE = "declared output shape"
+
+
+@njit
+def _intact(f, u, start, end, src, length, fill):
+    """``f[start:start+length]`` still equals ``src`` and the guard up to ``end`` the fill."""
+    for i in range(length):
+        if f[start + i] != src[i] and not (np.isnan(f[start + i]) and np.isnan(src[i])):
+            return False
+    for i in range(start + length, end):
+        if u[i] != fill:
+            return False
+    return True
+
+
+@njit
+def _guarded_call(fn, f, u, q, v, p, lay, fill):
+    """Evaluate ``fn`` with its ``out``, ``q``, ``v``, ``params`` inside the guarded buffer
+    ``f`` (``u`` is the same memory as uint64) and say whether it wrote exactly the
+    declared output: ``_OK``, ``_UNSET`` (a declared entry still holds the fill), or
+    ``_OUTSIDE`` (a guard or an input changed). Compiled, so a guarded evaluation costs
+    about what a plain one does (the dispatch from Python dominates both)."""
+    size, nq, nv, npar, qs, vs, ps = lay[0], lay[1], lay[2], lay[3], lay[4], lay[5], lay[6]
+    for i in range(u.shape[0]):
+        u[i] = fill
+    for i in range(nq):
+        f[qs + i] = q[i]
+    for i in range(nv):
+        f[vs + i] = v[i]
+    for i in range(npar):
+        f[ps + i] = p[i]
+    fn(ptr(f[qs:]), ptr(f[vs:]), ptr(f[ps:]), ptr(f))
+    if not (_intact(f, u, size, qs, q, 0, fill) and _intact(f, u, qs, vs, q, nq, fill)
+            and _intact(f, u, vs, ps, v, nv, fill) and _intact(f, u, ps, u.shape[0], p, npar, fill)):
+        return _OUTSIDE
+    for i in range(size):
+        if u[i] == fill:
+            return _UNSET
+    return _OK
+
+
+class _Callbacks:
+    """The model's compiled callbacks, evaluated from Python into guarded buffers.
+
+    Every call checks that the callback wrote each declared entry of ``out`` and nothing
+    else; on the first violation :meth:`diagnose` re-runs it with two different fill values
+    and raises :class:`ModelCheckError` saying what was written.
+    """
+
+    def __init__(self, model: Model, params: np.ndarray, report: "CheckReport"):
         cfs = model.kernel_arguments()[0]
         self.fn = dict(zip(SLOTS, cfs))
         self.present = set(model._functions)
-        self.p = params
-        self.n, self.m = model.n, model.m
+        self.p = np.ascontiguousarray(params, dtype=np.float64)
+        self.n, self.m, self.k = model.n, model.m, params.shape[0]
+        self.report = report
         self.count = 0
         n, m = self.n, self.m
         self.shape = dict(mass=(n, n), kinetic_grad=(n,), potential=(), potential_grad=(n,),
                           constraint=(m,), constraint_jacobian=(m, n), potential_hessian=(n, n),
                           constraint_hessian=(n, n), kinetic_hessian=(n, n),
                           momentum_jacobian=(n, n))
+        self.pad = n * n + 2 * n + _GUARD_MARGIN
+        self.layout, self.buf, self.size = {}, {}, {}
+        for slot, shape in self.shape.items():
+            size = int(np.prod(shape)) if shape else 1
+            nv = m if slot == "constraint_hessian" else n
+            starts, at = [], 0
+            for length in (size, n, nv, self.k):  # out, q, v, params, each followed by a guard
+                starts.append(at)
+                at += length + self.pad
+            self.layout[slot] = np.array([size, n, nv, self.k] + starts[1:], dtype=np.int64)
+            self.size[slot] = size
+            f = np.empty(at)
+            self.buf[slot] = (f, f.view(np.uint64))
+
+    def _run(self, slot: str, q, v, fill: int):
+        """One guarded evaluation: ``(status, buffer as float64, as uint64)``."""
+        f, u = self.buf[slot]
+        lay = self.layout[slot]
+        # the entry point below takes these as C-contiguous float64 vectors without checking
+        q = np.ascontiguousarray(q, dtype=np.float64)
+        v = q if v is None else np.ascontiguousarray(v, dtype=np.float64)
+        args = (self.fn[slot], f, u, q, v[:lay[2]], self.p, lay, _FILL[fill])
+        if _ENTRY:
+            status = _ENTRY[0](*args)
+        else:
+            with quiet():
+                status = _guarded_call(*args)
+            # the dispatcher re-derives the type of the callback argument on every call (15 µs,
+            # most of an evaluation); every argument here has one fixed type, so later calls go
+            # straight to the compiled entry point
+            _ENTRY[:] = [cres.entry_point for cres in _guarded_call.overloads.values()][:1]
+        self.count += 1
+        return status, f, u
 
     def __call__(self, slot: str, q: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
+        status, f, _ = self._run(slot, q, v, 0)
+        if status != _OK:
+            self.diagnose(slot, q, v)
         shape = self.shape[slot]
-        out = np.zeros(shape if shape else (1,))
-        q = np.ascontiguousarray(q)
-        _call(self.fn[slot], q, q if v is None else np.ascontiguousarray(v), self.p, out)
-        self.count += 1
-        return out if shape else out.reshape(())
+        out = f[:self.size[slot]].copy()
+        return out.reshape(shape) if shape else out.reshape(())
+
+    def check_size(self, slot: str, q: np.ndarray, v: np.ndarray | None = None) -> None:
+        """Two evaluations with different fills: every declared entry written, nothing else,
+        and the same values both times (a value read from ``out`` before it was set differs)."""
+        size = int(self.layout[slot][0])
+        s0, _, u = self._run(slot, q, v, 0)
+        first = u[:size].copy()
+        s1, _, u = self._run(slot, q, v, 1)
+        if s0 != _OK or s1 != _OK or not np.array_equal(first, u[:size]):
+            self.diagnose(slot, q, v)
+
+    def diagnose(self, slot: str, q, v=None, state: int = 0) -> None:
+        """Raise :class:`ModelCheckError` if ``slot`` writes outside its declared output,
+        into its inputs, or leaves a declared entry unset (two calls, two fill values)."""
+        size, nq, nv, npar, qs, vs, ps = (int(x) for x in self.layout[slot])
+        after = []
+        for fill in (0, 1):
+            _, f, u = self._run(slot, q, v, fill)
+            expected = np.full(u.shape, _FILL[fill], dtype=np.uint64)
+            ef = expected.view(np.float64)
+            ef[qs:qs + nq] = q
+            ef[vs:vs + nv] = (q if v is None else v)[:nv]
+            ef[ps:ps + npar] = self.p
+            after.append((u.copy(), expected))
+        (a0, b0), (a1, b1) = after
+        written = (a0 != b0) | (a1 != b1)
+        problem = None
+        past = np.flatnonzero(written[size:qs]) + size
+        if past.size:
+            problem = self._past_end(slot, past, written[:qs])
+        if problem is None:
+            ends = (vs, ps, written.shape[0])
+            vname = "eta" if slot == "constraint_hessian" else "v"
+            for (name, start, length), end in zip((("q", qs, nq), (vname, vs, nv), ("params", ps, npar)), ends):
+                hit = np.flatnonzero(written[start:end])
+                if hit.size:
+                    inside = hit[hit < length]
+                    what = (f"changed entry {int(inside[0])} of its input `{name}`" if inside.size else
+                            f"wrote past the end of its input `{name}` ({length} entries)")
+                    problem = (f"`{slot}` {what}; a callback must write only into `out` "
+                               "(copy an input before modifying it)", int(hit[0]))
+                    break
+        if problem is None:
+            unset = np.flatnonzero((a0[:size] == _FILL[0]) & (a1[:size] == _FILL[1]))
+            if unset.size:
+                problem = (self._unset(slot, unset), int(unset[0]))
+        if problem is None:
+            stale = np.flatnonzero(a0[:size] != a1[:size])
+            if stale.size:
+                idx = self._index(slot, int(stale[0]))
+                problem = (f"`{slot}` entry {idx} depends on what `out` held before the call (read "
+                           "before it was set, e.g. `out[i] += …`); `out` is not zeroed for you: "
+                           "set every entry", int(stale[0]))
+        if problem is None:  # pragma: no cover - the fast check and this one see the same writes
+            problem = (f"`{slot}` wrote outside its declared output", 0)
+        message, flat = problem
+        row = CheckRow(slot, f"{_SIZE_REFERENCE} {self.shape[slot] or (1,)}", state, np.inf, 0.0, 0.0,
+                       (flat,), "wrong", message)
+        self.report.rows.append(row)
+        self.report.evaluations = self.count
+        raise ModelCheckError(self.report)
+
+    def _declares(self, slot: str) -> str:
+        dims = dict.fromkeys(_DIMS[slot])
+        return ", ".join(f"{d} = {self.n if d == 'n' else self.m}" for d in dims)
+
+    def _index(self, slot: str, flat: int) -> list:
+        shape = self.shape[slot]
+        return [int(i) for i in np.unravel_index(flat, shape)] if shape else [0]
+
+    def _past_end(self, slot: str, past: np.ndarray, written: np.ndarray):
+        shape = self.shape[slot]
+        count = int(past.max()) + 1
+        decl = self._declares(slot)
+        if len(shape) < 2:
+            dim = _DIMS[slot][0] if _DIMS[slot] else "n"
+            return (f"`{slot}` wrote {count} entries but the model declares {decl} (out shape "
+                    f"{shape or (1,)}); check `{dim}` or the function", int(past[0]))
+        rows, cols = shape
+        msg = (f"`{slot}` wrote past the end of its output: up to flat index {count - 1} ({count} "
+               f"entries) but the model declares {decl} (out shape {shape}, {rows * cols} entries, "
+               "C order); wrong shape or transposed?")
+        # the pattern of an (cols, rows) array written as out[b, a] into the (rows, cols) buffer
+        transposed = np.zeros(written.shape, dtype=bool)
+        transposed[(np.arange(cols)[:, None] * cols + np.arange(rows)[None, :]).ravel()] = True
+        if rows != cols and np.array_equal(written, transposed):
+            meaning = f" ({_MEANING[slot]})" if slot in _MEANING else ""
+            msg += (f" The entries written are exactly those of a ({cols}, {rows}) array: the "
+                    f"transpose was written; write the ({rows}, {cols}) matrix{meaning}")
+        return msg, int(past[0])
+
+    def _unset(self, slot: str, unset: np.ndarray) -> str:
+        idx = [self._index(slot, int(i)) for i in unset[:4]]
+        more = f" and {unset.size - 4} more" if unset.size > 4 else ""
+        shape = self.shape[slot] or (1,)
+        if len(shape) == 1:
+            dim = _DIMS[slot][0]
+            hint = f"check `{dim}` or the function"
+        else:
+            hint = "start with `out[:, :] = 0.0` if most entries vanish"
+        return (f"`{slot}` never wrote entr{'y' if unset.size == 1 else 'ies'} "
+                f"{', '.join(map(str, idx))}{more} of its output (out shape {shape}, the model declares "
+                f"{self._declares(slot)}), or only updated it (`out[i] += …`); `out` is not zeroed "
+                f"for you, every entry must be set on every call: {hint}")
 
 
 def _fd(f, q: np.ndarray):
@@ -298,6 +535,18 @@ def _fd(f, q: np.ndarray):
     return J, est, fscale, hmin
 
 
+def _symmetry(M: np.ndarray, k: int) -> CheckRow:
+    if not np.all(np.isfinite(M)):
+        return CheckRow("mass", _REFERENCE["mass"], k, np.inf if k == 0 else np.nan, 0.0, 0.0, (),
+                        "wrong" if k == 0 else "skipped", "returned non-finite values")
+    asym = np.abs(M - M.T)
+    idx = tuple(int(i) for i in np.unravel_index(int(np.argmax(asym)), asym.shape))
+    scale = float(np.abs(M).max())
+    allowed = _ROUNDOFF * scale  # a symmetric formula gives exact symmetry
+    return CheckRow("mass", _REFERENCE["mass"], k, float(asym.max()), scale, allowed, idx,
+                    "ok" if asym.max() <= allowed else "wrong")
+
+
 def _compare(callback: str, state: int, exact: np.ndarray, fd, rtol: float, note: str = "") -> CheckRow:
     ref, est, fscale, hmin = fd
     reference = _REFERENCE[callback]
@@ -318,6 +567,9 @@ def _compare(callback: str, state: int, exact: np.ndarray, fd, rtol: float, note
     scale = max(float(np.abs(exact).max()), float(np.abs(ref).max())) if diff.size else 0.0
     noise = _NOISE * (float(est.max()) if est.size else 0.0) + _ROUNDOFF * fscale / hmin
     allowed = rtol * scale + noise
+    if error > allowed and exact.ndim == 2 and exact.shape[0] == exact.shape[1] > 1 \
+            and float(np.abs(exact.T - ref).max()) <= allowed:
+        note = (note + "; " if note else "") + "it matches the transpose of the reference: wrong shape or transposed?"
     return CheckRow(callback, reference, state, error, scale, allowed,
                     tuple(int(i) for i in idx), "ok" if error <= allowed else "wrong", note)
 
@@ -358,7 +610,11 @@ def check_model(model: Model, q, v=None, *, params=None, n_random: int = DEFAULT
     Raises
     ------
     ModelCheckError
-        Naming the first wrong callback (``.callback``) with the report attached.
+        Naming the first wrong callback (``.callback``) with the report attached. A callback
+        that writes outside its declared output (or into an input), or leaves an entry of it
+        unset, raises before any finite-difference comparison, even with
+        ``raise_on_error=False``: its values cannot be trusted and calling it from a kernel
+        would corrupt memory.
 
     Notes
     -----
@@ -395,63 +651,66 @@ def check_model(model: Model, q, v=None, *, params=None, n_random: int = DEFAULT
     if not (isinstance(rtol, (int, float, np.floating)) and 0 < rtol < 1):
         raise ValueError(f"`rtol` must be in (0, 1), got {rtol!r}")
 
-    cb = _Callbacks(model, prm)
     states = [(q, v)]
     qs, vs = max(1.0, float(np.abs(q).max())), max(1.0, float(np.abs(v).max()))
     for _ in range(int(n_random)):
         states.append((q + radius * qs * rng.standard_normal(n), v + radius * vs * rng.standard_normal(n)))
     etas = [np.eye(m)[a] for a in range(m)] + ([rng.standard_normal(m)] if m > 1 else [])
     report = CheckReport(model.name, states=states, rtol=float(rtol))
+    cb = _Callbacks(model, prm, report)
     has = cb.present.__contains__
 
-    for k, (qk, vk) in enumerate(states):
-        rows: dict[str, list[CheckRow]] = {}
+    # 1. Sizes, before anything else: every callback once, into guarded buffers filled with
+    # two different values (entries written past the end, into the inputs, or never).
+    eta0 = 1.0 + np.arange(m) / max(m, 1)
+    for slot in SLOTS:
+        if has(slot):
+            cb.check_size(slot, q, eta0 if slot == "constraint_hessian" else v)
 
-        def add(row: CheckRow, _rows=rows):
-            _rows.setdefault(row.callback, []).append(row)
+    # 2. First derivatives against the functions they differentiate, at every state, then
+    # 3. second derivatives against the first ones, only where that first one passed
+    # everywhere: a wrong G makes the FD reference of the constraint Hessian wrong too.
+    def each_state(slot, compare):
+        for k, (qk, vk) in enumerate(states):
+            rows = compare(k, qk, vk)
+            report.rows.extend(rows if isinstance(rows, list) else [rows])
 
-        if has("mass"):
-            M = cb("mass", qk)
-            if not np.all(np.isfinite(M)):
-                add(CheckRow("mass", _REFERENCE["mass"], k, np.inf if k == 0 else np.nan, 0.0, 0.0, (),
-                             "wrong" if k == 0 else "skipped", "returned non-finite values"))
-            else:
-                asym = np.abs(M - M.T)
-                idx = tuple(int(i) for i in np.unravel_index(int(np.argmax(asym)), asym.shape))
-                scale = float(np.abs(M).max())
-                allowed = _ROUNDOFF * scale  # a symmetric formula gives exact symmetry
-                add(CheckRow("mass", _REFERENCE["mass"], k, float(asym.max()), scale, allowed, idx,
-                             "ok" if asym.max() <= allowed else "wrong"))
-            add(_compare("kinetic_grad", k, cb("kinetic_grad", qk, vk),
-                         _fd(lambda x: 0.5 * vk @ cb("mass", x) @ vk, qk), rtol))
-            if has("momentum_jacobian"):
-                add(_compare("momentum_jacobian", k, cb("momentum_jacobian", qk, vk),
-                             _fd(lambda x: cb("mass", x) @ vk, qk), rtol))
-        add(_compare("potential_grad", k, cb("potential_grad", qk), _fd(lambda x: cb("potential", x), qk), rtol))
-        if m:
-            add(_compare("constraint_jacobian", k, cb("constraint_jacobian", qk),
-                         _fd(lambda x: cb("constraint", x), qk), rtol))
-        for slot in ("kinetic_hessian", "potential_hessian", "constraint_hessian"):
-            if not has(slot):
-                continue
-            parent = _PARENT[slot]
-            if not all(r.ok for r in rows.get(parent, [])):
-                add(CheckRow(slot, _REFERENCE[slot], k, np.nan, 0.0, 0.0, (), "skipped",
-                             f"its reference `{parent}` is wrong"))
-                continue
-            if slot == "kinetic_hessian":
-                add(_compare(slot, k, cb(slot, qk, vk), _fd(lambda x: cb("kinetic_grad", x, vk), qk), rtol))
-            elif slot == "potential_hessian":
-                add(_compare(slot, k, cb(slot, qk), _fd(lambda x: cb("potential_grad", x), qk), rtol))
-            else:
-                dG, est, fscale, hmin = _fd(lambda x: cb("constraint_jacobian", x), qk)  # (m, n, n)
-                for j, eta in enumerate(etas):
-                    ref = np.einsum("c,cab->ab", eta, dG)
-                    e = np.einsum("c,cab->ab", np.abs(eta), est)
-                    note = f"η = e_{j}" if j < m else "random η"
-                    add(_compare(slot, k, cb(slot, qk, eta), (ref, e, fscale * np.abs(eta).sum(), hmin), rtol, note))
-        for slot_rows in rows.values():
-            report.rows.extend(slot_rows)
+    if has("mass"):
+        each_state("mass", lambda k, qk, vk: _symmetry(cb("mass", qk), k))
+        each_state("kinetic_grad", lambda k, qk, vk: _compare(
+            "kinetic_grad", k, cb("kinetic_grad", qk, vk), _fd(lambda x: 0.5 * vk @ cb("mass", x) @ vk, qk), rtol))
+        if has("momentum_jacobian"):
+            each_state("momentum_jacobian", lambda k, qk, vk: _compare(
+                "momentum_jacobian", k, cb("momentum_jacobian", qk, vk), _fd(lambda x: cb("mass", x) @ vk, qk), rtol))
+    each_state("potential_grad", lambda k, qk, vk: _compare(
+        "potential_grad", k, cb("potential_grad", qk), _fd(lambda x: cb("potential", x), qk), rtol))
+    if m:
+        each_state("constraint_jacobian", lambda k, qk, vk: _compare(
+            "constraint_jacobian", k, cb("constraint_jacobian", qk), _fd(lambda x: cb("constraint", x), qk), rtol))
+
+    def hessian_rows(slot, k, qk, vk):
+        if slot == "kinetic_hessian":
+            return _compare(slot, k, cb(slot, qk, vk), _fd(lambda x: cb("kinetic_grad", x, vk), qk), rtol)
+        if slot == "potential_hessian":
+            return _compare(slot, k, cb(slot, qk), _fd(lambda x: cb("potential_grad", x), qk), rtol)
+        dG, est, fscale, hmin = _fd(lambda x: cb("constraint_jacobian", x), qk)  # (m, n, n)
+        rows = []
+        for j, eta in enumerate(etas):
+            ref = np.einsum("c,cab->ab", eta, dG)
+            e = np.einsum("c,cab->ab", np.abs(eta), est)
+            note = f"η = e_{j}" if j < m else "random η"
+            rows.append(_compare(slot, k, cb(slot, qk, eta), (ref, e, fscale * np.abs(eta).sum(), hmin), rtol, note))
+        return rows
+
+    for slot in ("kinetic_hessian", "potential_hessian", "constraint_hessian"):
+        if not has(slot):
+            continue
+        parent = _PARENT[slot]
+        if parent in report.failures:
+            report.rows.append(CheckRow(slot, _REFERENCE[slot], 0, np.nan, 0.0, 0.0, (), "skipped",
+                                        f"not checked: depends on `{parent}`, which is wrong"))
+            continue
+        each_state(slot, lambda k, qk, vk, _s=slot: hessian_rows(_s, k, qk, vk))
 
     report.evaluations = cb.count
     report.wall_time = time.perf_counter() - t0
@@ -460,6 +719,28 @@ def check_model(model: Model, q, v=None, *, params=None, n_random: int = DEFAULT
     elif raise_on_error:
         raise ModelCheckError(report)
     return report
+
+
+def _check_sizes(model: Model, q, v=None, *, params=None) -> None:
+    """Only the first part of :func:`check_model`: every callback evaluated twice at ``(q, v)``
+    into guarded buffers (well under a millisecond once compiled).
+
+    Raises
+    ------
+    ModelCheckError
+        A callback writes outside its declared output or into an input, or leaves an entry
+        of its output unset.
+    """
+    if not isinstance(model, Model):
+        raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
+    q = _vector(q, "q", model.n)
+    v = np.ones(model.n) if v is None else _vector(v, "v", model.n)
+    prm = model.params if params is None else _vector(params, "params", model.params.shape[0])
+    cb = _Callbacks(model, prm, CheckReport(model.name, states=[(q, v)]))
+    eta0 = 1.0 + np.arange(model.m) / max(model.m, 1)
+    for slot in SLOTS:
+        if slot in cb.present:
+            cb.check_size(slot, q, eta0 if slot == "constraint_hessian" else v)
 
 
 def _vector(x, name: str, n: int) -> np.ndarray:

@@ -140,10 +140,14 @@ def integrate(
         neighbours, so the modified energy may jump slightly there. Recovered steps are
         listed in ``stats["recovered_steps"]`` as (step, substeps).
     check : bool, default True
-        The first time a model is integrated, compare its derivative callbacks with finite
-        differences at ``q0`` and one nearby state (:func:`fastvi.check.check_model`, a few
-        milliseconds) and raise :class:`fastvi.ModelCheckError` naming a wrong one. Models
-        that passed once (or passed :meth:`Model.check`) are not checked again.
+        The first time a model is integrated, run :func:`fastvi.check.check_model` at ``q0``
+        and one nearby state (a few milliseconds): first every callback is evaluated once
+        into guarded buffers, so one that writes past its declared output shape, into its
+        inputs, or leaves an entry unset raises :class:`fastvi.ModelCheckError` instead of
+        corrupting memory in the kernels; then its derivative callbacks are compared with
+        finite differences. Models that passed once (or passed :meth:`Model.check`) are not
+        checked again. ``check=False`` skips both, at your own risk: a callback with a size
+        mistake then writes out of bounds (crashes, or silently wrong results).
 
     Returns
     -------

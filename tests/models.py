@@ -91,3 +91,85 @@ def quartic_dV(q, p, out):
 def quartic(eps=1.0):
     return fastvi.Model(2, 0, params=(eps,), mass=np.array([[1.0, 0.2], [0.2, 2.0]]),
                         potential=quartic_V, potential_grad=quartic_dV, name="quartic")
+
+
+# ----------------------------------------------------------------------------- slider–crank
+# Crank pin A on a circle of radius r about the origin, slider B on the x axis, a rod of
+# length L from A to B with its mass at its midpoint C, in redundant Cartesian coordinates
+# q = (xa, ya, xc, yc, xb, yb); five constraints leave one degree of freedom.
+# params = (r, L, ma, mc, mb, g)
+def sc_V(q, p):
+    return p[5] * (p[2] * q[1] + p[3] * q[3] + p[4] * q[5])
+
+
+def sc_dV(q, p, out):
+    out[0] = 0.0
+    out[1] = p[5] * p[2]
+    out[2] = 0.0
+    out[3] = p[5] * p[3]
+    out[4] = 0.0
+    out[5] = p[5] * p[4]
+
+
+def sc_ddV(q, p, out):
+    out[:, :] = 0.0
+
+
+def sc_g(q, p, out):
+    dx, dy = q[4] - q[0], q[5] - q[1]
+    out[0] = 0.5 * (q[0] * q[0] + q[1] * q[1] - p[0] * p[0])
+    out[1] = 0.5 * (dx * dx + dy * dy - p[1] * p[1])
+    out[2] = q[2] - 0.5 * (q[0] + q[4])
+    out[3] = q[3] - 0.5 * (q[1] + q[5])
+    out[4] = q[5]
+
+
+def sc_G(q, p, out):
+    dx, dy = q[4] - q[0], q[5] - q[1]
+    out[:, :] = 0.0
+    out[0, 0] = q[0]
+    out[0, 1] = q[1]
+    out[1, 0] = -dx
+    out[1, 1] = -dy
+    out[1, 4] = dx
+    out[1, 5] = dy
+    out[2, 0] = -0.5
+    out[2, 2] = 1.0
+    out[2, 4] = -0.5
+    out[3, 1] = -0.5
+    out[3, 3] = 1.0
+    out[3, 5] = -0.5
+    out[4, 5] = 1.0
+
+
+def sc_ddg(q, eta, p, out):
+    out[:, :] = 0.0
+    for a in (0, 1):  # η0 ∇²g0 on (xa, ya); η1 ∇²g1 couples A and B
+        out[a, a] = eta[0] + eta[1]
+        out[a + 4, a + 4] = eta[1]
+        out[a, a + 4] = -eta[1]
+        out[a + 4, a] = -eta[1]
+
+
+SLIDER_CRANK_PARAMS = (0.3, 1.0, 0.5, 1.0, 2.0, 9.81)
+
+
+def slider_crank():
+    """Slider–crank (n = 6, m = 5) with exact second derivatives."""
+    ma, mc, mb = SLIDER_CRANK_PARAMS[2:5]
+    return fastvi.Model(6, 5, params=SLIDER_CRANK_PARAMS, mass=np.diag([ma, ma, mc, mc, mb, mb]),
+                        potential=sc_V, potential_grad=sc_dV, potential_hessian=sc_ddV,
+                        constraint=sc_g, constraint_jacobian=sc_G, constraint_hessian=sc_ddg,
+                        name="slider_crank")
+
+
+def slider_crank_state(phi, omega):
+    """The exact ``(q, v)`` for crank angle ``phi`` and crank speed ``omega`` (slider to the right)."""
+    r, L = SLIDER_CRANK_PARAMS[:2]
+    xa, ya = r * np.cos(phi), r * np.sin(phi)
+    vxa, vya = -r * np.sin(phi) * omega, r * np.cos(phi) * omega
+    s = np.sqrt(L * L - ya * ya)
+    xb, vxb = xa + s, vxa - ya * vya / s
+    q = np.array([xa, ya, 0.5 * (xa + xb), 0.5 * ya, xb, 0.0])
+    v = np.array([vxa, vya, 0.5 * (vxa + vxb), 0.5 * vya, vxb, 0.0])
+    return q, v

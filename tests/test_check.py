@@ -376,3 +376,48 @@ def test_automatic_check_costs_a_fraction_of_the_model_setup(monkeypatch):
     cost = time.perf_counter() - t0
     assert report.ok
     assert cost < 0.1 * setup, (cost, setup)  # measured 3.7 ms vs 1.5 s (ratio 0.0025)
+
+
+# ----------------------------------------------------------------------------- blame order
+def bad_constraint_jacobian_sign_z(q, p, out):  # ∂g1/∂z = −z: invisible where z = 0
+    out[0, 0] = q[0]
+    out[0, 1] = q[1]
+    out[0, 2] = -q[2]
+    out[1, 0] = -p[2] * q[1]
+    out[1, 1] = -p[2] * q[0]
+    out[1, 2] = 1.0
+
+
+def bad_constraint_forgets_last(q, p, out):  # g2 never written
+    out[0] = 0.5 * (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] - p[1] * p[1])
+
+
+def _starting_states(k=6):
+    """Random states, half of them with z = 0, where the planted sign error in G vanishes
+    (there the exact Hessian disagrees with finite differences of the wrong G first)."""
+    rng = np.random.default_rng(2024)
+    for i in range(k):
+        q = rng.uniform(-1.0, 1.0, 3)
+        if i % 2 == 0:
+            q[2] = 0.0
+        yield q
+
+
+@pytest.mark.parametrize("q", list(_starting_states()), ids=lambda q: f"z={q[2]:.2f}")
+def test_a_wrong_jacobian_is_blamed_not_the_hessian_compared_with_it(q):
+    model = curve(constraint_jacobian=bad_constraint_jacobian_sign_z)
+    with pytest.raises(fastvi.ModelCheckError, match="callback `constraint_jacobian` disagrees") as err:
+        model.check(q)
+    assert err.value.callbacks == ["constraint_jacobian"]
+    skipped = err.value.report.worst("constraint_hessian")
+    assert skipped.status == "skipped"
+    assert skipped.note == "not checked: depends on `constraint_jacobian`, which is wrong"
+    assert "Also wrong" not in str(err.value)
+
+
+@pytest.mark.parametrize("q", list(_starting_states()), ids=lambda q: f"z={q[2]:.2f}")
+def test_an_unwritten_constraint_entry_is_blamed_on_the_constraint(q):
+    model = curve(constraint=bad_constraint_forgets_last)
+    with pytest.raises(fastvi.ModelCheckError, match=r"`constraint` never wrote entry \[1\]") as err:
+        model.check(q)
+    assert err.value.callback == "constraint" and err.value.callbacks == ["constraint"]

@@ -64,9 +64,11 @@ from fastvi.baselines import rk4 as rk4_baseline
 from fastvi.baselines.rk4 import BaselineResult, acceleration, observe
 from fastvi.baselines.rk4 import make_workspace as rk_workspace
 from fastvi.kernels.linalg import lu_factor, lu_solve
-from fastvi.kernels.step import _PGRAD, assemble, end_momentum
-from fastvi.kernels.step import make_workspace as vi_workspace
-from fastvi.kernels.step import step as vi_step
+from fastvi.kernels.layout import PGRAD as _PGRAD
+from fastvi.kernels.layout import NEWTON_FULL, STEP_OUT_SIZE, ModelData, NewtonOptions
+from fastvi.kernels.layout import make_workspace as vi_workspace
+from fastvi.kernels.step import assemble, end_momentum
+from fastvi.kernels.step import step as _vi_step
 from fastvi.status import Status
 from fastvi.studies.reference import REF_TOL, chain_cartesian, chain_pendulum_reference
 
@@ -455,10 +457,10 @@ def method_crossovers(points, metric: str, per_decade: int = 40):
 
 # ----------------------------------------------------------------------------- profile
 @njit
-def _loop_assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac, K):
+def _loop_assemble(md, tabs, h, qk, pk, ws, jac, K):
     st = 0
     for _ in range(K):
-        st += assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, jac)
+        st += assemble(md, tabs, h, qk, pk, ws, jac)
     return st
 
 
@@ -493,10 +495,10 @@ def _loop_callback(fns, q, prm, out, K):
 
 
 @njit
-def _loop_end(fns, flags, Mc, prm, q1, P, p1, v1, G1, ws, K):
+def _loop_end(md, q1, P, p1, v1, G1, ws, K):
     st = 0
     for _ in range(K):
-        st += end_momentum(fns, flags, Mc, prm, q1, P, p1, v1, G1, ws)
+        st += end_momentum(md, q1, P, p1, v1, G1, ws)
     return st
 
 
@@ -528,20 +530,28 @@ def newton_matrix(model, q, p, v, method: str, h: float) -> np.ndarray:
     Its sparsity matters for timing: the LU of :mod:`fastvi.kernels.linalg` skips zero
     multipliers, so a random dense matrix of the same size would overstate its cost."""
     meth = fastvi.method(method)
-    fns, flags, Mc = model.kernel_arguments()
-    prm = np.asarray(model.params, float)
+    md = ModelData(*model.kernel_arguments(), np.asarray(model.params, float))
     n, m = model.n, model.m
     N = meth.s * n + meth.J * m
-    ws = vi_workspace(n, m, meth.s, meth.r, meth.J)
-    q1, p1, v1, out = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(4)
     q, p, v = (np.ascontiguousarray(x, dtype=float) for x in (q, p, v))
     with quiet():
-        st = vi_step(fns, flags, Mc, prm, meth.kernel_tables, h, q, p, v, q1, p1, v1, ws, 1e-14,
-                     30, True, out)
+        st, ws = _one_full_step(md, meth, h, q, p, v)
         if st != 0:
             raise RuntimeError(f"the step for the Newton matrix failed with status {st}")
-        assemble(fns, flags, Mc, prm, meth.kernel_tables, h, q, p, ws, True)
-    return ws[2][:N, :N].copy()
+        assemble(md, meth.kernel_tables, h, q, p, ws, True)
+    return ws.A[:N, :N].copy()
+
+
+def _one_full_step(md, meth, h, q, p, v):
+    """One full-Newton step from ``(q, p, v)``: ``(status, workspace)`` (the profile's
+    parts are those of the full Newton)."""
+    n = q.shape[0]
+    ws = vi_workspace(n, int(md.flags[1]), meth.s, meth.r, meth.J)
+    state = np.zeros((6, n))
+    state[0], state[1], state[2] = q, p, v
+    st = _vi_step(md, meth.kernel_tables, NewtonOptions(1e-14, 30, NEWTON_FULL), h, state, ws,
+                  True, np.zeros(STEP_OUT_SIZE))
+    return st, ws
 
 
 def lu_factor_cost(A0: np.ndarray, budget: float = 0.05, repeats: int = 3) -> float:
@@ -554,7 +564,7 @@ def lu_factor_cost(A0: np.ndarray, budget: float = 0.05, repeats: int = 3) -> fl
 
 def profile_step(model, q0, v0, method: str, h: float, n_steps: int = 2000, rounds: int = 3,
                  budget: float = 0.05) -> dict:
-    r"""Cost of the parts of one fastvi step, in CPU seconds (of this thread) per call.
+    r"""Cost of the parts of one full-Newton fastvi step, in CPU seconds (of this thread) per call.
 
     Runs ``n_steps`` steps with :func:`fastvi.integrate` (the cost per step, and Newton
     iterations per step), and times each kernel alone on the state reached: the residual with the
@@ -576,44 +586,40 @@ def profile_step(model, q0, v0, method: str, h: float, n_steps: int = 2000, roun
     meth = fastvi.method(method)
     fns, flags, Mc = model.kernel_arguments()
     prm = np.asarray(model.params, float)
+    md = ModelData(fns, flags, Mc, prm)
     tabs = meth.kernel_tables
     n, m = model.n, model.m
     N = meth.s * n + meth.J * m
     with quiet():
-        fastvi.integrate(model, q0, v0, h=h, n_steps=2, method=method)
-        res = fastvi.integrate(model, q0, v0, h=h, n_steps=n_steps, method=method)
+        fastvi.integrate(model, q0, v0, h=h, n_steps=2, method=method, newton="full")
+        res = fastvi.integrate(model, q0, v0, h=h, n_steps=n_steps, method=method, newton="full")
     its = res.stats["newton_iterations"] / res.stats["steps"]
     qk, pk, vk = res.q[-1].copy(), res.p[-1].copy(), res.v[-1].copy()
-    ws = vi_workspace(n, m, meth.s, meth.r, meth.J)
     q1, p1, v1 = np.zeros(n), np.zeros(n), np.zeros(n)
-    out = np.zeros(4)
     t: dict[str, float] = {}
     with quiet():
-        st = vi_step(fns, flags, Mc, prm, tabs, h, qk, pk, vk, q1, p1, v1, ws, 1e-14, 30, True, out)
+        st, ws = _one_full_step(md, meth, h, qk, pk, vk)
         if st != 0:
             raise RuntimeError(f"profile step failed with status {st}")
         # the Newton matrix at the converged unknowns, then its factors
-        assemble(fns, flags, Mc, prm, tabs, h, qk, pk, ws, True)
-        A0 = ws[2][:N, :N].copy()
-        R0 = ws[1][:N].copy()
+        assemble(md, tabs, h, qk, pk, ws, True)
+        A0 = ws.A[:N, :N].copy()
+        R0 = ws.R[:N].copy()
         A, piv, R = np.zeros((N, N)), np.zeros(N, dtype=np.int64), np.zeros(N)
-        P = ws[14].copy()
+        P = ws.P.copy()
         # rounds interleave the whole step with its parts; each keeps its fastest round, so
         # a burst of other load shifts no part against the others
         timed = dict(budget=budget, repeats=3)
         for _ in range(rounds):
             t0 = time.thread_time()
-            fastvi.integrate(model, q0, v0, h=h, n_steps=n_steps, method=method)
+            fastvi.integrate(model, q0, v0, h=h, n_steps=n_steps, method=method, newton="full")
             parts = dict(
                 step=(time.thread_time() - t0) / n_steps,
-                assemble_jac=_per_call(_loop_assemble, fns, flags, Mc, prm, tabs, h, qk, pk, ws,
-                                       True, **timed),
-                assemble_res=_per_call(_loop_assemble, fns, flags, Mc, prm, tabs, h, qk, pk, ws,
-                                       False, **timed),
+                assemble_jac=_per_call(_loop_assemble, md, tabs, h, qk, pk, ws, True, **timed),
+                assemble_res=_per_call(_loop_assemble, md, tabs, h, qk, pk, ws, False, **timed),
                 lu_factor=lu_factor_cost(A0, **timed),
                 lu_solve=_per_call(_loop_solve, A, piv, R0, R, N, **timed),
-                end_momentum=_per_call(_loop_end, fns, flags, Mc, prm, q1, P, p1, v1,
-                                       ws[5][meth.J], ws, **timed),
+                end_momentum=_per_call(_loop_end, md, q1, P, p1, v1, ws.G[meth.J], ws, **timed),
                 callback=_per_call(_loop_callback, fns, qk.copy(), prm, np.zeros(n), **timed),
             )
             for k, v in parts.items():

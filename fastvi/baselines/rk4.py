@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import _validate as check
-from .._numba import njit, ptr
+from .._numba import hot, njit, ptr
 from ..kernels.linalg import lu_factor, lu_solve
 from ..model import SLOTS, Model
 from ..results import TrajectoryResult
@@ -121,7 +121,7 @@ def make_workspace(n, m):
     )
 
 
-@njit
+@hot
 def _mass(fns, flags, Mc, prm, q, M):
     n = q.shape[0]
     if flags[_F_MASSFN] != 0:
@@ -132,7 +132,7 @@ def _mass(fns, flags, Mc, prm, q, M):
                 M[a, c] = Mc[a, c]
 
 
-@njit
+@hot
 def _fd_step(q, v):
     """Central-difference step along ``v``: relative to |q|, measured in units of |v|."""
     qs = 1.0
@@ -145,7 +145,7 @@ def _fd_step(q, v):
     return _FD_REL * qs / vs
 
 
-@njit
+@hot
 def _saddle(M, G, n, m, K):
     """K = [M Gᵀ; G 0]."""
     for a in range(n):
@@ -159,7 +159,7 @@ def _saddle(M, G, n, m, K):
             K[n + c, n + d] = 0.0
 
 
-@njit
+@hot
 def acceleration(fns, flags, Mc, prm, q, v, a, ws):
     """Solve the index-1 system at ``(q, v)`` for the acceleration ``a`` (n,), in place.
 
@@ -242,7 +242,7 @@ def acceleration(fns, flags, Mc, prm, q, v, a, ws):
     return _OK
 
 
-@njit
+@hot
 def _project(fns, flags, Mc, prm, q, v, ws):
     """M-orthogonal projection of q onto g = 0 (simplified Newton), then of v onto G v = 0.
 
@@ -296,7 +296,7 @@ def _project(fns, flags, Mc, prm, q, v, ws):
     return _OK
 
 
-@njit
+@hot
 def rk4_step(fns, flags, Mc, prm, h, q, v, ws):
     """One classical RK4 step of ``(q̇, v̇) = (v, a(q, v))``, in place."""
     n = flags[0]
@@ -336,7 +336,7 @@ def rk4_step(fns, flags, Mc, prm, h, q, v, ws):
     return _OK
 
 
-@njit
+@hot
 def observe(fns, flags, Mc, prm, q, v, ws, out):
     """``out[:3] = (H, max|g|, max|G v|)`` at ``(q, v)``."""
     n = flags[0]

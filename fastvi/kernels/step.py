@@ -120,6 +120,23 @@ def _fd_constraint_hessian(fjac, q, eta, prm, out, qa, Gp, Gm, n, m):
 
 # ----------------------------------------------------------------------------- assembly
 @hot
+def _point_force(md, ws, Mi, has_mass, n):
+    """At ``(ws.qi, ws.vi)``: ``ws.F = ∂T/∂q − ∇V``, ``ws.fa = ∇V`` and, for a mass
+    function, ``Mi = M(q_i)``."""
+    fns, prm = md.fns, md.prm
+    qi, vi, F, fa = ws.qi, ws.vi, ws.F, ws.fa
+    fns[PGRAD](ptr(qi), ptr(qi), ptr(prm), ptr(fa))
+    if has_mass:
+        fns[KGRAD](ptr(qi), ptr(vi), ptr(prm), ptr(F))
+        fns[MASS](ptr(qi), ptr(qi), ptr(prm), ptr(Mi))
+        for a in range(n):
+            F[a] -= fa[a]
+    else:
+        for a in range(n):
+            F[a] = -fa[a]
+
+
+@hot
 def assemble(md, tabs, h, qk, pk, ws, jac):
     """Residual (and, if ``jac``, the Newton matrix) at the unknowns ``ws.X``.
 
@@ -165,15 +182,7 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
                 va += Ld[nu, i] * x
             qi[a] = qa
             vi[a] = va * inv_h
-        fns[PGRAD](ptr(qi), ptr(qi), ptr(prm), ptr(fa))
-        if has_mass:
-            fns[KGRAD](ptr(qi), ptr(vi), ptr(prm), ptr(F))
-            fns[MASS](ptr(qi), ptr(qi), ptr(prm), ptr(Mi))
-            for a in range(n):
-                F[a] -= fa[a]
-        else:
-            for a in range(n):
-                F[a] = -fa[a]
+        _point_force(md, ws, Mi, has_mass, n)
         if diag:
             for a in range(n):
                 Pm[a] = Mi[a, a] * vi[a]
@@ -295,7 +304,7 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
     return OK
 
 
-# ----------------------------------------------------------------------------- one step
+# ----------------------------------------------------------------------------- predictor, full Newton
 @hot
 def predict(tabs, n, m, h, vk, ws, first):
     """Initial guess: the previous step's polynomial extrapolated onto this step."""
@@ -478,15 +487,7 @@ def residual(md, tabs, h, qk, pk, ws):
                 x = X[off + a]
                 qi[a] += cl * x
                 vi[a] += cd * x
-        fns[PGRAD](ptr(qi), ptr(qi), ptr(prm), ptr(fa))
-        if has_mass:
-            fns[KGRAD](ptr(qi), ptr(vi), ptr(prm), ptr(F))
-            fns[MASS](ptr(qi), ptr(qi), ptr(prm), ptr(Mi))
-            for a in range(n):
-                F[a] -= fa[a]
-        else:
-            for a in range(n):
-                F[a] = -fa[a]
+        _point_force(md, ws, Mi, has_mass, n)
         if diag:
             for a in range(n):
                 Pm[a] = Mi[a, a] * vi[a]

@@ -48,7 +48,8 @@ right-hand side with a compiled adaptive solver. This module is that user's code
 Energies (and, for (a), the constraint residuals ``max |g_i(q)|`` in fastvi's own
 normalisation) are evaluated afterwards by compiled loops at **every accepted step** of the
 solver (CyRK stores each step; no dense output is requested): a denser sample than fastvi's
-(every :data:`fastvi.studies.wpd` stride), so never in the peer's favour.
+saved steps (every 0.1 s in the study, ``fastvi.studies.wpd.PEER_SAMPLE_DT``), so never in
+the peer's favour.
 
 CyRK is an optional dependency (the ``bench`` extra): ``pip install -e .[bench]`` or
 ``make bench``. It is imported lazily by :func:`require_cyrk`.

@@ -1435,7 +1435,11 @@ def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> li
         "same double pendulum (the 2×2 multiplier system `G M⁻¹ Gᵀ λ = G M⁻¹ f + Ġv` solved "
         "inline, no Baumgarte terms, so the constraints drift) and **(b)** angle coordinates, its "
         "best case (no constraints). fastvi runs through its public `fastvi.integrate` (so the "
-        "numbers follow the kernels); `P1L-Q2G` … `P4L-Q5G`, h swept.\n")
+        "numbers follow the kernels); `P1L-Q2G` … `P4L-Q5G`, h swept. Regenerate with "
+        "`make wpd` (installs the `bench` extra, CyRK, into `.venv`) or `python -m fastvi wpd` "
+        "with CyRK installed (`pip install -e .[bench]`); `--no-peers` skips these sections. "
+        "The same comparison at one setting under pytest-benchmark: "
+        "`bench/test_bench_peers.py` (`make bench`).\n")
     P.append(
         f"**Measurements.** CPU time of the process (`time.process_time`), median of "
         f"{pcfg['repeats']} runs, every contender and setting run round-robin in one process "

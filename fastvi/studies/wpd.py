@@ -25,6 +25,18 @@ where the curves cross, profiles one step (which part costs what), and tabulates
 per step on ``fastvi.scenes.chain(N)``, N = 2 … 64, with the fitted exponent and the share
 of the dense LU.
 
+**Compiled peers** (issue 11, item 5; :func:`run_peers`, needs CyRK, the ``bench`` extra):
+CyRK's C++ DOP853 on hand-written ``@njit`` right-hand sides (:mod:`fastvi.studies.peers`) of
+the same pendulum, (a) Cartesian index-1 and (b) angle coordinates, against fastvi through
+its public :func:`fastvi.integrate`: CPU time against ``max |H − H(0)|`` at ``T = 1000`` s
+and ``T = 10^4`` s, the ratio "fastvi best / DOP853" at ``max|ΔH| = 1e-2, 1e-4, 1e-6, 1e-8``
+J (log–log interpolation on each contender's Pareto front), the growth of the energy error
+and of the constraint drift with ``T``; and a **stiff panel**: the rod–slider with spring
+stiffness ``k = 10^3 … 10^8`` over ``T = 10`` s, fastvi against CyRK DOP853, LSODA and Radau,
+the CPU time of each to reach ``max|ΔH| ≤`` :data:`STIFF_TARGET_REL` × the spring energy,
+the crossover stiffness and the ratio at the largest ``k``. Without CyRK these sections say
+how to install it; ``--no-peers`` skips them.
+
 SciPy runs through :func:`scipy_run`: the equations of :func:`fastvi.baselines.solve_ivp`
 (the compiled index-1 acceleration :func:`fastvi.baselines.rk4.acceleration`) with the
 model's cfuncs frozen into the right-hand side, a few microseconds per call, timed around
@@ -40,6 +52,7 @@ Usage::
     python -m fastvi wpd                 # full study (≈ 4–10 min on 2 cores), writes ./fastvi-study-wpd/
     python -m fastvi wpd --quick         # T = 1 s and 10 s, few points (tests, a first look)
     python -m fastvi wpd --out DIR       # write DIR/wpd.md and DIR/figures/wpd-*.png
+    python -m fastvi wpd --no-peers      # without the compiled-peer (CyRK) panels
 """
 
 from __future__ import annotations
@@ -1064,10 +1077,622 @@ def markdown(points, cfg, figs, prof, ref_floor, command, elapsed, growth=None) 
     return "\n".join(P) + "\n"
 
 
+# ----------------------------------------------------------------------------- compiled peers
+# Issue 11, item 5: fastvi against a compiled DOP853 (CyRK's C++ solver on hand-written @njit
+# right-hand sides, :mod:`fastvi.studies.peers`), and a stiff panel on the rod–slider.
+#: a peer-panel run longer than this (CPU s) is timed once: long enough to average out the
+#: timer (the T = 10^4 s fastvi runs), and the study stays within minutes
+PEER_LONG_RUN = 2.0
+#: … and in the stiff panel (its slowest settings are the finest steps at k = 10^8)
+STIFF_LONG_RUN = 0.5
+#: energy levels (J) at which the fastvi / DOP853 ratio is read off (issue 11's goal range)
+PEER_LEVELS = (1e-2, 1e-4, 1e-6, 1e-8)
+PEER_GOAL = 2.0  # issue 11: fastvi's best within 2× of DOP853 (a) at equal max|ΔH|, T = 1000 s
+STIFF_GOAL = 10.0  # issue 11: ≥ 10× ahead of every compiled peer at k = 1e8
+#: fastvi's energies are sampled every PEER_SAMPLE_DT seconds (save_every = PEER_SAMPLE_DT/h):
+#: saving every step would cost fastvi more than the peer pays for storing its steps
+PEER_SAMPLE_DT = 0.1
+#: … and in the stiff panel every STIFF_SAMPLE_DT seconds (≥ 10⁴ samples over T = 10 s: the
+#: energy error of a step beyond the fast period oscillates from step to step)
+STIFF_SAMPLE_DT = 1e-3
+#: tolerance of the stiff panel's reference end state (CyRK DOP853, untimed)
+STIFF_REF_TOL = 1e-11
+#: the stiff panel's target: max|ΔH| ≤ STIFF_TARGET_REL × the spring energy at the start
+STIFF_TARGET_REL = 1e-4
+#: the stiff panel's fastvi steps: h = T/⌈T ω / c⌉ for each c (ωh ≈ c), at most STIFF_H_MAX
+STIFF_H_MAX = 0.01
+
+PEERS_FULL = dict(
+    repeats=3,
+    T=(1000.0, 10000.0),
+    fastvi={
+        # (h = 0.1 is beyond P4L-Q5G's stability limit here: its energy error explodes)
+        1000.0: {"P1L-Q2G": (0.01,), "P2L-Q3G": (0.04, 0.02, 0.01),
+                 "P3L-Q4G": (0.05, 0.025, 0.0125), "P4L-Q5G": (0.05, 0.025, 0.0125)},
+        # fewer points at T = 10^4 s (cost; the finest, 8·10^5 steps, is timed once)
+        10000.0: {"P3L-Q4G": (0.025,), "P4L-Q5G": (0.05, 0.025, 0.0125)},
+    },
+    dop={1000.0: (1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12, 1e-13, 1e-14),
+         10000.0: (1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12, 1e-13, 1e-14)},
+    #: energy-error growth with T at one setting per contender
+    growth=dict(T=(100.0, 1000.0, 10000.0), fastvi=("P3L-Q4G", 0.025), tol=1e-10),
+    # r = s methods (P2L-Q2G, P3L-Q3G) are stable at any ωh; the defaults (r = s + 1) are not
+    stiff=dict(T=10.0, ks=(1e3, 1e4, 1e5, 1e6, 1e7, 1e8),
+               methods=("P2L-Q2G", "P3L-Q3G", "P2L-Q3G", "P3L-Q4G"),
+               c=(64.0, 16.0, 4.0, 1.0, 0.5),
+               peers={"DOP853": (1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10),
+                      "LSODA": (1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10),
+                      "Radau": (1e-5, 1e-6, 1e-7, 1e-8, 1e-9)}),
+)
+PEERS_QUICK = dict(
+    repeats=1,
+    T=(100.0,),
+    fastvi={100.0: {"P3L-Q4G": (0.05, 0.025), "P4L-Q5G": (0.05,)}},
+    dop={100.0: (1e-8, 1e-10, 1e-12)},
+    growth=dict(T=(10.0, 100.0), fastvi=("P3L-Q4G", 0.025), tol=1e-10),
+    stiff=dict(T=1.0, ks=(1e3, 1e6), methods=("P2L-Q2G", "P3L-Q4G"), c=(4.0, 0.5),
+               peers={"DOP853": (1e-6, 1e-9), "LSODA": (1e-6, 1e-9), "Radau": (1e-6,)}),
+)
+#: contender labels of the peer panels
+DOP_A, DOP_B = "DOP853 (a) Cartesian", "DOP853 (b) angles"
+
+
+@dataclass
+class PeerPoint:
+    """One run of one contender in the peer panels: CPU time and errors of the same run."""
+
+    panel: str  # "pendulum" or "stiff"
+    label: str
+    knob: float  # h (fastvi) or rtol = atol (CyRK)
+    T: float
+    cpu: float = float("nan")  # median CPU time (process), s
+    cpus: list = field(default_factory=list)
+    dH: float = float("nan")
+    g: float = float("nan")
+    work: int = 0  # steps (fastvi: fixed; CyRK: accepted)
+    k: float = float("nan")  # stiffness (stiff panel)
+    ok: bool = True
+    #: stiff panel: |θ(T) − θ_ref(T)| (the slow motion) and |r(T) − r_ref(T)| (the spring),
+    #: against CyRK DOP853 at STIFF_REF_TOL
+    err_theta: float = float("nan")
+    err_r: float = float("nan")
+
+    @property
+    def wall(self) -> float:  # so that pareto()/cost_at() can read either cost
+        return self.cpu
+
+    @property
+    def is_fastvi(self) -> bool:
+        return self.label.startswith("P")
+
+
+def _fastvi_peer_run(model, q0, v0, method, h, T, params=None, sample_dt=PEER_SAMPLE_DT):
+    """One public ``fastvi.integrate`` call, energies saved every ``sample_dt`` seconds."""
+    every = max(1, int(round(sample_dt / h)))
+    c0 = time.process_time()
+    res = fastvi.integrate(model, q0, v0, h=h, t_end=T, method=method, save_every=every,
+                           params=params, on_failure="return")
+    cpu = time.process_time() - c0
+    ok = bool(res.success) and bool(np.isclose(res.t[-1], T))
+    dH = float(np.max(np.abs(res.energy - res.energy[0]))) if len(res.energy) else np.inf
+    g = float(np.max(res.constraint_residual)) if len(res.energy) else np.inf
+    return cpu, dict(dH=dH, g=g, steps=int(res.stats["steps"]), ok=ok and np.isfinite(dH),
+                     end=res.q[-1].copy() if len(res.q) else None)
+
+
+def _interleaved(jobs, repeats, log, budget=LONG_RUN):
+    """Run ``jobs`` (callables returning (cpu, info)) round-robin ``repeats`` times.
+
+    Interleaving spreads the machine's changing load over every contender alike. A job
+    whose run took longer than ``budget`` seconds is not repeated."""
+    cpus = [[] for _ in jobs]
+    infos = [None] * len(jobs)
+    for r in range(repeats):
+        for j, job in enumerate(jobs):
+            if r and cpus[j] and cpus[j][-1] > budget:
+                continue
+            c, info = job()
+            cpus[j].append(c)
+            infos[j] = info
+    return cpus, infos
+
+
+def peer_pendulum_sweep(pcfg, log) -> list[PeerPoint]:
+    """Work–precision panels at each T of ``pcfg``: fastvi vs DOP853 (a) and (b)."""
+    from fastvi.studies import peers
+
+    model = fastvi.scenes.double_pendulum()
+    q0, v0 = model.initial_state(*THETA0)
+    ya, yb, prm = peers.cartesian_start(THETA0), peers.angles_start(THETA0), peers.DP_PARAMS
+    for method in {m for d in pcfg["fastvi"].values() for m in d} | {pcfg["growth"]["fastvi"][0]}:
+        fastvi.integrate(model, q0, v0, h=0.01, n_steps=2, method=method)  # compile / load
+    specs = []
+    for T in pcfg["T"]:
+        for method, hs in pcfg["fastvi"][T].items():
+            specs += [(method, h, T) for h in hs]
+        for tol in pcfg["dop"][T]:
+            specs += [(DOP_A, tol, T), (DOP_B, tol, T)]
+    gm, gh = pcfg["growth"]["fastvi"]
+    for T in pcfg["growth"]["T"]:  # the growth table's settings, where the panels lack them
+        for spec in ((gm, gh, T), (DOP_A, pcfg["growth"]["tol"], T), (DOP_B, pcfg["growth"]["tol"], T)):
+            if spec not in specs:
+                specs.append(spec)
+
+    def job(label, knob, T):
+        if label == DOP_A:
+            return lambda: _peer_job(peers, "cartesian", ya, prm, T, knob, "DOP853")
+        if label == DOP_B:
+            return lambda: _peer_job(peers, "angles", yb, prm, T, knob, "DOP853")
+        return lambda: _quiet_fastvi(model, q0, v0, label, knob, T, sample_dt=PEER_SAMPLE_DT)
+
+    t0 = time.perf_counter()
+    cpus, infos = _interleaved([job(*s) for s in specs], pcfg["repeats"], log, PEER_LONG_RUN)
+    points = []
+    for (label, knob, T), cs, info in zip(specs, cpus, infos):
+        pt = PeerPoint("pendulum", label, knob, T, float(np.median(cs)), cs, info["dH"], info["g"],
+                       info["steps"], ok=info["ok"])
+        points.append(pt)
+        log(f"(peers) {label:<22} {knob:<8g} T {T:<7g} CPU {pt.cpu:8.4f} s  max|ΔH| {pt.dH:.2e}  "
+            f"max|g| {pt.g:.1e}{'' if pt.ok else '  FAILED'}")
+    log(f"peer pendulum panels: {time.perf_counter() - t0:.0f} s")
+    return points
+
+
+def _peer_job(peers, system, y0, prm, T, tol, method):
+    r = peers.run_peer(system, y0, prm, T=T, tol=tol, method=method)
+    return r["cpu"], dict(dH=r["dH"], g=r["g"], steps=r["steps"], ok=r["ok"], end=r["y_end"])
+
+
+def _stiff_hs(k: float, T: float, cs) -> list[float]:
+    from fastvi.studies import peers
+
+    om = peers.slider_omega(k)
+    hs = []
+    for c in cs:
+        n = max(int(np.ceil(T / STIFF_H_MAX)), int(np.ceil(T * om / c)))
+        h = T / n
+        if h not in hs:
+            hs.append(h)
+    return hs
+
+
+def peer_stiff_sweep(pcfg, log) -> list[PeerPoint]:
+    """The stiff panel: rod–slider at each k, fastvi (h swept) vs CyRK DOP853/LSODA/Radau."""
+    from fastvi.studies import peers
+
+    s = pcfg["stiff"]
+    T = s["T"]
+    points = []
+    t0 = time.perf_counter()
+    # one model, k passed as a parameter (a new model per k would compile its kernels anew)
+    model = fastvi.scenes.rotary_rod_slider(k=s["ks"][0])
+    with quiet():
+        for method in s["methods"]:  # compile / load outside the timing
+            q0, v0 = model.initial_state(0.0, peers.SLIDER_R0)
+            fastvi.integrate(model, q0, v0, h=1e-4, n_steps=2, method=method)
+    for k in s["ks"]:
+        q0, v0 = model.initial_state(0.0, peers.SLIDER_R0 + peers.slider_stretch(k))
+        y0, prm = peers.slider_start(k), peers.slider_params(k)
+        specs = [(m, h) for m in s["methods"] for h in _stiff_hs(k, T, s["c"])]
+        specs += [(f"CyRK {meth}", tol) for meth, tols in s["peers"].items() for tol in tols]
+
+        def job(label, knob):
+            if label.startswith("CyRK"):
+                return lambda: _peer_job(peers, "slider", y0, prm, T, knob, label.split()[1])
+            return lambda: _quiet_fastvi(model, q0, v0, label, knob, T, prm)
+
+        cpus, infos = _interleaved([job(*sp) for sp in specs], pcfg["repeats"], log, STIFF_LONG_RUN)
+        ref = peers.run_peer("slider", y0, prm, T=T, tol=STIFF_REF_TOL)["y_end"]  # untimed
+        for (label, knob), cs, info in zip(specs, cpus, infos):
+            pt = PeerPoint("stiff", label, knob, T, float(np.median(cs)), cs, info["dH"], info["g"],
+                           info["steps"], k=k, ok=info["ok"])
+            end = info.get("end")
+            if pt.ok and end is not None:  # fastvi q = (θ, r, φ); CyRK y = (θ, r, θ̇, ṙ)
+                pt.err_theta, pt.err_r = abs(end[0] - ref[0]), abs(end[1] - ref[1])
+            points.append(pt)
+            log(f"(stiff) k {k:<6g} {label:<12} {knob:<10.3g} CPU {pt.cpu:8.4f} s  "
+                f"max|ΔH| {pt.dH:.2e}{'' if pt.ok else '  FAILED'}")
+    log(f"stiff panel: {time.perf_counter() - t0:.0f} s")
+    return points
+
+
+def _quiet_fastvi(model, q0, v0, method, h, T, params=None, sample_dt=STIFF_SAMPLE_DT):
+    with quiet():
+        import warnings
+
+        with warnings.catch_warnings():  # the energy-growth alarm of an unstable setting
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return _fastvi_peer_run(model, q0, v0, method, h, T, params, sample_dt)
+
+
+def _front_cost(points, E):
+    """CPU time to reach max|ΔH| = E on these runs' Pareto front (log–log), NaN outside."""
+    return cost_at([p for p in points if p.ok], "dH", E, cost="cpu")
+
+
+def peer_ratios(points, T, rival, levels=PEER_LEVELS):
+    """[(E, fastvi-best CPU, method, rival CPU, fastvi / rival)] at each level ``E``."""
+    rows = []
+    riv = [p for p in points if p.label == rival and p.T == T and p.panel == "pendulum"]
+    methods = sorted({p.label for p in points if p.is_fastvi and p.T == T and p.panel == "pendulum"})
+    for E in levels:
+        best, which = np.nan, ""
+        for m in methods:
+            c = _front_cost([p for p in points if p.label == m and p.T == T and p.panel == "pendulum"], E)[0]
+            if np.isfinite(c) and not (c >= best):
+                best, which = c, m
+        r = _front_cost(riv, E)[0]
+        rows.append((E, best, which, r, best / r if np.isfinite(best) and np.isfinite(r) else np.nan))
+    return rows
+
+
+def stiff_table(points, pcfg):
+    """{k: {contender: (cpu, how)}} at the target max|ΔH|; how = "interp" (on the front),
+    "≤" (every run met the target: the cheapest run's time, an upper bound), "—" (not
+    reached by any run)."""
+    from fastvi.studies import peers
+
+    target = STIFF_TARGET_REL * peers.SPRING_ENERGY
+    out = {}
+    for k in pcfg["stiff"]["ks"]:
+        row = {}
+        labels = list(dict.fromkeys(p.label for p in points if p.panel == "stiff" and p.k == k))
+        for label in labels:
+            pts = [p for p in points if p.panel == "stiff" and p.k == k and p.label == label and p.ok]
+            meeting = [p for p in pts if p.dH <= target]
+            c = _front_cost(pts, target)[0]
+            if np.isfinite(c):
+                row[label] = (c, "interp")
+            elif meeting and all(p.dH <= target for p in pts):
+                row[label] = (min(p.cpu for p in meeting), "≤")
+            elif meeting:
+                row[label] = (min(p.cpu for p in meeting), "run")
+            else:
+                row[label] = (np.nan, "—")
+        out[k] = row
+    return out, target
+
+
+def stiff_summary(table, pcfg):
+    """(crossover k or None, ratio best peer / best fastvi at the largest k, per-k ratios)."""
+    ratios = {}
+    for k, row in table.items():
+        fv = [c for lab, (c, _) in row.items() if not lab.startswith("CyRK") and np.isfinite(c)]
+        pr = [c for lab, (c, _) in row.items() if lab.startswith("CyRK") and np.isfinite(c)]
+        f = min(fv) if fv else np.nan
+        p = min(pr) if pr else np.nan
+        ratios[k] = p / f if fv and pr else (np.inf if fv else (0.0 if pr else np.nan))
+    ks = sorted(ratios)
+    cross = None
+    for i, k in enumerate(ks):  # smallest k from which fastvi is ahead at every larger k
+        if all(ratios[kk] > 1.0 for kk in ks[i:]):
+            cross = k
+            break
+    return cross, ratios[ks[-1]], ratios
+
+
+def peer_figures(points, pcfg, table, outdir, log) -> list[str]:
+    try:
+        import matplotlib
+    except ImportError:
+        return []
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    os.makedirs(os.path.join(outdir, "figures"), exist_ok=True)
+    paths = []
+    Ts = pcfg["T"]
+    fig, axes = plt.subplots(2, len(Ts), figsize=(6.5 * len(Ts), 9), squeeze=False)
+    every = list(dict.fromkeys(p.label for p in points if p.panel == "pendulum"))
+    for col, T in enumerate(Ts):
+        labels = list(dict.fromkeys(p.label for p in points if p.panel == "pendulum" and p.T == T))
+        for label in labels:
+            k = every.index(label)  # one colour per contender in every panel
+            pts = sorted((p for p in points if p.panel == "pendulum" and p.T == T and p.label == label
+                          and p.ok), key=lambda p: p.dH)
+            if not pts:
+                continue
+            style = dict(ls="-", marker="o") if pts[0].is_fastvi else dict(ls="--", marker="s")
+            axes[0, col].loglog([p.dH for p in pts], [p.cpu for p in pts], color=f"C{k % 10}",
+                                label=label, **style)
+            axes[1, col].loglog([p.dH for p in pts], [max(p.g, 1e-17) for p in pts],
+                                color=f"C{k % 10}", label=label, **style)
+        axes[0, col].set_title(f"double pendulum, T = {T:g} s")
+        axes[0, col].set_ylabel("CPU time (s)")
+        axes[1, col].set_ylabel("max |g(q)| (angles: 0, plotted at 1e-17)")
+        for r in (0, 1):
+            axes[r, col].set_xlabel(f"max |H − H(0)| over T = {T:g} s (J)")
+            axes[r, col].grid(True, alpha=0.3)
+            axes[r, col].legend(fontsize=7)
+    fig.tight_layout()
+    rel = "figures/wpd-peers.png"
+    fig.savefig(os.path.join(outdir, rel), dpi=100)
+    plt.close(fig)
+    paths.append(rel)
+    if table:
+        fig, ax = plt.subplots(figsize=(8, 5.5))
+        labels = list(dict.fromkeys(lab for row in table.values() for lab in row))
+        for j, label in enumerate(labels):
+            ks = [k for k in table if label in table[k] and np.isfinite(table[k][label][0])]
+            style = dict(ls="--", marker="s") if label.startswith("CyRK") else dict(ls="-", marker="o")
+            ax.loglog(ks, [table[k][label][0] for k in ks], color=f"C{j % 10}", label=label, **style)
+        ax.set_xlabel("spring stiffness k (N/m)")
+        ax.set_ylabel("CPU time to reach the target max|ΔH| (s)")
+        ax.set_title(f"stiff rod–slider, T = {pcfg['stiff']['T']:g} s")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        rel = "figures/wpd-stiff.png"
+        fig.savefig(os.path.join(outdir, rel), dpi=100)
+        plt.close(fig)
+        paths.append(rel)
+    return paths
+
+
+def _fmt(x, spec=".3g"):
+    return format(x, spec) if np.isfinite(x) else "—"
+
+
+def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> list[str]:
+    """The page's sections on the compiled peers (issue 11, item 5)."""
+    P = ["## Against a compiled DOP853 (issue 11)\n"]
+    if missing:
+        P.append(f"Not run: {missing}.\n")
+        return P
+    from fastvi.studies import peers
+
+    import CyRK
+
+    P.append(
+        f"The solver a speed-minded user would pick instead of fastvi: **DOP853 from CyRK "
+        f"{CyRK.__version__}** (`CyRK.nbsolve2_ivp`, C++ solver, right-hand side a numba "
+        "`cfunc` called through a function pointer; no Python in the loop; CyRK's pure-numba "
+        "`nbsolve_ivp` was ≈ 1.8× slower here), on right-hand sides written by hand in "
+        "`fastvi/studies/peers.py` (no fastvi code): **(a)** the Cartesian index-1 form of the "
+        "same double pendulum (the 2×2 multiplier system `G M⁻¹ Gᵀ λ = G M⁻¹ f + Ġv` solved "
+        "inline, no Baumgarte terms, so the constraints drift) and **(b)** angle coordinates, its "
+        "best case (no constraints). fastvi runs through its public `fastvi.integrate` (so the "
+        "numbers follow the kernels); `P1L-Q2G` … `P4L-Q5G`, h swept. Regenerate with "
+        "`make wpd` (installs the `bench` extra, CyRK, into `.venv`) or `python -m fastvi wpd` "
+        "with CyRK installed (`pip install -e .[bench]`); `--no-peers` skips these sections. "
+        "The same comparison at one setting under pytest-benchmark: "
+        "`bench/test_bench_peers.py` (`make bench`).\n")
+    P.append(
+        f"**Measurements.** CPU time of the process (`time.process_time`), median of "
+        f"{pcfg['repeats']} runs, every contender and setting run round-robin in one process "
+        f"(runs longer than {PEER_LONG_RUN:g} s, in the stiff panel {STIFF_LONG_RUN:g} s, timed "
+        "once), after compilation. fastvi: the whole "
+        f"public call (validation, initial projection, energies of the saved steps), saving every "
+        f"{PEER_SAMPLE_DT:g} s (`save_every = {PEER_SAMPLE_DT:g}/h`; stiff panel: every "
+        f"{STIFF_SAMPLE_DT:g} s). CyRK: the solver call "
+        "storing every accepted step (its default; no dense output, no `t_eval`) and the copy of "
+        "the stored steps out of CyRK (< 1 %). Energy errors max |H − H(0)|: fastvi over its saved "
+        f"samples, CyRK over **every accepted step** (denser: never "
+        "in fastvi's favour). Constraint residual max |g_i(q)| with fastvi's g = ½(|r|² − l²). "
+        "DOP853 evaluates the right-hand side "
+        f"{peers.DOP853_STAGES} times per accepted step. The machine has 2 cores and was shared with "
+        "other jobs; read ratios to within ≈ 1.5×.\n")
+    P.append("### fastvi's best method / DOP853 at equal max energy error\n")
+    P.append("CPU time of the cheapest fastvi method at that max|ΔH| divided by that of DOP853 "
+             "(log–log interpolation on each contender's Pareto front; — where a curve does not "
+             f"reach the level). Above 1: fastvi is slower. Goal of issue 11: ≤ {PEER_GOAL:g} "
+             "against (a) at T = 1000 s over 1e-2 … 1e-8 J.\n")
+    P.append("| T (s) | max\\|ΔH\\| (J) | best fastvi | fastvi CPU (s) | DOP853 (a) CPU (s) | "
+             "**fastvi / (a)** | DOP853 (b) CPU (s) | **fastvi / (b)** |")
+    P.append("|---|---|---|---|---|---|---|---|")
+    for T in pcfg["T"]:
+        ra = peer_ratios(points, T, DOP_A)
+        rb = peer_ratios(points, T, DOP_B)
+        for (E, best, which, ca, xa), (_, _, _, cb, xb) in zip(ra, rb):
+            P.append(f"| {T:g} | {E:.0e} | {which or '—'} | {_fmt(best, '.4f')} | {_fmt(ca, '.4f')} | "
+                     f"**{_fmt(xa)}** | {_fmt(cb, '.4f')} | **{_fmt(xb)}** |")
+    P.append("")
+    T0 = pcfg["T"][0]
+    xs = [r[4] for r in peer_ratios(points, T0, DOP_A) if np.isfinite(r[4])]
+    if xs:
+        met = all(x <= PEER_GOAL for x in xs)
+        P.append(f"Goal (fastvi within {PEER_GOAL:g}× of DOP853 (a) at T = {T0:g} s): "
+                 f"**{'met' if met else 'not met'}** — fastvi is {min(xs):.3g}× to {max(xs):.3g}× "
+                 "the CPU time of DOP853 (a) at the levels it reaches.\n")
+    # growth with T
+    gm, gh = pcfg["growth"]["fastvi"]
+    tol = pcfg["growth"]["tol"]
+    P.append(f"### Energy error and constraint drift against T\n")
+    P.append(f"One setting per contender (fastvi `{gm}` h = {gh:g}; DOP853 rtol = atol = {tol:g}), "
+             "max over [0, T]:\n")
+    P.append("| contender | T (s) | CPU (s) | max\\|ΔH\\| (J) | max\\|g(q)\\| | steps |")
+    P.append("|---|---|---|---|---|---|")
+    for label, knob in ((gm, gh), (DOP_A, tol), (DOP_B, tol)):
+        for T in pcfg["growth"]["T"]:
+            pt = [p for p in points if p.panel == "pendulum" and p.label == label and p.knob == knob
+                  and p.T == T]
+            if pt:
+                p = pt[0]
+                P.append(f"| {label} | {T:g} | {p.cpu:.4g} | {p.dH:.2e} | {p.g:.1e} | {p.work} |"
+                         + ("" if p.ok else " FAILED |"))
+    P.append("")
+    growth = []
+    Tg = pcfg["growth"]["T"]
+    for label, knob in ((gm, gh), (DOP_A, tol), (DOP_B, tol)):
+        pts = {p.T: p for p in points if p.panel == "pendulum" and p.label == label
+               and p.knob == knob and p.T in (Tg[0], Tg[-1]) and p.ok}
+        if len(pts) == 2 and pts[Tg[0]].dH > 0:
+            dec = np.log10(Tg[-1] / Tg[0])
+            f = (pts[Tg[-1]].dH / pts[Tg[0]].dH) ** (1.0 / dec)
+            gg = (pts[Tg[-1]].g / pts[Tg[0]].g) ** (1.0 / dec) if pts[Tg[0]].g > 0 else np.nan
+            growth.append(f"{label} {f:.3g}×" + (f" (max|g| {gg:.3g}×)" if np.isfinite(gg) else ""))
+    if growth:
+        P.append(f"Growth of max|ΔH| per decade of T ({Tg[0]:g} → {Tg[-1]:g} s): "
+                 + "; ".join(growth) + ". fastvi's energy error is bounded (symplectic: its "
+                 "slow rise is the chaotic motion visiting more extreme states over longer runs) "
+                 "and its constraints stay at round-off; DOP853's energy error drifts (≈ linearly "
+                 "in T at fixed tolerance), and in Cartesian form so does its constraint "
+                 "residual. Holding DOP853's error fixed as T grows costs it a tighter tolerance, "
+                 "which it buys cheaply (the panels above).\n")
+    # cost per step: where the gap comes from
+    T0 = pcfg["T"][0]
+    fv = [p.cpu / p.work for p in points if p.panel == "pendulum" and p.T == T0 and p.is_fastvi
+          and p.ok and p.work]
+    da = [p.cpu / p.work for p in points if p.panel == "pendulum" and p.T == T0 and p.label == DOP_A
+          and p.ok and p.work]
+    if fv and da:
+        P.append(f"**Cost per step** (T = {T0:g} s, median over the runs): fastvi "
+                 f"{1e6 * np.median(fv):.2f} µs (whole public call / steps), DOP853 (a) "
+                 f"{1e6 * np.median(da):.2f} µs per accepted step ({peers.DOP853_STAGES} "
+                 "evaluations). At equal energy error the two take similar numbers of steps (the "
+                 "steps columns of the data table), so the ratio above is essentially the ratio "
+                 "of the costs per step.\n")
+    # stiff
+    table, target = stiff_table(points, pcfg)
+    s = pcfg["stiff"]
+    if table:
+        cross, r_top, ratios = stiff_summary(table, pcfg)
+        P.append("### Stiff rod–slider\n")
+        P.append(
+            f"`fastvi.scenes.rotary_rod_slider(k=…)` (paper B's l = {peers.SLIDER_L:g} m, mA = "
+            f"{peers.SLIDER_MA:g} kg, mB = {peers.SLIDER_MB:g} kg, r0 = {peers.SLIDER_R0:g} m), the "
+            f"rod released horizontally at rest with the spring stretched so that it holds "
+            f"{peers.SPRING_ENERGY:g} J at every k (δ = sqrt(2 J/k); the fast mode, ω = sqrt(k/mB), "
+            f"carries the same energy at every k, so a solver that damps it pays in energy error), "
+            f"T = {s['T']:g} s. Peers: CyRK DOP853, LSODA and Radau (C++, same `cfunc` mechanism) on "
+            "the hand-written minimal-coordinate (θ, r) right-hand side, rtol = atol swept; LSODA "
+            "and Radau form their Jacobians by finite differences of the compiled right-hand "
+            f"side. fastvi: {', '.join('`' + m + '`' for m in s['methods'])} with h = T/⌈Tω/c⌉, "
+            f"ωh ≈ c ∈ {{{', '.join(f'{c:g}' for c in s['c'])}}}, h ≤ {STIFF_H_MAX:g} (so at small "
+            "k every c gives the same h). The methods with r = s (`P2L-Q2G`, `P3L-Q3G`) stay "
+            "stable and keep the energy at any ωh; the defaults (r = s + 1) have a stability "
+            "limit (FAILED or exploding energy beyond it). At ωh ≫ 1 the energy is right but "
+            "the phase of the fast oscillation is not resolved (it is aliased): a step that "
+            "keeps the energy, not one that follows the fast mode. "
+            f"**Target: max|ΔH| ≤ {target:.0e} J** ({STIFF_TARGET_REL:g} of the spring energy). "
+            "Each cell: CPU time to reach the target, log–log interpolated on the contender's "
+            "front; ≤: every run met it, the cheapest run's time (an upper bound: for fastvi "
+            f"the cheapest is h = {STIFF_H_MAX:g}, a step the slow motion, not the spring, "
+            "limits, so the ratio in the last column is then a lower bound of fastvi's lead); "
+            "—: no run reached it.\n")
+        labels = list(dict.fromkeys(lab for row in table.values() for lab in row))
+        P.append("| k (N/m) | ω (rad/s) | " + " | ".join(labels) + " | best peer / best fastvi |")
+        P.append("|---" * (len(labels) + 3) + "|")
+        for k, row in table.items():
+            cells = []
+            for lab in labels:
+                c, how = row.get(lab, (np.nan, "—"))
+                cells.append("—" if not np.isfinite(c) else (("≤ " if how == "≤" else "")
+                                                             + f"{c:.4g}"))
+            P.append(f"| {k:.0e} | {peers.slider_omega(k):.3g} | " + " | ".join(cells)
+                     + f" | **{_fmt(ratios[k])}** |")
+        P.append("")
+        ks = sorted(table)
+        P.append(
+            (f"**Crossover:** fastvi is ahead of every compiled peer from k = {cross:.0e} on. "
+             if cross is not None else
+             "**Crossover:** none — fastvi is not ahead of every compiled peer at the largest k "
+             "(or at every k from some k on). ")
+            + f"At k = {ks[-1]:.0e} the best peer takes {_fmt(r_top)}× fastvi's CPU time "
+            f"(goal ≥ {STIFF_GOAL:g}×: **{'met' if r_top >= STIFF_GOAL else 'not met'}**).\n")
+        big = [p for p in points if p.panel == "stiff" and p.k == ks[-1] and p.is_fastvi and p.ok
+               and np.isfinite(p.err_theta) and p.dH <= target]
+        if big:
+            p = max(big, key=lambda p: p.knob)
+            P.append(
+                f"**Is the motion right, not only the energy?** At k = {ks[-1]:.0e}, `{p.label}` "
+                f"with h = {p.knob:.3g} (ωh ≈ {peers.slider_omega(ks[-1]) * p.knob:.3g}) ends "
+                f"{p.err_theta:.1e} rad from a tight DOP853 reference (rtol = atol = "
+                f"{STIFF_REF_TOL:g}) in the rod angle θ (the slow motion), but {p.err_r:.1e} m in "
+                f"r, against a spring amplitude δ = {peers.slider_stretch(ks[-1]):.1e} m: the "
+                "slow motion and the energy are right, the phase of the spring's oscillation is "
+                "not. A user who needs the fast oscillation itself must resolve it, and there "
+                "DOP853 is cheaper (the rows at small ωh).\n")
+    # where fastvi loses
+    P.append("### Where fastvi loses\n")
+    P.extend(_loses_lines(points, pcfg, table))
+    P.append("")
+    for rel in figs:
+        P.append(f"![{rel}]({rel})\n")
+    P.append(f"### Data (peer panels)\n")
+    P.append("| panel | contender | h or tol | k | T (s) | CPU (s) | runs | max\\|ΔH\\| (J) | max\\|g\\| | steps "
+             "| \\|θ(T) − ref\\| | \\|r(T) − ref\\| |")
+    P.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for p in points:
+        P.append(f"| {p.panel} | {p.label} | {p.knob:.4g} | {'' if not np.isfinite(p.k) else f'{p.k:.0e}'} | "
+                 f"{p.T:g} | {p.cpu:.4g} | {len(p.cpus)} | {'FAILED' if not p.ok else f'{p.dH:.2e}'} | "
+                 f"{p.g:.1e} | {p.work} | {_fmt(p.err_theta, '.1e')} | {_fmt(p.err_r, '.1e')} |")
+    P.append(f"\n(The peer sections took {elapsed / 60:.1f} min of this run.)\n")
+    return P
+
+
+def _loses_lines(points, pcfg, table) -> list[str]:
+    """A plain statement, from the measured numbers, of where fastvi is slower."""
+    out = []
+    for T in pcfg["T"]:
+        for rival in (DOP_A, DOP_B):
+            xs = [(E, x, w) for E, _, w, _, x in peer_ratios(points, T, rival) if np.isfinite(x)]
+            slow = [(E, x, w) for E, x, w in xs if x > 1.0]
+            if slow:
+                out.append(f"- T = {T:g} s, against {rival}: fastvi is slower at "
+                           + ", ".join(f"{E:.0e} J ({x:.3g}×, {w})" for E, x, w in slow) + ".")
+            elif xs:
+                out.append(f"- T = {T:g} s, against {rival}: fastvi is not slower at any level "
+                           "both reach.")
+    if table:
+        _, _, ratios = stiff_summary(table, pcfg)
+        lose = [k for k, r in ratios.items() if np.isfinite(r) and r < 1.0]
+        if lose:
+            out.append("- Stiff rod–slider: a compiled peer is cheaper at the target at k = "
+                       + ", ".join(f"{k:.0e} ({1 / ratios[k]:.3g}× cheaper)" if ratios[k] > 0
+                                   else f"{k:.0e} (fastvi never reaches the target)"
+                                   for k in lose) + ".")
+        # the default methods (r = s + 1) on their own
+        defaults = [lab for lab in next(iter(table.values())) if lab in ("P2L-Q3G", "P3L-Q4G")]
+        behind = []
+        for k, row in table.items():
+            fd = [row[lab][0] for lab in defaults if lab in row and np.isfinite(row[lab][0])]
+            pr = [c for lab, (c, _) in row.items() if lab.startswith("CyRK") and np.isfinite(c)]
+            if fd and pr and min(fd) > min(pr):
+                behind.append(f"{k:.0e} ({min(fd) / min(pr):.3g}×)")
+        if behind:
+            out.append("- Stiff rod–slider with fastvi's *default* methods (r = s + 1, "
+                       + ", ".join(f"`{d}`" for d in defaults) + "): slower than the best peer at "
+                       "k = " + ", ".join(behind) + ": their stability limit makes them resolve "
+                       "the spring, like DOP853, at a higher cost per step. The lead at large k "
+                       "belongs to the r = s methods only.")
+    T0 = pcfg["T"][0]
+    fv = [p.cpu / p.work for p in points if p.panel == "pendulum" and p.T == T0 and p.is_fastvi
+          and p.ok and p.work]
+    da = [p.cpu / p.work for p in points if p.panel == "pendulum" and p.T == T0 and p.label == DOP_A
+          and p.ok and p.work]
+    if fv and da:
+        out.append(f"- Why: a fastvi step costs ≈ {np.median(fv) / np.median(da):.0f}× a DOP853 (a) "
+                   "step (medians, cost per step above) and the two need similar numbers of steps "
+                   "at equal energy error; the kernel rewrite of issue 11 targets exactly this. "
+                   "These numbers follow the kernels: rerun `python -m fastvi wpd` after it lands.")
+    out.append("- What fastvi wins regardless: constraints at round-off (max|g| above) and an "
+               "energy error that does not drift with T.")
+    return out
+
+
+def run_peers(pcfg, log):
+    """Run the peer panels; returns (points, elapsed s, missing-reason or None)."""
+    from fastvi.studies import peers
+
+    if not peers.have_cyrk():
+        log(f"compiled peer skipped: {peers.INSTALL_HINT}")
+        return [], 0.0, peers.INSTALL_HINT
+    t0 = time.perf_counter()
+    with quiet():
+        peers.warm_up_peers()
+    points = peer_pendulum_sweep(pcfg, log) + peer_stiff_sweep(pcfg, log)
+    return points, time.perf_counter() - t0, None
+
+
 # ----------------------------------------------------------------------------- main
 def run_study(cfg, outdir: str, log, command: str, figures_on: bool = True, profile: bool = True,
-              growth_on: bool = True):
-    """Run the sweeps, write ``outdir/wpd.md`` and the figures; returns (points, path)."""
+              growth_on: bool = True, peers_on: bool = True, peers_cfg=None):
+    """Run the sweeps, write ``outdir/wpd.md`` and the figures; returns (points, path).
+
+    ``peers_on``: also the compiled-peer panels (:func:`run_peers`, needs CyRK; skipped with
+    a note on the page when it is missing), configured by ``peers_cfg`` (default
+    :data:`PEERS_QUICK` for the quick configuration, :data:`PEERS_FULL` otherwise)."""
     t_start = time.perf_counter()
     model = fastvi.scenes.double_pendulum()
     q0, v0 = model.initial_state(*THETA0)
@@ -1092,11 +1717,22 @@ def run_study(cfg, outdir: str, log, command: str, figures_on: bool = True, prof
             r = growth[N]
             log(f"chain({N}): {r['rows']} rows, {1e6 * r['cpu_per_step']:.1f} µs/step, "
                 f"LU {100 * r['lu_share']:.0f}% of a step")
+    peer_text = []
     os.makedirs(outdir, exist_ok=True)
+    if peers_on:
+        pcfg = peers_cfg if peers_cfg is not None else (PEERS_QUICK if cfg is QUICK or
+                                                        cfg.get("repeats") == 1 else PEERS_FULL)
+        ppoints, p_elapsed, missing = run_peers(pcfg, log)
+        ptable = stiff_table(ppoints, pcfg)[0] if ppoints else {}
+        pfigs = peer_figures(ppoints, pcfg, ptable, outdir, log) if figures_on and ppoints else []
+        peer_text = peer_markdown(ppoints, pcfg, pfigs, p_elapsed, missing)
     figs = figures(points, cfg, outdir, log) if figures_on else []
     path = os.path.join(outdir, "wpd.md")
     text = markdown(points, cfg, figs, prof, ref_floor, command, time.perf_counter() - t_start,
                     growth)
+    if peer_text:
+        head, sep, tail = text.partition("## Diagrams\n")
+        text = head + "\n".join(peer_text) + "\n" + sep + tail
     with open(path, "w", encoding="utf-8") as fh:
         fh.write(text)
     log(f"wrote {path}" + (f" and {len(figs)} figures" if figs else ""))
@@ -1114,6 +1750,8 @@ def main(argv=None) -> int:
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     parser.add_argument("--no-profile", action="store_true", help="skip the per-step profile")
     parser.add_argument("--no-growth", action="store_true", help="skip the chain(N) cost-growth table")
+    parser.add_argument("--no-peers", action="store_true",
+                        help="skip the compiled-peer panels (CyRK DOP853 / LSODA / Radau)")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     args = parser.parse_args(argv)
 
@@ -1124,7 +1762,7 @@ def main(argv=None) -> int:
     command = "python -m fastvi wpd" + (" --quick" if args.quick else "")
     points, path = run_study(QUICK if args.quick else FULL, args.out, log, command,
                              figures_on=not args.no_figures, profile=not args.no_profile,
-                             growth_on=not args.no_growth)
+                             growth_on=not args.no_growth, peers_on=not args.no_peers)
     goals, _ = goal_lines(points, QUICK if args.quick else FULL)
     print("\n".join(goals))
     print(f"wrote {path}")

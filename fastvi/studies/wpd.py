@@ -80,9 +80,10 @@ from fastvi.kernels.linalg import lu_factor, lu_solve
 from fastvi.kernels.layout import PGRAD as _PGRAD
 from fastvi.kernels.layout import NEWTON_FULL, STEP_OUT_SIZE, ModelData, NewtonOptions
 from fastvi.kernels.layout import make_workspace as vi_workspace
-from fastvi.kernels.step import assemble, end_momentum
+from fastvi.kernels.step import assemble
 from fastvi.kernels.step import step as _vi_step
 from fastvi.status import Status
+from fastvi.studies.profile import _loop_assemble, _loop_end, _loop_solve
 from fastvi.studies.reference import REF_TOL, chain_cartesian, chain_pendulum_reference
 
 #: fastvi's defaults P1…P4 and paper B's own scheme
@@ -470,14 +471,6 @@ def method_crossovers(points, metric: str, per_decade: int = 40):
 
 # ----------------------------------------------------------------------------- profile
 @njit
-def _loop_assemble(md, tabs, h, qk, pk, ws, jac, K):
-    st = 0
-    for _ in range(K):
-        st += assemble(md, tabs, h, qk, pk, ws, jac)
-    return st
-
-
-@njit
 def _loop_factor(A0, A, piv, N, factor, K):
     st = 0
     for _ in range(K):
@@ -490,29 +483,12 @@ def _loop_factor(A0, A, piv, N, factor, K):
 
 
 @njit
-def _loop_solve(A, piv, R0, R, N, K):
-    for _ in range(K):
-        for i in range(N):
-            R[i] = R0[i]
-        lu_solve(A, piv, R, N)
-    return R[0]
-
-
-@njit
 def _loop_callback(fns, q, prm, out, K):
     acc = 0.0
     for _ in range(K):
         fns[_PGRAD](ptr(q), ptr(q), ptr(prm), ptr(out))
         acc += out[0]
     return acc
-
-
-@njit
-def _loop_end(md, q1, P, p1, v1, G1, ws, K):
-    st = 0
-    for _ in range(K):
-        st += end_momentum(md, q1, P, p1, v1, G1, ws)
-    return st
 
 
 def _per_call(fn, *args, budget: float = 0.05, repeats: int = 5) -> float:

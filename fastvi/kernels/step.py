@@ -342,6 +342,17 @@ def _qscale(qk):
 
 
 @hot
+def _apply_increment(X, R, N, sn, qscale):
+    """X −= R; returns the max-norm of the control-point increments over ``qscale``."""
+    dn = 0.0
+    for k in range(N):
+        X[k] -= R[k]
+    for k in range(sn):
+        dn = max(dn, abs(R[k]))
+    return dn / qscale
+
+
+@hot
 def newton_full(md, tabs, opts, h, qk, pk, ws, out):
     """Newton's method with the exact Newton matrix, from the unknowns in ``ws.X``.
 
@@ -372,12 +383,7 @@ def newton_full(md, tabs, opts, h, qk, pk, ws, out):
         if lu_factor(A, piv, N) != 0:
             return SINGULAR
         lu_solve(A, piv, R, N)
-        dn = 0.0
-        for k in range(N):
-            X[k] -= R[k]
-        for k in range(sn):
-            dn = max(dn, abs(R[k]))
-        dn /= qscale
+        dn = _apply_increment(X, R, N, sn, qscale)
         if not np.isfinite(dn):
             return NONFINITE
         if dn <= tol:
@@ -675,12 +681,7 @@ def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
             if st != OK:
                 return st
         _mech_solve(md, tabs, h, ws, n, m, s, J)
-        dn = 0.0
-        for k in range(N):
-            X[k] -= R[k]
-        for k in range(sn):
-            dn = max(dn, abs(R[k]))
-        dn /= qscale
+        dn = _apply_increment(X, R, N, sn, qscale)
         if not np.isfinite(dn):
             return NONFINITE
         if dn <= tol:

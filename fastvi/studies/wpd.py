@@ -1008,7 +1008,9 @@ def markdown(points, cfg, figs, prof, ref_floor, command, elapsed, growth=None) 
     if prof:
         P.append("## What a step costs\n")
         P.append("`fastvi.studies.wpd.profile_step`, in CPU time of the thread: the cost per "
-                 "step of `fastvi.integrate` (saving every step), and each kernel timed alone in a "
+                 "step of `fastvi.integrate` with `newton=\"full\"` (saving every step; the "
+                 "default mechanics-matrix iteration is profiled in `docs/benchmarks.md`), and "
+                 "each kernel of the full Newton timed alone in a "
                  "compiled loop on the same state, times its calls per step (Newton iterations "
                  f"for the parts inside Newton's loop); fastest of {cfg['profile'][2]} "
                  "interleaved round(s). "

@@ -29,7 +29,7 @@ here allocates.
 
 import numpy as np
 
-from .._numba import hot, ptr
+from .._numba import hot, hot_inline, ptr
 from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_KHESS, F_EX_MJAC, F_EX_PHESS,
                      F_M, F_MASSFN, F_N, KGRAD, MASS, MJAC, NEWTON_FAILED, NEWTON_FULL, NONFINITE,
                      OK, PGRAD, PHESS, KHESS, S_FULL, S_G, S_GV, S_ITERS, S_RES, SINGULAR,
@@ -119,7 +119,7 @@ def _fd_constraint_hessian(fjac, q, eta, prm, out, qa, Gp, Gm, n, m):
 
 
 # ----------------------------------------------------------------------------- assembly
-@hot
+@hot_inline
 def _point_force(md, ws, Mi, has_mass, n):
     """At ``(ws.qi, ws.vi)``: ``ws.F = ∂T/∂q − ∇V``, ``ws.fa = ∇V`` and, for a mass
     function, ``Mi = M(q_i)``."""
@@ -305,7 +305,7 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
 
 
 # ----------------------------------------------------------------------------- predictor, full Newton
-@hot
+@hot_inline
 def predict(tabs, n, m, h, vk, ws, first):
     """Initial guess: the previous step's polynomial extrapolated onto this step."""
     E, tau = tabs.E, tabs.tau
@@ -333,7 +333,7 @@ def predict(tabs, n, m, h, vk, ws, first):
         X[k] = Xp[k]
 
 
-@hot
+@hot_inline
 def _qscale(qk):
     qscale = 1.0
     for a in range(qk.shape[0]):
@@ -341,7 +341,7 @@ def _qscale(qk):
     return qscale
 
 
-@hot
+@hot_inline
 def _apply_increment(X, R, N, sn, qscale):
     """X −= R; returns the max-norm of the control-point increments over ``qscale``."""
     dn = 0.0
@@ -407,7 +407,7 @@ def newton_full(md, tabs, opts, h, qk, pk, ws, out):
 
 
 # ----------------------------------------------------------------------------- mechanics matrix
-@hot
+@hot_inline
 def _mass_bar(md, qk, ws, n):
     """Prepare ``M̄⁻¹`` for this step: ``1/diag(M)``, or the LU of ``M(q_k)`` (of the
     constant ``M`` once per trajectory). Returns a status code."""
@@ -433,7 +433,7 @@ def _mass_bar(md, qk, ws, n):
     return OK
 
 
-@hot
+@hot_inline
 def _minv(md, ws, x, n):
     """x ← M̄⁻¹ x."""
     if md.flags[F_DIAG] != 0:
@@ -443,7 +443,7 @@ def _minv(md, ws, x, n):
         lu_solve(ws.Mb, ws.pivn, x, n)
 
 
-@hot
+@hot_inline
 def _mech_rows(md, ws, j, n, m):
     """``ws.Y[j]`` = (M̄⁻¹ G_jᵀ)ᵀ from ``ws.G[j]``."""
     for c in range(m):
@@ -453,7 +453,7 @@ def _mech_rows(md, ws, j, n, m):
         _minv(md, ws, Yc, n)
 
 
-@hot
+@hot_inline
 def residual(md, tabs, h, qk, pk, ws):
     """The residual alone at ``ws.X``, into ``ws.R`` (with ``ws.D`` and ``ws.G[1:]``).
 
@@ -549,7 +549,7 @@ def residual(md, tabs, h, qk, pk, ws):
     return OK
 
 
-@hot
+@hot_inline
 def _schur(tabs, h, ws, n, m, J):
     """Build and factor the Schur complement ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` on the
     impulses from ``ws.G`` and ``ws.Y``. Returns a status code."""
@@ -569,7 +569,7 @@ def _schur(tabs, h, ws, n, m, J):
     return OK
 
 
-@hot
+@hot_inline
 def _mech_solve(md, tabs, h, ws, n, m, s, J):
     r"""Overwrite the residual ``ws.R`` with ``K̃⁻¹ R`` for the mechanics matrix
 
@@ -696,7 +696,7 @@ def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
     return NEWTON_FAILED
 
 
-@hot
+@hot_inline
 def _finish_mech(md, tabs, h, qk, ws, q1, n, m, s, J):
     """After :func:`newton_mech`: q1, g(q1), G(q1) and ``D_s`` at the final unknowns.
 
@@ -839,7 +839,7 @@ def step(md, tabs, opts, h, state, ws, first, out):
     return OK
 
 
-@hot
+@hot_inline
 def velocity_residual(G1, v1, n, m):
     """max_a |(G v)_a|."""
     gv = 0.0

@@ -38,6 +38,23 @@ argument                    function                                        ``ou
 The last four are optional: a missing one is replaced by central finite differences of the
 first derivative it differentiates (inside the kernel, without allocation). They only enter
 the Newton matrix, so they change the Newton convergence rate, not the solution.
+
+Forces and time (optional; time always first):
+
+===============================  ==========================================  ==============
+argument                         function                                     ``out`` shape
+===============================  ==========================================  ==============
+``force``                        ``force(t, q, v, params, out)``: F(t, q, v)  (n,)
+``force_jacobian_q``             ``(t, q, v, params, out)``: ∂F/∂q            (n, n)
+``force_jacobian_v``             ``(t, q, v, params, out)``: ∂F/∂v            (n, n)
+``constraint_time_derivative``   ``(t, q, params, out)``: ∂g/∂t               (m,)
+===============================  ==========================================  ==============
+
+With ``time_dependent=True`` the potential and constraint callbacks of the first table take
+``t`` first as well (``potential(t, q, params)``, ``constraint(t, q, params, out)``, …). The
+compiled signature stays the one above: the time travels in a hidden entry ``params[k]``
+after the user's ``k`` parameters, written by the kernels before each evaluation and read by
+the wrappers (:meth:`Model.kernel_params`); models without forces or time have no such entry.
 """
 
 from __future__ import annotations

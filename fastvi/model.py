@@ -54,7 +54,7 @@ With ``time_dependent=True`` the potential and constraint callbacks of the first
 ``t`` first as well (``potential(t, q, params)``, ``constraint(t, q, params, out)``, …). The
 compiled signature stays the one above: the time travels in a hidden entry ``params[k]``
 after the user's ``k`` parameters, written by the kernels before each evaluation and read by
-the wrappers (:meth:`Model.kernel_params`); models without forces or time have no such entry.
+the wrappers (:meth:`Model.kernel_params`); the other callbacks never look at it.
 """
 
 from __future__ import annotations
@@ -534,7 +534,8 @@ class Model:
     @property
     def timed(self) -> bool:
         """Whether any callback reads the time (a force, or ``time_dependent``): the kernels
-        then pass it in a hidden entry after the parameters (:meth:`kernel_params`)."""
+        pass it in a hidden entry after the parameters (:meth:`kernel_params`), and the
+        results carry the work of forces and time."""
         return self.time_dependent or self.has_force
 
     def _kind(self, slot: str) -> str:
@@ -544,11 +545,10 @@ class Model:
 
     def kernel_params(self, params=None, t: float = 0.0) -> np.ndarray:
         """The parameter vector the compiled callbacks receive: ``params`` (default the
-        model's), followed for a :attr:`timed` model by one hidden entry holding the time
-        ``t``, which the kernels overwrite at every evaluation. A fresh array."""
+        model's) followed by one hidden entry holding the time ``t``, which the kernels
+        overwrite at every evaluation (time-aware callbacks read it; the others never look).
+        A fresh array of length k + 1."""
         p = self.params if params is None else np.asarray(params, dtype=np.float64)
-        if not self.timed:
-            return np.array(p, dtype=np.float64)
         return np.append(p, float(t))
 
     def _compile(self):
@@ -577,7 +577,7 @@ class Model:
             flags[lay.F_EX_FJV] = int("force_jacobian_v" in self._functions)
             flags[lay.F_TIME] = int(self.time_dependent)
             flags[lay.F_EX_GT] = int("constraint_time_derivative" in self._functions)
-            flags[lay.F_TSLOT] = k if self.timed else -1
+            flags[lay.F_TSLOT] = k
             self._compiled = (cfs, flags, Mc)
         return self._compiled
 

@@ -34,7 +34,7 @@ MODELS = _models()
 
 
 def _kernel(model, meth, h, qk, pk, X, jac=True):
-    md = ModelData(*model.kernel_arguments(), model.params)
+    md = ModelData(*model.kernel_arguments(), model.kernel_params())
     ws = make_workspace(model.n, model.m, meth.s, meth.r, meth.J)
     ws.X[:] = X
     if model.m:

@@ -24,8 +24,7 @@ __all__ = ["run", "run_member", "run_ensemble", "energy", "accept", "record", "I
 @hot
 def energy(md, t, q, p, v, scratch):
     """H = ½ vᵀp + V(t, q) with v = M⁻¹p already known."""
-    if md.flags[F_TSLOT] >= 0:
-        md.prm[md.flags[F_TSLOT]] = t
+    md.prm[md.flags[F_TSLOT]] = t
     md.fns[POT](ptr(q), ptr(q), ptr(md.prm), ptr(scratch))
     e = scratch[0]
     for a in range(q.shape[0]):

@@ -9,7 +9,9 @@ positional argument lists:
 ``ModelData(fns, flags, Mc, prm)``
     the model's compiled callbacks (tuple in :data:`SLOTS` order), its int64 flags vector
     (indices ``F_*``), the constant mass matrix (zeros when ``M`` is a function) and the
-    parameter vector of this trajectory;
+    parameter vector of this trajectory, always built by
+    :meth:`fastvi.Model.kernel_params` (k + 1 entries: the kernels write the time into the
+    last one, so a bare ``model.params`` would be written past its end);
 ``NewtonOptions(tol, max_iter, mode)``
     the stopping tolerance, the iteration cap and the Newton variant (``NEWTON_*``);
 ``Tables`` (:meth:`fastvi.tables.Method.kernel_tables`)
@@ -68,9 +70,10 @@ F_EX_FJV = 10  # exact ∂F/∂v given
 F_TIME = 11  # potential and constraints depend on time (rheonomic)
 F_EX_GT = 12  # exact ∂g/∂t given
 #: index of the hidden trailing entry of the kernel's parameter vector that carries the
-#: time to the callbacks (−1: the model never reads the time, and the vector has no such
-#: entry). One callback signature serves every model: the kernels write the time of each
-#: evaluation there, the wrappers of time-aware callbacks read it (docs/api.md).
+#: time to the callbacks (= k, the number of user parameters; every model has the entry,
+#: so that writing the time needs no branch). One callback signature serves every model:
+#: the kernels write the time of each evaluation there, the wrappers of time-aware
+#: callbacks read it, the others never look (docs/api.md).
 F_TSLOT = 13
 FLAGS_SIZE = 14
 #: flag index of each optional second derivative, in SECOND order

@@ -120,7 +120,7 @@ def profile_step(model, q0, v0, method: str = "P2L-Q3G", h: float = 0.01, warm: 
     ``iterations_full`` (Newton iterations per step) and ``N`` (unknowns per step).
     """
     meth = fastvi.method(method)
-    prm = np.asarray(model.params, float)
+    prm = model.kernel_params()
     md = ModelData(*model.kernel_arguments(), prm)
     tabs = meth.kernel_tables
     n, m, s, J = model.n, model.m, meth.s, meth.J

@@ -519,7 +519,7 @@ def newton_matrix(model, q, p, v, method: str, h: float) -> np.ndarray:
     Its sparsity matters for timing: the LU of :mod:`fastvi.kernels.linalg` skips zero
     multipliers, so a random dense matrix of the same size would overstate its cost."""
     meth = fastvi.method(method)
-    md = ModelData(*model.kernel_arguments(), np.asarray(model.params, float))
+    md = ModelData(*model.kernel_arguments(), model.kernel_params())
     n, m = model.n, model.m
     N = meth.s * n + meth.J * m
     q, p, v = (np.ascontiguousarray(x, dtype=float) for x in (q, p, v))
@@ -574,7 +574,7 @@ def profile_step(model, q0, v0, method: str, h: float, n_steps: int = 2000, roun
     """
     meth = fastvi.method(method)
     fns, flags, Mc = model.kernel_arguments()
-    prm = np.asarray(model.params, float)
+    prm = model.kernel_params()
     md = ModelData(fns, flags, Mc, prm)
     tabs = meth.kernel_tables
     n, m = model.n, model.m

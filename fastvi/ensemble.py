@@ -482,10 +482,11 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -
                 numba.set_num_threads(threads)
             used = numba.get_num_threads()
             numba.set_parallel_chunksize(max(1, N // (CHUNKS_PER_THREAD * used)))
-            args = (fns, flags, Mc, KP, meth.kernel_tables, opts["newton"], h, t0,
+            args = (fns, flags, Mc, KP, model.kernel_data().timed, meth.kernel_tables,
+                    opts["newton"], h, t0,
                     meth.s, meth.r, meth.J, X0, total, mode, every, H0,
                     Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst)
-            compile_time += _dispatch_time(drive.run_ensemble, *args)
+            compile_time += _dispatch_time(drive.run_ensemble, args[4], *args)
             t_loop = time.perf_counter()
             drive.run_ensemble(*args)
             t1 = time.perf_counter()

@@ -14,7 +14,7 @@ from . import _validate as valid
 from ._numba import quiet
 from .kernels import drive
 from .kernels import layout as lay
-from .kernels.layout import ModelData, Samples, make_workspace
+from .kernels.layout import Samples, make_workspace
 from .model import Model
 from .results import ProgressBar, Result
 from .status import MESSAGES, Status
@@ -186,7 +186,7 @@ def integrate(
         check_time = _timed(lambda: model.check(q0, v0, params=prm, n_random=1, t=t0))
     q0, v0 = valid.initial_state(model, q0, v0, prm, t0)
 
-    md = ModelData(*model.kernel_arguments(), model.kernel_params(prm, t0))
+    md = model.kernel_data(prm, t0)
     M0 = model.mass_matrix(q0, prm)
     state = np.zeros((6, n))
     state[0], state[1], state[2] = q0, M0 @ v0, v0
@@ -207,7 +207,7 @@ def integrate(
     tabs = meth.kernel_tables
 
     chunk = total if not progress else max(1, total // _PROGRESS_CHUNKS)
-    compile_time += _dispatch_time(drive.run, md, tabs, opts, h, state, ws, chunk, total, every,
+    compile_time += _dispatch_time(drive.run, md.timed, md, tabs, opts, h, state, ws, chunk, total, every,
                                    smp, info)
     bar = ProgressBar(total) if progress else None
     t_loop = time.perf_counter()
@@ -258,19 +258,25 @@ def _timed(fn) -> float:
     return time.perf_counter() - t
 
 
-def _dispatch_time(kernel, *args) -> float:
+#: (kernel, kind) pairs already made ready in this process (see _dispatch_time)
+_READY: set = set()
+
+
+def _dispatch_time(kernel, kind, *args) -> float:
     """Seconds to make ``kernel`` ready for ``args`` (compile, or load from numba's cache).
 
     The types are computed as numba's dispatcher computes them for a call, so the call that
     follows finds the compiled version and the loop's timing holds the loop only. Typing
     the arguments costs ≈ 0.5 ms (the tuple of callbacks), so it is skipped once the kernel
-    has a compiled version: the kernels are called with the same types for every model.
+    is ready for this ``kind`` of model: the kernels are called with the same types for
+    every model of a kind (conservative, or with forces or time: ``ModelData.timed``).
     """
-    if not hasattr(kernel, "compile") or kernel.overloads:  # NUMBA_DISABLE_JIT, or ready
+    if not hasattr(kernel, "compile") or (kernel, kind) in _READY:  # NUMBA_DISABLE_JIT, or ready
         return 0.0
     t = time.perf_counter()
     with quiet():
         kernel.compile(tuple(kernel.typeof_pyval(a) for a in args))
+    _READY.add((kernel, kind))
     return time.perf_counter() - t
 
 

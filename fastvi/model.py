@@ -551,6 +551,14 @@ class Model:
         p = self.params if params is None else np.asarray(params, dtype=np.float64)
         return np.append(p, float(t))
 
+    def kernel_data(self, params=None, t: float = 0.0):
+        """The :class:`fastvi.kernels.layout.ModelData` the kernels receive: the callbacks,
+        flags, constant mass, :meth:`kernel_params` and the kind marker (``None`` for a
+        conservative, autonomous model: its kernels are compiled without any force or time
+        code)."""
+        return lay.ModelData(*self._compile(), self.kernel_params(params, t),
+                             True if self.timed else None)
+
     def _compile(self):
         if self._compiled is None:
             k = self.params.shape[0]

@@ -15,7 +15,7 @@ from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_IT
                      F_MAXRES, F_N, F_RES, F_TSLOT, I_FAILED, I_FIRST, I_FULL, I_ITERS, I_MAXRES,
                      I_RES, I_SLOT, I_STEPS, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK, INFO_SIZE,
                      POT, S_FULL, S_G, S_GV, S_ITERS, S_RES, S_WORK, SAVE_DIAGNOSTICS, SAVE_FINAL,
-                     SAVE_STRIDE, STEP_OUT_SIZE, ModelData, Samples, make_workspace)
+                     SAVE_STRIDE, STEP_OUT_SIZE, ModelData, Samples, is_timed, make_workspace)
 from .step import step
 
 __all__ = ["run", "run_member", "run_ensemble", "energy", "accept", "record", "INFO_SIZE"]
@@ -24,7 +24,8 @@ __all__ = ["run", "run_member", "run_ensemble", "energy", "accept", "record", "I
 @hot
 def energy(md, t, q, p, v, scratch):
     """H = ½ vᵀp + V(t, q) with v = M⁻¹p already known."""
-    md.prm[md.flags[F_TSLOT]] = t
+    if is_timed(md):
+        md.prm[md.flags[F_TSLOT]] = t
     md.fns[POT](ptr(q), ptr(q), ptr(md.prm), ptr(scratch))
     e = scratch[0]
     for a in range(q.shape[0]):
@@ -164,12 +165,13 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
 
 
 @njit(parallel=True)
-def run_ensemble(fns, flags, Mc, P, tabs, opts, h, t0, s, r, J, X0, n_total, mode, every, H0,
-                 Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst):
+def run_ensemble(fns, flags, Mc, P, timed, tabs, opts, h, t0, s, r, J, X0, n_total, mode, every,
+                 H0, Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst):
     """``run_member`` for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in parallel.
 
-    ``P`` (N, k) holds each member's kernel parameters (with the hidden time entry of a
-    time-aware model: each member writes only its own row); the outputs are indexed by
+    ``P`` (N, k + 1) holds each member's kernel parameters (the kernels write the time into
+    the last entry of a member's own row) and ``timed`` the kind marker of
+    ``ModelData``; the outputs are indexed by
     member first (``Qs`` (N, K, n), ``En``, ``Wk`` (N, K), ``ist`` (N, E_SIZE), ``fst``
     (N, F_SIZE)). Each member gets its own workspace and state, allocated inside the loop
     body, so threads share nothing but read-only model and method data.
@@ -186,5 +188,5 @@ def run_ensemble(fns, flags, Mc, P, tabs, opts, h, t0, s, r, J, X0, n_total, mod
         # the member's times are the caller's grid, so they go to scratch
         smp = Samples(np.zeros(En.shape[1]), Qs[i], Vs[i], Ps[i], En[i], Gr[i], GVr[i], It[i],
                       Wk[i])
-        run_member(ModelData(fns, flags, Mc, P[i]), tabs, opts, h, t0, state, ws, n_total, mode,
+        run_member(ModelData(fns, flags, Mc, P[i], timed), tabs, opts, h, t0, state, ws, n_total, mode,
                    every, H0[i], smp, ist[i], fst[i])

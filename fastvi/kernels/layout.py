@@ -6,12 +6,17 @@ imported by :mod:`fastvi.model`, the step and drive kernels, the RK4 baseline an
 yardstick in ``bench/``. Kernels receive a handful of named tuples instead of long
 positional argument lists:
 
-``ModelData(fns, flags, Mc, prm)``
+``ModelData(fns, flags, Mc, prm, timed)``
     the model's compiled callbacks (tuple in :data:`SLOTS` order), its int64 flags vector
     (indices ``F_*``), the constant mass matrix (zeros when ``M`` is a function) and the
     parameter vector of this trajectory, always built by
     :meth:`fastvi.Model.kernel_params` (k + 1 entries: the kernels write the time into the
-    last one, so a bare ``model.params`` would be written past its end);
+    last one, so a bare ``model.params`` would be written past its end), and ``timed``:
+    ``None`` for a conservative, autonomous model, ``True`` for one with forces or time.
+    ``timed`` is a *type-level* switch: numba compiles the kernels once for each kind and
+    removes the force and time code from the conservative ones (:func:`is_timed`; a
+    run-time flag there cost 6–10 % of a conservative step, measured side by side). Build
+    it with :meth:`fastvi.Model.kernel_data`;
 ``NewtonOptions(tol, max_iter, mode)``
     the stopping tolerance, the iteration cap and the Newton variant (``NEWTON_*``);
 ``Tables`` (:meth:`fastvi.tables.Method.kernel_tables`)
@@ -26,7 +31,7 @@ from collections import namedtuple
 
 import numpy as np
 
-from .._numba import njit
+from .._numba import hot_inline, njit
 from ..status import Status
 
 # ----------------------------------------------------------------------------- model callbacks
@@ -127,7 +132,7 @@ F_SIZE = 6
 #: |g|, |G v| and the sum of Newton iterations over the steps since the previous sample, and
 #: the work of forces and time since the start (zero for a conservative model)
 Samples = namedtuple("Samples", ["t", "q", "v", "p", "energy", "g", "gv", "iters", "work"])
-ModelData = namedtuple("ModelData", ["fns", "flags", "Mc", "prm"])
+ModelData = namedtuple("ModelData", ["fns", "flags", "Mc", "prm", "timed"])
 NewtonOptions = namedtuple("NewtonOptions", ["tol", "max_iter", "mode"])
 Tables = namedtuple("Tables", ["b", "L", "Ld", "Lc", "E", "tau", "Ainv", "W", "As", "mech",
                                "c", "d"])
@@ -176,6 +181,13 @@ Workspace = namedtuple(
         "time",  # (2,) t_k, t_{k+1} of the step being taken (set by the driver)
     ],
 )
+
+
+@hot_inline
+def is_timed(md):
+    """Whether the model reads the time or has a force: a compile-time constant (see
+    ``ModelData.timed``), so the branches it guards vanish from conservative kernels."""
+    return md.timed is not None
 
 
 @njit

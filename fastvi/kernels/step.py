@@ -34,7 +34,8 @@ from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F
                      F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_M, F_MASSFN, F_N, F_TIME,
                      F_TSLOT, FJQ, FJV, FORCE, GT, KGRAD, MASS, MJAC, NEWTON_FAILED, NEWTON_FULL,
                      NONFINITE, OK, PGRAD, PHESS, POT, KHESS, S_FULL, S_G, S_GV, S_ITERS, S_RES,
-                     S_WORK, SINGULAR, SINGULAR_CONSTRAINTS, SINGULAR_MASS, make_workspace)
+                     S_WORK, SINGULAR, SINGULAR_CONSTRAINTS, SINGULAR_MASS, is_timed,
+                     make_workspace)
 from .linalg import lu_factor, lu_solve
 
 __all__ = ["make_workspace", "assemble", "step", "end_momentum", "velocity_residual",
@@ -143,10 +144,10 @@ def _fd_force_v(fn, q, v, prm, out, va, fa, fb, n):
 @hot_inline
 def _at(md, ws, h, x):
     """Set the time the callbacks read to ``t_k + x h`` (``x = 1``: ``t_{k+1}`` exactly, the
-    value the next step starts from). Unconditional: every model's kernel parameters have
-    the entry, and a store is cheaper than the branch (a branch here cost 1–4 % of a
-    conservative step, measured side by side)."""
-    md.prm[md.flags[F_TSLOT]] = ws.time[1] if x == 1.0 else ws.time[0] + x * h
+    value the next step starts from). Compiled away for a conservative model
+    (:func:`.layout.is_timed`)."""
+    if is_timed(md):
+        md.prm[md.flags[F_TSLOT]] = ws.time[1] if x == 1.0 else ws.time[0] + x * h
 
 
 @hot_inline
@@ -171,7 +172,7 @@ def _d_dt(md, fn, q, t, out, scratch, k):
     prm[slot] = t
 
 
-@hot_inline
+@hot
 def constraint_rate(md, q, t, out, scratch):
     """``out = g_t(t, q)``: the callback, or a five-point difference of the constraint."""
     m = md.flags[F_M]
@@ -198,7 +199,7 @@ def _point_force(md, ws, Mi, has_mass, n):
     else:
         for a in range(n):
             F[a] = -fa[a]
-    if md.flags[F_FORCE] != 0:
+    if is_timed(md) and md.flags[F_FORCE] != 0:
         fb = ws.fb
         fns[FORCE](ptr(qi), ptr(vi), ptr(prm), ptr(fb))
         for a in range(n):
@@ -212,7 +213,7 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
     Also leaves ``ws.D`` (∂S_u/∂Q^ν) and ``ws.G[j]`` (G at the constraint points j ≥ 1).
     Returns 0, or ``NONFINITE`` when a callback produced NaN/inf.
     """
-    fns, flags, Mc, prm = md
+    fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     b, L, Ld, Lc = tabs.b, tabs.L, tabs.Ld, tabs.Lc
     X, R, A = ws.X, ws.R, ws.A
     D, G = ws.D, ws.G
@@ -241,7 +242,7 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
             D[nu, a] = 0.0
 
     Mi = Mc if not has_mass else ws.Mi
-    has_force = flags[F_FORCE] != 0
+    has_force = is_timed(md) and flags[F_FORCE] != 0
     Fv = ws.Fv
     for i in range(r):
         _at(md, ws, h, tabs.c[i])
@@ -502,7 +503,7 @@ def newton_full(md, tabs, opts, h, qk, pk, ws, out):
 def _mass_bar(md, qk, ws, n):
     """Prepare ``M̄⁻¹`` for this step: ``1/diag(M)``, or the LU of ``M(q_k)`` (of the
     constant ``M`` once per trajectory). Returns a status code."""
-    fns, flags, Mc, prm = md
+    fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     if flags[F_DIAG] != 0:
         if ws.hold[1] == 0:
             for a in range(n):
@@ -554,7 +555,7 @@ def residual(md, tabs, h, qk, pk, ws):
     latency of their additions. It differs from ``assemble(jac=False)`` at round-off.
     Returns 0, or ``NONFINITE`` when a callback produced NaN/inf.
     """
-    fns, flags, Mc, prm = md
+    fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     b, L, Ld, Lc = tabs.b, tabs.L, tabs.Ld, tabs.Lc
     X, R, D, G = ws.X, ws.R, ws.D, ws.G
     qi, vi, F, Pm, fa = ws.qi, ws.vi, ws.F, ws.Pm, ws.fa
@@ -798,7 +799,7 @@ def _finish_mech(md, tabs, h, qk, ws, q1, n, m, s, J):
     O(|δ| h |∂M/∂q|) otherwise): ``D_s −= (1/h) Σ_μ As_μ M̄ δQ^μ``. The force part moves by
     O(h |∂F/∂q| |δ|), below round-off of the momentum. Returns max|g(q1)|.
     """
-    fns, flags, Mc, prm = md
+    fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     X, R, D, G = ws.X, ws.R, ws.D, ws.G
     As = tabs.As
     inv_h = 1.0 / h
@@ -842,7 +843,7 @@ def step(md, tabs, opts, h, state, ws, first, out):
     max|G(q1) v1|, the max-norm of the last residual and 1 if the step used the full
     Newton as a fallback. Returns a status code (0 on success).
     """
-    fns, flags, Mc, prm = md
+    fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     qk, pk, vk, q1, p1, v1 = state[0], state[1], state[2], state[3], state[4], state[5]
     X, R, D, G = ws.X, ws.R, ws.D, ws.G
     Lc = tabs.Lc
@@ -928,7 +929,7 @@ def step(md, tabs, opts, h, state, ws, first, out):
     out[S_G] = gmax
     out[S_GV] = hidden_residual(G[J], v1, ws.gt, n, m)
     out[S_WORK] = 0.0
-    if flags[F_FORCE] != 0 or flags[F_TIME] != 0:
+    if is_timed(md):
         out[S_WORK] = _step_work(md, tabs, h, qk, q1, ws, n, m, s, J)
     # keep this step's unknowns for the next predictor
     Xp = ws.Xprev
@@ -961,7 +962,7 @@ def hidden_residual(G1, v1, gt, n, m):
     return gv
 
 
-@hot_inline
+@hot
 def _step_work(md, tabs, h, qk, q1, ws, n, m, s, J):
     r"""The work done on the system over the step (``docs/api.md``, energy balance)::
 
@@ -971,7 +972,7 @@ def _step_work(md, tabs, h, qk, q1, ws, n, m, s, J):
     time-dependent potential, and the constraint impulses (``η_J`` the projection's) for
     driving constraints: the constraint force ``−Gᵀλ`` has power ``−λ·Gv = λ·g_t``.
     """
-    fns, flags, Mc, prm = md
+    fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     b, L, Ld, Lc = tabs.b, tabs.L, tabs.Ld, tabs.Lc
     X, qi, vi, fb = ws.X, ws.qi, ws.vi, ws.fb
     timed = flags[F_TIME] != 0
@@ -1024,7 +1025,7 @@ def _step_work(md, tabs, h, qk, q1, ws, n, m, s, J):
 def end_momentum(md, q1, P, p1, v1, G1, ws):
     """p1 = P − G1ᵀ η with (G M⁻¹ Gᵀ) η = G M⁻¹ P (+ g_t at t_{k+1} for a rheonomic
     constraint), and v1 = M⁻¹ p1: the hidden constraint G v1 + g_t = 0."""
-    fns, flags, Mc, prm = md
+    fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     n = flags[F_N]
     m = flags[F_M]
     Mlu = ws.Ma
@@ -1059,7 +1060,7 @@ def end_momentum(md, q1, P, p1, v1, G1, ws):
             else:
                 lu_solve(Mlu, pivn, Yc, n)  # row c of (M⁻¹ Gᵀ)ᵀ
         eta = ws.etaJ
-        rheonomic = flags[F_TIME] != 0
+        rheonomic = is_timed(md) and flags[F_TIME] != 0
         if rheonomic:
             # G v1 + g_t = 0 at t_{k+1}: (G M⁻¹ Gᵀ) η = G M⁻¹ P + g_t (forces.md §3)
             constraint_rate(md, q1, ws.time[1], ws.gt, ws.g)

@@ -11,6 +11,8 @@ import warnings
 import numpy as np
 
 from . import _validate as valid
+from . import events as events_
+from .kernels.events import event_values
 from ._numba import quiet
 from .kernels import drive
 from .kernels import layout as lay
@@ -80,6 +82,8 @@ def integrate(
     on_failure: str = "raise",
     recover: int = 0,
     check: bool = True,
+    dense_output: bool = False,
+    events=None,
 ) -> Result:
     r"""Integrate a constrained mechanical system with a Galerkin variational integrator.
 
@@ -152,6 +156,19 @@ def integrate(
         finite differences. Models that passed once (or passed :meth:`Model.check`) are not
         checked again. ``check=False`` skips both, at your own risk: a callback with a size
         mistake then writes out of bounds (crashes, or silently wrong results).
+    dense_output : bool, default False
+        Keep every step's control points and return ``Result.sol``, a
+        :class:`fastvi.events.DenseSolution`: ``sol(t) -> (q, v)`` at any time(s) of the run
+        from the step polynomials (``8 (s+1) n`` bytes a step; interior accuracy in
+        ``docs/api.md``).
+    events : callable or list of callables, optional
+        ``event(t, q, v, params) -> float`` (numba's nopython subset, compiled once like the
+        model's callbacks), at most 8, with SciPy's optional attributes ``terminal`` (bool or
+        a count) and ``direction`` (−1, 0, +1). Zero crossings are located on the step
+        polynomial to round-off in ``t`` (no extra steps) and returned in
+        ``Result.t_events``, ``q_events``, ``v_events`` (one array per event). A terminal
+        event ends the run after the step containing it, with ``status`` 1
+        (``Status.TERMINATED``); that step's end is the last sample.
 
     Returns
     -------
@@ -180,6 +197,11 @@ def integrate(
     opts = valid.newton_options(tol, max_iter, newton)
     recover = valid.recover(recover)
     meth = valid.method(method)
+    if not isinstance(dense_output, (bool, np.bool_)):
+        raise TypeError(f"`dense_output` must be True or False, got {dense_output!r}")
+    if recover and (dense_output or events is not None):
+        raise ValueError("`recover` cannot be combined with `dense_output` or `events` (a recovered "
+                         "step has no single polynomial); use a smaller `h` instead")
     compile_time = _timed(model._compile)
     check_time = 0.0
     if check and not model._checked:  # before the projection, which trusts G(q)
@@ -205,18 +227,32 @@ def integrate(
     info[lay.I_FIRST] = 1
     info[lay.I_T0] = t0
     tabs = meth.kernel_tables
+    ev = events_.prepare(model, meth, events, total if dense_output else 0)
+    if ev is not None and ev.count:
+        event_values(md, ev, t0, q0, v0)
 
     chunk = total if not progress else max(1, total // _PROGRESS_CHUNKS)
     sout = np.zeros(lay.STEP_OUT_SIZE)
-    compile_time += _dispatch_time(drive.run, md.timed, md, tabs, opts, h, state, ws, chunk, total,
-                                   every, smp, info, sout)
+    compile_time += _dispatch_time(drive.run, (md.timed, ev is None), md, tabs, opts, h, state, ws,
+                                   chunk, total, every, smp, info, sout, ev)
     bar = ProgressBar(total) if progress else None
     t_loop = time.perf_counter()
     status = 0
     recovered = []
     while info[lay.I_STEPS] < total:
         with quiet():
-            status = drive.run(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout)
+            status = drive.run(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout, ev)
+        if status == lay.EVENTS_FULL:
+            ev = events_.grow(ev)
+            status = 0
+            continue
+        if status == lay.EVENT_TERMINAL:
+            done = int(info[lay.I_STEPS])
+            if smp.t[int(info[lay.I_SLOT]) - 1] != t0 + done * h:
+                with quiet():  # the step containing the event is the last sample
+                    drive.record(md, t0 + done * h, state, ws, smp, int(info[lay.I_SLOT]), info)
+                info[lay.I_SLOT] += 1
+            break
         if status != 0 and recover:
             sub = _retry_in_substeps(md, model, meth, h, opts, state, recover, total, every, smp,
                                      info)
@@ -232,6 +268,13 @@ def integrate(
     t_end_loop = time.perf_counter()
     J = int(info[lay.I_SLOT])
     status = Status(status)
+    ev_out = {}
+    if ev is not None:
+        if events is not None:
+            ev_out.update(zip(("t_events", "q_events", "v_events"), events_.collect(ev)))
+        if dense_output:
+            steps_done = int(info[lay.I_STEPS])
+            ev_out["sol"] = events_.DenseSolution(t0, h, meth.tau, ev.dense[:steps_done].copy())
     result = Result(
         t=smp.t[:J].copy(), q=smp.q[:J].copy(), v=smp.v[:J].copy(), p=smp.p[:J].copy(),
         energy=smp.energy[:J].copy(), work=smp.work[:J].copy() if model.timed else None,
@@ -243,10 +286,11 @@ def integrate(
                    setup_time=t_loop - t_start, compile_time=compile_time, check_time=check_time,
                    wall_time=t_end_loop - t_start),
         status=status, method=meth, h=h, model_name=model.name,
-        failed_step=None if status == 0 else int(info[lay.I_FAILED]),
+        failed_step=None if status >= 0 else int(info[lay.I_FAILED]),
+        **ev_out,
     )
     _warn_if_energy_explodes(result)
-    if status != 0 and on_failure == "raise":
+    if status < 0 and on_failure == "raise":
         k = int(info[lay.I_FAILED])
         culprit = _nonfinite_callback(model, prm, state, ws) if status == Status.NONFINITE else None
         raise IntegrationError(status, k, t0 + k * h, float(info[lay.I_RES]), result, culprit)
@@ -320,7 +364,7 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
         info_sub[lay.I_T0] = info[lay.I_T0] + info[lay.I_STEPS] * h
         with quiet():
             st = drive.run(md, tabs, opts, h / sub, trial, ws_sub, sub, sub, sub, smp_sub, info_sub,
-                           np.zeros(lay.STEP_OUT_SIZE))
+                           np.zeros(lay.STEP_OUT_SIZE), None)
         if st == 0:
             state[:3] = trial[:3]
             info[lay.I_ITERS] += info_sub[lay.I_ITERS]

@@ -189,6 +189,10 @@ def _templates(n, m, k, tag):
         tag  # noqa: B018
         jf(p[k], carray(q, (n,)), carray(v, (n,)), carray(p, (k,)), carray(out, nn))  # noqa: F821
 
+    def event_t(q, v, p, out):  # an event function of fastvi.integrate(events=...)
+        tag  # noqa: B018
+        out[0] = jf(p[k], carray(q, (n,)), carray(v, (n,)), carray(p, (k,)))  # noqa: F821
+
     return {"potential": potential, "mass": matrix, "potential_hessian": matrix,
             "potential_grad": potential_grad, "constraint": constraint,
             "constraint_jacobian": constraint_jacobian, "constraint_hessian": constraint_hessian,
@@ -200,7 +204,7 @@ def _templates(n, m, k, tag):
             "constraint_hessian@t": constraint_hessian_t,
             "constraint_time_derivative@t": constraint_t,
             "force@t": force_t, "force_jacobian_q@t": force_matrix_t,
-            "force_jacobian_v@t": force_matrix_t}
+            "force_jacobian_v@t": force_matrix_t, "event@t": event_t}
 
 
 #: callbacks that take the time first when the model is ``time_dependent``

@@ -208,7 +208,8 @@ class Result(TrajectoryResult):
         loading or compiling the kernels), of which ``compile_time`` (callbacks and
         kernels), and ``wall_time`` (the total, as before the split).
     status : Status
-        ``Status.SUCCESS`` or the reason the run stopped early.
+        ``Status.SUCCESS``, ``Status.TERMINATED`` (a terminal event) or the reason the run
+        stopped early.
     method : Method
     h : float
     failed_step : int or None
@@ -230,6 +231,10 @@ class Result(TrajectoryResult):
     failed_step: int | None = None
     model_name: str = field(default="model")
     work: np.ndarray | None = None
+    t_events: list | None = None
+    q_events: list | None = None
+    v_events: list | None = None
+    sol: object | None = None
 
     def _label(self) -> str:
         return self.method.name

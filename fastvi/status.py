@@ -9,6 +9,7 @@ class Status(IntEnum):
     """Outcome of an integration. ``>= 0`` is success; negative codes are failures by cause."""
 
     SUCCESS = 0
+    TERMINATED = 1
     NEWTON_NOT_CONVERGED = -1
     SINGULAR_JACOBIAN = -2
     NONFINITE = -3
@@ -18,6 +19,7 @@ class Status(IntEnum):
 
 MESSAGES = {
     Status.SUCCESS: "The integration reached the final time.",
+    Status.TERMINATED: "A termination event occurred.",
     Status.NEWTON_NOT_CONVERGED: "Newton's method did not converge within `max_iter` iterations; "
     "try a smaller step `h`.",
     Status.SINGULAR_JACOBIAN: "The Newton matrix is singular to working precision "

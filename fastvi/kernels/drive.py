@@ -15,7 +15,9 @@ from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_IT
                      F_MAXRES, F_N, F_RES, F_TSLOT, I_FAILED, I_FIRST, I_FULL, I_ITERS, I_MAXRES,
                      I_RES, I_SLOT, I_STEPS, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK, INFO_SIZE,
                      POT, S_FULL, S_G, S_GV, S_ITERS, S_RES, S_WORK, SAVE_DIAGNOSTICS, SAVE_FINAL,
-                     SAVE_STRIDE, STEP_OUT_SIZE, ModelData, Samples, is_timed, make_workspace)
+                     SAVE_STRIDE, STEP_OUT_SIZE, EVENTS_FULL, ModelData, Samples, is_timed,
+                     make_workspace)
+from .events import after_step, room_for_crossings
 from .step import step
 
 __all__ = ["run", "run_member", "run_ensemble", "energy", "accept", "record", "INFO_SIZE"]
@@ -93,10 +95,11 @@ def _take(md, tabs, opts, h, state, ws, info, sout):
 
 
 @hot
-def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, sout):
+def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, sout, ev):
     """Advance ``state`` (rows q, p, v, then scratch) by up to ``n_chunk`` steps, step k
     running from ``info[I_T0] + k h``; ``sout`` is the step's output scratch
-    (``STEP_OUT_SIZE``).
+    (``STEP_OUT_SIZE``); ``ev`` is None or the :class:`.layout.Events` of a run with dense
+    output or events (None compiles the event code away).
 
     The time loop is ``hot`` (no reference counting) with the bookkeeping inlined: with
     reference counting on, the inlined helpers' array views cost 15 % of a step; without
@@ -105,15 +108,28 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
 
     Saves every ``save_every``-th step and the last one into the :class:`Samples` ``smp``,
     the residuals and iterations being the maxima/sums over the steps since the previous
-    sample. Returns a status code; on failure ``info[I_FAILED]`` holds the failed step.
+    sample. Returns a status code; on failure ``info[I_FAILED]`` holds the failed step;
+    ``EVENT_TERMINAL`` after the step in which a terminal event fired, ``EVENTS_FULL``
+    before a step when an event record has no room left.
     """
     for _ in range(n_chunk):
-        if int(info[I_STEPS]) >= n_total:
+        k = int(info[I_STEPS])
+        if k >= n_total:
             break
+        if ev is not None:
+            if not room_for_crossings(ev):
+                return EVENTS_FULL
+            for a in range(state.shape[1]):
+                ev.qk[a] = state[0, a]
         status = _take(md, tabs, opts, h, state, ws, info, sout)
         if status != 0:
             return status
+        est = 0
+        if ev is not None:
+            est = after_step(md, tabs, h, ws.time[0], ws.time[1], k, ev.qk, ws.X, state, ev)
         accept(md, h, state, ws, n_total, save_every, smp, info, sout)
+        if est != 0:
+            return est
     return 0
 
 

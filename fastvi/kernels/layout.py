@@ -92,6 +92,14 @@ NONFINITE = int(Status.NONFINITE)
 SINGULAR_MASS = int(Status.SINGULAR_MASS)
 SINGULAR_CONSTRAINTS = int(Status.SINGULAR_CONSTRAINTS)
 
+# ----------------------------------------------------------------------------- events
+#: event functions a run can watch (a fixed-size tuple of callbacks: one kernel type)
+EVENT_SLOTS = 8
+#: positive returns of the time loop: a terminal event ended the run (not a failure), or
+#: the event records need room before the next step (the driver grows them and resumes)
+EVENT_TERMINAL = 1
+EVENTS_FULL = 2
+
 # ----------------------------------------------------------------------------- Newton variants
 #: full Newton: the exact Newton matrix assembled and factored at every iteration
 NEWTON_FULL = 0
@@ -134,6 +142,14 @@ F_SIZE = 6
 Samples = namedtuple("Samples", ["t", "q", "v", "p", "energy", "g", "gv", "iters", "work"])
 ModelData = namedtuple("ModelData", ["fns", "flags", "Mc", "prm", "timed"])
 NewtonOptions = namedtuple("NewtonOptions", ["tol", "max_iter", "mode"])
+#: dense output and events of one trajectory (kernels/events.py): the event callbacks
+#: (EVENT_SLOTS, the first ``count`` used), per event ``direction`` and ``terminal`` (int64),
+#: the last grid values ``g``, the records ``t`` (E, cap), ``q``, ``v`` (E, cap, n) and their
+#: counts ``n``; ``dense`` (steps, s+1, n) the control points of every step (0 rows: none);
+#: scratch: ``Q`` (s+1, n) this step's control points, ``qk`` (n,) its start, ``qx``, ``vx``
+#: (n,), ``ell``, ``dell`` (s+1,), ``scratch`` (1,)
+Events = namedtuple("Events", ["fns", "count", "direction", "terminal", "g", "t", "q", "v", "n",
+                               "dense", "Q", "qk", "qx", "vx", "ell", "dell", "scratch"])
 Tables = namedtuple("Tables", ["b", "L", "Ld", "Lc", "E", "tau", "Ainv", "W", "As", "mech",
                                "c", "d"])
 Tables.__doc__ = """Method tables read by the step kernel (see :class:`fastvi.tables.Method`).

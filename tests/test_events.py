@@ -1,0 +1,156 @@
+"""Dense output and events (issue 14), against exact answers and SciPy.
+
+The pendulum released at rest from θ0 crosses the vertical at ``T/4 + k T/2`` with
+``T = 4 √(l/g) K(sin²(θ0/2))`` (complete elliptic integral of the first kind, SciPy's
+``ellipk`` with parameter m = sin²(θ0/2)); the state between grid points is compared with
+SciPy's DOP853 at tight tolerance on ``θ'' = −(g/l) sin θ``.
+"""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.special import ellipk
+
+import fastvi
+from fastvi.status import Status
+
+TH0, G = 1.0, 9.81
+PERIOD = 4 * np.sqrt(1 / G) * ellipk(np.sin(TH0 / 2) ** 2)
+METHODS = [("P1L-Q2G", 1), ("P2L-Q3G", 2), ("P3L-Q4G", 3)]
+
+
+def cross(t, q, v, p):
+    return q[0]  # the bob passes under the pivot
+
+
+def up(t, q, v, p):
+    return q[0]
+
+
+up.direction = 1.0
+
+
+def stop(t, q, v, p):
+    return q[0]
+
+
+stop.terminal = True
+stop.direction = -1
+
+
+def low(t, q, v, p):
+    return q[1] + 0.95  # the bob within 5 cm of its lowest point
+
+
+def at_half(t, q, v, p):
+    return t - 0.5
+
+
+@pytest.fixture(scope="module")
+def pend():
+    return fastvi.scenes.pendulum()
+
+
+def _exact_crossings(count):
+    return PERIOD / 4 + np.arange(count) * PERIOD / 2
+
+
+def _reference(t):
+    ref = solve_ivp(lambda s, y: [y[1], -G * np.sin(y[0])], (0, t.max() + 1e-9), [TH0, 0.0],
+                    t_eval=t, rtol=1e-13, atol=1e-13, method="DOP853")
+    th, w = ref.y
+    return (np.stack([np.sin(th), -np.cos(th)], 1), np.stack([np.cos(th) * w, np.sin(th) * w], 1))
+
+
+@pytest.mark.parametrize("name,s", METHODS)
+def test_event_times_and_dense_output_converge_at_their_orders(pend, name, s):
+    hs = np.array([0.04, 0.02, 0.01, 0.005])
+    T_END = 2.0
+    q0, v0 = pend.initial_state(TH0)
+    e_t, e_q, e_v = [], [], []
+    for h in hs:
+        n = int(round(T_END / h))
+        r = fastvi.integrate(pend, q0, v0, h=h, n_steps=n, method=name, events=cross, dense_output=True)
+        te = r.t_events[0]
+        assert te.size == 2  # T/4 + k T/2 < 2 s for k = 0, 1 (T = 2.14 s)
+        e_t.append(np.abs(te - _exact_crossings(te.size)).max())
+        tm = np.arange(n) * h + 0.37 * h  # inside every step
+        qr, vr = _reference(tm)
+        q, v = r.sol(tm)
+        e_q.append(np.abs(q - qr).max())
+        e_v.append(np.abs(v - vr).max())
+        assert np.array_equal(r.sol(r.t)[0], r.q)  # the grid points are the integrator's q_k
+        assert np.abs(r.q_events[0][:, 0]).max() < 1e-13  # the located state is on the event
+
+    def slope(e):
+        return np.log(e[0] / e[-1]) / np.log(hs[0] / hs[-1])
+
+    assert slope(e_q) > s + 1 - 0.2, e_q  # interior q: order s + 1
+    assert slope(e_v) > s - 0.2, e_v  # interior v: order s
+    assert slope(e_t) > s + 1 - 0.3, e_t  # event times: at least s + 1
+
+
+def test_direction_filters_crossings(pend):
+    q0, v0 = pend.initial_state(TH0)
+    r = fastvi.integrate(pend, q0, v0, h=0.01, n_steps=300, events=[cross, up])
+    both, rising = r.t_events
+    assert both.size == 3 and np.array_equal(rising, both[1::2])  # it starts swinging left
+    assert np.all(r.v_events[1][:, 0] > 0)
+
+
+def test_terminal_event_ends_the_run_at_the_step_containing_it(pend):
+    q0, v0 = pend.initial_state(TH0)
+    r = fastvi.integrate(pend, q0, v0, h=0.01, n_steps=1000, events=stop, dense_output=True)
+    assert r.status == Status.TERMINATED and r.success and "termination event" in r.message
+    (te,) = r.t_events
+    assert te.size == 1 and abs(te[0] - PERIOD / 4) < 1e-6
+    assert r.t[-1] - 0.01 < te[0] <= r.t[-1] + 1e-15  # the last sample ends that step
+    assert r.stats["steps"] == int(round(r.t[-1] / 0.01))
+    q, v = r.sol(te[0])
+    assert np.allclose(q, r.q_events[0][0], atol=1e-15) and np.allclose(v, r.v_events[0][0], atol=1e-15)
+
+
+def test_several_events_and_records_that_grow(pend):
+    q0, v0 = pend.initial_state(TH0)
+    r = fastvi.integrate(pend, q0, v0, h=0.01, n_steps=8000, events=[cross, low], save_every=100)
+    n_cross = int((80 - PERIOD / 4) // (PERIOD / 2)) + 1
+    assert r.t_events[0].size == n_cross > 64  # beyond the initial record capacity
+    assert np.abs(r.t_events[0] - _exact_crossings(n_cross)).max() < 1e-5
+    assert r.t_events[1].size == 2 * n_cross  # entering and leaving the low band each swing
+    assert np.allclose(r.q_events[1][:, 1], -0.95, atol=1e-13)
+
+
+def test_event_exactly_at_a_grid_point_is_found_once(pend):
+    q0, v0 = pend.initial_state(TH0)
+    r = fastvi.integrate(pend, q0, v0, h=0.125, n_steps=8, events=at_half)
+    assert r.t_events[0].tolist() == [0.5]
+    assert np.array_equal(r.q_events[0][0], r.q[4])
+
+
+def test_events_on_a_time_dependent_model():
+    kapitza = fastvi.scenes.kapitza_pendulum()
+
+    def pivot_top(t, q, v, p):
+        return np.sin(p[4] * t)  # the pivot passes its top at ω t = k π
+
+    r = fastvi.integrate(kapitza, *kapitza.initial_state(3.0), h=1e-3, n_steps=200, events=pivot_top)
+    w = kapitza.params[4]
+    k = np.arange(1, r.t_events[0].size + 1)
+    assert r.t_events[0].size == int(0.2 * w / np.pi) and np.abs(r.t_events[0] - k * np.pi / w).max() < 1e-12
+
+
+def test_bad_events_are_refused_naming_them(pend):
+    q0, v0 = pend.initial_state(TH0)
+    with pytest.raises(TypeError, match=r"events\[1\]"):
+        fastvi.integrate(pend, q0, v0, h=0.01, n_steps=3, events=[cross, 3.0])
+
+    def bad(t, q, v, p):
+        return f"{q[0]:.3f}"
+
+    with pytest.raises(TypeError, match="could not be compiled"):
+        fastvi.integrate(pend, q0, v0, h=0.01, n_steps=3, events=bad)
+    with pytest.raises(ValueError, match="recover"):
+        fastvi.integrate(pend, q0, v0, h=0.01, n_steps=3, events=cross, recover=1)
+    r = fastvi.integrate(pend, q0, v0, h=0.01, n_steps=3, dense_output=True)
+    with pytest.raises(ValueError, match="integrated interval"):
+        r.sol(1.0)

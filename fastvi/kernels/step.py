@@ -33,7 +33,10 @@ from .._numba import hot, hot_inline, ptr
 from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_KHESS, F_EX_MJAC, F_EX_PHESS,
                      F_M, F_MASSFN, F_N, KGRAD, MASS, MJAC, NEWTON_FAILED, NEWTON_FULL, NONFINITE,
                      OK, PGRAD, PHESS, KHESS, S_FULL, S_G, S_GV, S_ITERS, S_RES, SINGULAR,
-                     SINGULAR_CONSTRAINTS, SINGULAR_MASS, make_workspace)
+                     SINGULAR_CONSTRAINTS, SINGULAR_MASS, SI_A, SI_S, SI_SC, SOLVE_BANDED,
+                     make_workspace)
+from .banded import (g_sub, gt_times, mech_rows_sparse, newton_banded, project_banded,
+                     schur_banded, schur_solve_banded)
 from .linalg import lu_factor, lu_solve
 
 __all__ = ["make_workspace", "assemble", "step", "end_momentum", "velocity_residual"]
@@ -380,9 +383,13 @@ def newton_full(md, tabs, opts, h, qk, pk, ws, out):
         st = assemble(md, tabs, h, qk, pk, ws, True)
         if st != OK:
             return st
-        if lu_factor(A, piv, N) != 0:
-            return SINGULAR
-        lu_solve(A, piv, R, N)
+        if ws.si[SI_A] == SOLVE_BANDED:  # large sparse models (banded.py)
+            if newton_banded(ws, N) != 0:
+                return SINGULAR
+        else:
+            if lu_factor(A, piv, N) != 0:
+                return SINGULAR
+            lu_solve(A, piv, R, N)
         dn = _apply_increment(X, R, N, sn, qscale)
         if not np.isfinite(dn):
             return NONFINITE
@@ -446,6 +453,9 @@ def _minv(md, ws, x, n):
 @hot_inline
 def _mech_rows(md, ws, j, n, m):
     """``ws.Y[j]`` = (M̄⁻¹ G_jᵀ)ᵀ from ``ws.G[j]``."""
+    if ws.si[SI_SC] == SOLVE_BANDED:
+        mech_rows_sparse(ws, j, m)
+        return
     for c in range(m):
         Yc = ws.Y[j, c]
         for a in range(n):
@@ -554,6 +564,10 @@ def _schur(tabs, h, ws, n, m, J):
     """Build and factor the Schur complement ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` on the
     impulses from ``ws.G`` and ``ws.Y``. Returns a status code."""
     G, Y, Sc, W = ws.G, ws.Y, ws.Sc, tabs.W
+    if ws.si[SI_SC] == SOLVE_BANDED:  # large sparse models (banded.py)
+        if schur_banded(ws, W, h, m, J) != 0:
+            return SINGULAR
+        return OK
     for j in range(1, J + 1):
         for jp in range(J):
             w = h * W[j - 1, jp]
@@ -597,7 +611,31 @@ def _mech_solve(md, tabs, h, ws, n, m, s, J):
             c = h * Ainv[mu, nu]
             for a in range(n):
                 U[mu, a] += c * Z[nu, a]
-    if m > 0:
+    if m > 0 and ws.si[SI_SC] == SOLVE_BANDED:  # the same with the pattern of G (banded.py)
+        Jm = J * m
+        for j in range(1, J + 1):
+            for a in range(n):
+                T[a] = 0.0
+            for mu in range(1, s + 1):
+                cl = Lc[mu, j]
+                if cl != 0.0:
+                    for a in range(n):
+                        T[a] += cl * U[mu - 1, a]
+            g_sub(ws.si, G[j], T, R, sn + (j - 1) * m, m)
+        schur_solve_banded(ws, R[sn:], Jm)
+        for nu in range(s):
+            for a in range(n):
+                Z[nu, a] = 0.0
+            for jp in range(J):
+                cl = Lc[nu, jp]
+                if cl != 0.0:
+                    gt_times(ws.si, Y[jp], R[sn + jp * m:], Z[nu], cl, m)
+        for mu in range(s):
+            for nu in range(s):
+                c = h * Ainv[mu, nu]
+                for a in range(n):
+                    U[mu, a] += c * Z[nu, a]
+    elif m > 0:
         Jm = J * m
         for j in range(1, J + 1):
             row = sn + (j - 1) * m
@@ -857,6 +895,8 @@ def end_momentum(md, q1, P, p1, v1, G1, ws):
     fns, flags, Mc, prm = md
     n = flags[F_N]
     m = flags[F_M]
+    if ws.si[SI_S] == SOLVE_BANDED:  # large sparse models, diagonal mass (banded.py)
+        return project_banded(Mc, q1, P, p1, v1, G1, ws, n, m)
     Mlu = ws.Ma
     pivn = ws.pivp
     Y = ws.Gp

@@ -17,7 +17,7 @@ Once per model, method and parameter vector, in NumPy:
 3. **The choice.** Banded LU (:mod:`fastvi.kernels.banded`) where it is cheaper than the
    dense LU by the measured crossover (``BAND_MIN_ROWS``, ``BAND_GAIN``), the dense LU
    otherwise — every small model keeps the dense path, bit for bit, and is not even
-   analysed (``PLAN_MIN_ROWS``). The Schur complement and the projection use the pattern
+   analysed. The Schur complement and the projection use the pattern
    of ``G`` only with a diagonal constant mass (``M⁻¹`` is otherwise dense).
 
 Why safe: the full Newton and the mechanics iteration only *solve for an increment* — a
@@ -43,12 +43,14 @@ __all__ = ["Plan", "plan", "workspace", "detect_pattern", "SOLVERS", "PATTERN_ST
 
 #: random states whose non-zeros are united into the detected pattern
 PATTERN_STATES = 3
-#: below this many unknowns per step the model is not analysed: dense everywhere
-PLAN_MIN_ROWS = 48
-#: a system is solved banded from this many rows (dense LU of fewer rows measured faster)
-BAND_MIN_ROWS = 48
-#: … and only if the banded factorisation's flop count is below the dense one's by this
-BAND_GAIN = 4.0
+#: a system is solved banded from this many rows: the crossovers measured on chain(N),
+#: ``P2L-Q3G``, side by side (docs/benchmarks.md, "Large mechanisms"): the full Newton step
+#: 0.95× at 24 rows, 1.23× at 48; the mechanics step (Schur complement and products with
+#: the pattern of G) 0.94× at J m = 12, 1.12× at 16; the projection 0.9× at m = 6, 1.1× at 8
+BAND_MIN_ROWS = dict(newton=36, schur=16, projection=8)
+#: … and only if the banded factorisation's flop count ``N (kl + 1)(kl + ku + 1)`` is below
+#: the dense one's ``N³/3`` by this factor (a pattern that fills the band stays dense)
+BAND_GAIN = 1.0
 #: the ``solver`` choices: automatic, or forced for every system (for tests and benchmarks)
 SOLVERS = ("auto", "dense", "banded")
 
@@ -77,7 +79,9 @@ def detect_pattern(model, meth, prm=None, n_states: int = PATTERN_STATES, seed: 
     for _ in range(n_states):
         q = rng.standard_normal(n)
         if m:
-            PG |= model.constraint_jacobian_value(q, prm) != 0.0
+            G0 = model.constraint_jacobian_value(q, prm)
+            PG |= G0 != 0.0
+            ws.G[0, :m] = G0  # G at q_k: the step kernel sets it before Newton
         ws.X[:] = 0.1 * rng.standard_normal(N)
         with quiet():
             assemble(md, tabs, 0.01, q, rng.standard_normal(n), ws, True)
@@ -89,19 +93,21 @@ def detect_pattern(model, meth, prm=None, n_states: int = PATTERN_STATES, seed: 
 
 
 def _ordering(P):
-    """RCM permutation of the symmetrised pattern and the bandwidths (kl, ku) after it."""
-    S = sp.csr_matrix(P | P.T)
-    perm = reverse_cuthill_mckee(S, symmetric_mode=True).astype(np.int64)
+    """RCM permutation of the symmetrised pattern and the bandwidths (kl, ku) after it, of
+    the symmetrised pattern too (a margin: the Newton matrices are structurally symmetric
+    up to the impulse blocks)."""
+    P = P | P.T
+    perm = reverse_cuthill_mckee(sp.csr_matrix(P), symmetric_mode=True).astype(np.int64)
     i, j = np.nonzero(P[np.ix_(perm, perm)])
     kl = int(max(0, (i - j).max(initial=0)))
     ku = int(max(0, (j - i).max(initial=0)))
     return perm, kl, ku
 
 
-def _banded_pays(N, kl, ku, solver):
+def _banded_pays(N, kl, ku, solver, system):
     if solver != "auto":
         return solver == "banded"
-    return N >= BAND_MIN_ROWS and BAND_GAIN * N * (kl + 1) * (kl + ku + 1) < N**3 / 3
+    return N >= BAND_MIN_ROWS[system] and BAND_GAIN * N * (kl + 1) * (kl + ku + 1) < N**3 / 3
 
 
 def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
@@ -119,7 +125,9 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
     si = np.zeros(lay.SI_HEADER, dtype=np.int64)
     dense = Plan(si, np.zeros(1), dict(newton="dense", schur="dense", projection="dense"),
                  {}, {})
-    if solver == "dense" or (solver == "auto" and N < PLAN_MIN_ROWS):
+    small = (N < BAND_MIN_ROWS["newton"] and J * m < BAND_MIN_ROWS["schur"]
+             and m < BAND_MIN_ROWS["projection"])
+    if solver == "dense" or (solver == "auto" and small):  # not even analysed
         cache[key] = dense
         return dense
     pats = detect_pattern(model, meth, prm)
@@ -145,7 +153,7 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
 
     perm, kl, ku = _ordering(pats["newton"])
     bands["newton"] = (kl, ku)
-    if _banded_pays(N, kl, ku, solver):
+    if _banded_pays(N, kl, ku, solver, "newton"):
         si[lay.SI_A] = lay.SOLVE_BANDED
         si[lay.SI_A_KL], si[lay.SI_A_KU] = kl, ku
         si[lay.SI_A_PERM] = put(perm)
@@ -170,8 +178,8 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
         p_sc, kl_sc, ku_sc = _ordering(PSc)
         bands["projection"] = (kl_s, ku_s)
         bands["schur"] = (kl_sc, ku_sc)
-        use_s = _banded_pays(m, kl_s, ku_s, solver)
-        use_sc = meth.kernel_tables.mech and _banded_pays(J * m, kl_sc, ku_sc, solver)
+        use_s = _banded_pays(m, kl_s, ku_s, solver, "projection")
+        use_sc = meth.kernel_tables.mech and _banded_pays(J * m, kl_sc, ku_sc, solver, "schur")
         if use_s or use_sc:
             si[lay.SI_GPTR] = put(gptr)
             si[lay.SI_GCOL] = put(cols)

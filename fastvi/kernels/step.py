@@ -549,6 +549,9 @@ def residual(md, tabs, h, qk, pk, ws):
                 if cl == 0.0:
                     continue
                 r0 = nu * n
+                if ws.si[SI_SC] == SOLVE_BANDED:  # over the pattern of G (banded.py)
+                    gt_times(ws.si, Gj, X[col:], R[r0:], -cl, m)
+                    continue
                 for c in range(m):
                     e = cl * X[col + c]
                     for a in range(n):

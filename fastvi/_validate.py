@@ -69,6 +69,25 @@ def _count(x, name: str, least: int) -> int:
     return int(x)
 
 
+def conservative(model, name: str) -> None:
+    """Refuse a model with forces or time for a baseline that integrates only conservative,
+    autonomous models."""
+    if model.timed:
+        raise ValueError(f"the `{name}` baseline integrates conservative, autonomous models only; "
+                         f"model {model.name!r} has a force or time-dependent callbacks: use "
+                         "fastvi.integrate")
+
+
+def start_time(t0) -> float:
+    """The start time ``t0``: a finite float."""
+    if isinstance(t0, bool) or not isinstance(t0, (int, float, np.integer, np.floating)):
+        raise TypeError(f"`t0` must be a float, got {t0!r}")
+    t0 = float(t0)
+    if not math.isfinite(t0):
+        raise ValueError(f"`t0` must be finite, got {t0}")
+    return t0
+
+
 def step_count(h: float, t_end, n_steps) -> int:
     """Exactly one of ``t_end`` and ``n_steps``; ``t_end`` must be a multiple of ``h``."""
     if (t_end is None) == (n_steps is None):
@@ -149,8 +168,8 @@ def _min_norm_solve(S: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.linalg.lstsq(S, b, rcond=1e-15)[0]
 
 
-def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray):
-    """Check M(q0), G(q0), and project (q0, v0) onto g = 0, G v = 0.
+def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray, t0: float = 0.0):
+    """Check M(q0), G(q0), and project (q0, v0) onto ``g(t0, q) = 0``, ``G v + g_t = 0``.
 
     Data off the constraint manifold by more than ``CONSISTENCY_TOL`` (relative) raise;
     smaller violations are projected, with a warning when the move exceeds round-off.
@@ -165,21 +184,23 @@ def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray):
         sym = False
     if not sym:
         raise ValueError(f"the mass matrix at `q0` must be symmetric positive definite, got {M}")
-    if not np.isfinite(model.potential_energy(q0, prm)):
+    if not np.isfinite(model.potential_energy(q0, prm, t0)):
         raise ValueError("the potential energy at `q0` is not finite (callback `potential`)")
     if model.m == 0:
         return q0, v0
     scale = max(1.0, float(np.max(np.abs(q0))))
-    g = model.constraint_value(q0, prm)
+    at = f"(t0 = {t0:g}, q0)" if model.time_dependent else "`q0`"
+    g = model.constraint_value(q0, prm, t0)
     if not np.all(np.isfinite(g)):
-        raise ValueError(f"callback `constraint` returned non-finite values at `q0`: {g}")
-    G = model.constraint_jacobian_value(q0, prm)
+        raise ValueError(f"callback `constraint` returned non-finite values at {at}: {g}")
+    G = model.constraint_jacobian_value(q0, prm, t0)
     if not np.all(np.isfinite(G)):
-        raise ValueError(f"callback `constraint_jacobian` returned non-finite values at `q0`: {G}")
+        raise ValueError(f"callback `constraint_jacobian` returned non-finite values at {at}: {G}")
     gmax = float(np.max(np.abs(g)))
     if gmax > CONSISTENCY_TOL * scale:
+        gname = f"g(t0, q0) (t0 = {t0:g})" if model.time_dependent else "g(q0)"
         raise ValueError(
-            f"`q0` violates the constraints: max|g(q0)| = {gmax:.3e} > {CONSISTENCY_TOL:.0e}·{scale:g}; "
+            f"`q0` violates the constraints: max|{gname}| = {gmax:.3e} > {CONSISTENCY_TOL:.0e}·{scale:g}; "
             "start from a consistent state: `fastvi.consistent_state(model, q0, v0, fixed=...)` builds one "
             "from this guess (keeping the coordinates you list in `fixed`), and the scenes' "
             "`initial_state` helpers give one from natural coordinates"
@@ -194,8 +215,8 @@ def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray):
     for _ in range(20):
         Minv_Gt = np.linalg.solve(M, G.T)
         q = q - Minv_Gt @ _min_norm_solve(G @ Minv_Gt, g)
-        g = model.constraint_value(q, prm)
-        G = model.constraint_jacobian_value(q, prm)
+        g = model.constraint_value(q, prm, t0)
+        G = model.constraint_jacobian_value(q, prm, t0)
         if model.mass_matrix_constant is None:
             M = model.mass_matrix(q, prm)
         if np.max(np.abs(g)) <= 4e-16 * scale:
@@ -205,19 +226,22 @@ def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray):
         warnings.warn(f"`q0` was projected onto the constraints (max|g| was {gmax:.2e}; "
                       f"q moved by {moved:.2e})", stacklevel=3)
     Minv_Gt = np.linalg.solve(M, G.T)
-    gv = G @ v0
+    gt = model.constraint_time_derivative_value(q, prm, t0)
+    gv = G @ v0 + gt
     vscale = max(1.0, float(np.max(np.abs(v0))))
     gvmax = float(np.max(np.abs(gv)))
     if gvmax > CONSISTENCY_TOL * vscale * max(1.0, scale):
+        hidden, name = (("G v0 + g_t = 0 at t0", "G v0 + g_t") if model.time_dependent
+                        else ("G(q0) v0 = 0", "G v0"))
         raise ValueError(
-            f"`v0` violates the hidden constraint G(q0) v0 = 0: max|G v0| = {gvmax:.3e}; "
-            "start from a consistent state: `fastvi.consistent_state(model, q0, v0, fixed=...)` "
-            "changes the velocities you do not list in `fixed` (least, in the metric of M) so "
-            "that G v0 = 0"
+            f"`v0` violates the hidden constraint {hidden}: max|{name}| = {gvmax:.3e}; "
+            "start from a consistent state: `fastvi.consistent_state(model, q0, v0, fixed=..., t=t0)` "
+            f"changes the velocities you do not list in `fixed` (least, in the metric of M) so "
+            f"that {hidden}"
         )
-    v = v0 - Minv_Gt @ _min_norm_solve(G @ Minv_Gt, G @ v0)
+    v = v0 - Minv_Gt @ _min_norm_solve(G @ Minv_Gt, gv)
     if gvmax > SILENT_PROJECTION * vscale * max(1.0, scale):
-        warnings.warn(f"`v0` was projected onto G(q0) v = 0 (max|G v0| was {gvmax:.2e}; "
+        warnings.warn(f"`v0` was projected onto the hidden constraint (max|G v0 + g_t| was {gvmax:.2e}; "
                       f"v moved by {float(np.max(np.abs(v - v0))):.2e})", stacklevel=3)
     return q, v
 

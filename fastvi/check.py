@@ -99,6 +99,9 @@ _REFERENCE = {
     "kinetic_hessian": "FD of kinetic_grad",
     "potential_hessian": "FD of potential_grad",
     "constraint_hessian": "FD of Gᵀη (constraint_jacobian)",
+    "force_jacobian_q": "FD in q of force",
+    "force_jacobian_v": "FD in v of force",
+    "constraint_time_derivative": "FD in t of constraint",
 }
 _PARENT = {
     "kinetic_hessian": "kinetic_grad",
@@ -298,7 +301,9 @@ _ENTRY: list = []  # compiled entry point of _guarded_call, once known
 
 _DIMS = dict(mass=("n", "n"), kinetic_grad=("n",), potential=(), potential_grad=("n",),
              constraint=("m",), constraint_jacobian=("m", "n"), potential_hessian=("n", "n"),
-             constraint_hessian=("n", "n"), kinetic_hessian=("n", "n"), momentum_jacobian=("n", "n"))
+             constraint_hessian=("n", "n"), kinetic_hessian=("n", "n"), momentum_jacobian=("n", "n"),
+             force=("n",), force_jacobian_q=("n", "n"), force_jacobian_v=("n", "n"),
+             constraint_time_derivative=("m",))
 _MEANING = dict(constraint_jacobian="out[a, b] = ∂g_a/∂q_b", momentum_jacobian="out[a, b] = ∂(M v)_a/∂q_b")
 _SIZE_REFERENCE = "declared output shape"
 
@@ -349,12 +354,15 @@ class _Callbacks:
     and raises :class:`ModelCheckError` saying what was written.
     """
 
-    def __init__(self, model: Model, params: np.ndarray, report: "CheckReport"):
+    def __init__(self, model: Model, params: np.ndarray, report: "CheckReport", t: float = 0.0):
         cfs = model.kernel_arguments()[0]
         self.fn = dict(zip(SLOTS, cfs))
         self.present = set(model._functions)
-        self.p = np.ascontiguousarray(params, dtype=np.float64)
-        self.n, self.m, self.k = model.n, model.m, params.shape[0]
+        # the kernels' parameter vector: a time-aware model reads t from a hidden last entry
+        self.p = model.kernel_params(params, t)
+        self.t = float(t)
+        self.timed = model.timed
+        self.n, self.m, self.k = model.n, model.m, self.p.shape[0]
         self.report = report
         self.count = 0
         self.sized = set()  # slots whose guarded size check passed
@@ -362,7 +370,8 @@ class _Callbacks:
         self.shape = dict(mass=(n, n), kinetic_grad=(n,), potential=(), potential_grad=(n,),
                           constraint=(m,), constraint_jacobian=(m, n), potential_hessian=(n, n),
                           constraint_hessian=(n, n), kinetic_hessian=(n, n),
-                          momentum_jacobian=(n, n))
+                          momentum_jacobian=(n, n), force=(n,), force_jacobian_q=(n, n),
+                          force_jacobian_v=(n, n), constraint_time_derivative=(m,))
         self.pad = n * n + 2 * n + _GUARD_MARGIN
         self.layout, self.buf, self.size = {}, {}, {}
         for slot, shape in self.shape.items():
@@ -396,6 +405,16 @@ class _Callbacks:
             _ENTRY[:] = [cres.entry_point for cres in _guarded_call.overloads.values()][:1]
         self.count += 1
         return status, f, u
+
+    def at(self, slot: str, t: float, q: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
+        """``self(slot, q, v)`` at time ``t`` (the check's own time is restored after)."""
+        if not self.timed or t == self.t:
+            return self(slot, q, v)
+        self.p[-1] = t
+        try:
+            return self(slot, q, v)
+        finally:
+            self.p[-1] = self.t
 
     def __call__(self, slot: str, q: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
         if slot in self.sized and self.n > GUARD_ALL_CALLS_UP_TO_N:
@@ -592,8 +611,9 @@ def _compare(callback: str, state: int, exact: np.ndarray, fd, rtol: float, note
                     tuple(int(i) for i in idx), "ok" if error <= allowed else "wrong", note)
 
 
-def check_model(model: Model, q, v=None, *, params=None, n_random: int = DEFAULT_RANDOM_STATES,
-                radius: float = DEFAULT_RADIUS, rtol: float = DEFAULT_RTOL, seed: int = 0,
+def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
+                n_random: int = DEFAULT_RANDOM_STATES, radius: float = DEFAULT_RADIUS,
+                rtol: float = DEFAULT_RTOL, seed: int = 0,
                 raise_on_error: bool = True) -> CheckReport:
     r"""Compare every derivative callback of ``model`` with finite differences.
 
@@ -606,6 +626,9 @@ def check_model(model: Model, q, v=None, *, params=None, n_random: int = DEFAULT
         The velocity for the kinetic-energy derivatives (default: random, ``~N(0, 1)``).
     params : array_like (k,), optional
         Parameter vector (default: the model's).
+    t : float, default 0.0
+        The time of the check, for a model with forces or time-dependent callbacks
+        (``∂g/∂t`` is compared with a difference in ``t`` around it).
     n_random : int, default 3
         Random nearby states checked in addition to ``(q, v)``:
         ``q + radius·max(1, |q|)·ξ``, ``v + radius·max(1, |v|)·ξ'`` with ``ξ, ξ' ~ N(0, I)``.
@@ -680,7 +703,9 @@ def check_model(model: Model, q, v=None, *, params=None, n_random: int = DEFAULT
     n_units = len(etas)
     etas += [rng.standard_normal(m) for _ in range(1 if m <= MAX_UNIT_ETAS else 2)] if m > 1 else []
     report = CheckReport(model.name, states=states, rtol=float(rtol))
-    cb = _Callbacks(model, prm, report)
+    if isinstance(t, bool) or not isinstance(t, (int, float, np.integer, np.floating)) or not np.isfinite(t):
+        raise ValueError(f"`t` must be a finite float, got {t!r}")
+    cb = _Callbacks(model, prm, report, float(t))
     has = cb.present.__contains__
 
     # 1. Sizes, before anything else: every callback once, into guarded buffers filled with
@@ -710,6 +735,17 @@ def check_model(model: Model, q, v=None, *, params=None, n_random: int = DEFAULT
     if m:
         each_state("constraint_jacobian", lambda k, qk, vk: _compare(
             "constraint_jacobian", k, cb("constraint_jacobian", qk), _fd(lambda x: cb("constraint", x), qk), rtol))
+    if has("force_jacobian_q"):
+        each_state("force_jacobian_q", lambda k, qk, vk: _compare(
+            "force_jacobian_q", k, cb("force_jacobian_q", qk, vk), _fd(lambda x: cb("force", x, vk), qk), rtol))
+    if has("force_jacobian_v"):
+        each_state("force_jacobian_v", lambda k, qk, vk: _compare(
+            "force_jacobian_v", k, cb("force_jacobian_v", qk, vk), _fd(lambda x: cb("force", qk, x), vk), rtol))
+    if has("constraint_time_derivative"):
+        tt = np.array([float(t)])
+        each_state("constraint_time_derivative", lambda k, qk, vk: _compare(
+            "constraint_time_derivative", k, cb("constraint_time_derivative", qk),
+            _t_column(_fd(lambda x: cb.at("constraint", float(x[0]), qk), tt)), rtol))
 
     def hessian_rows(slot, k, qk, vk):
         if slot == "kinetic_hessian":
@@ -744,7 +780,13 @@ def check_model(model: Model, q, v=None, *, params=None, n_random: int = DEFAULT
     return report
 
 
-def _check_sizes(model: Model, q, v=None, *, params=None) -> None:
+def _t_column(fd):
+    """An FD result over the one-entry vector ``[t]`` as the derivative itself (drop the axis)."""
+    J, est, fscale, hmin = fd
+    return J[..., 0], est[..., 0], fscale, hmin
+
+
+def _check_sizes(model: Model, q, v=None, *, params=None, t: float = 0.0) -> None:
     """Only the first part of :func:`check_model`: every callback evaluated twice at ``(q, v)``
     into guarded buffers (well under a millisecond once compiled).
 
@@ -759,7 +801,7 @@ def _check_sizes(model: Model, q, v=None, *, params=None) -> None:
     q = _vector(q, "q", model.n)
     v = np.ones(model.n) if v is None else _vector(v, "v", model.n)
     prm = model.params if params is None else _vector(params, "params", model.params.shape[0])
-    cb = _Callbacks(model, prm, CheckReport(model.name, states=[(q, v)]))
+    cb = _Callbacks(model, prm, CheckReport(model.name, states=[(q, v)]), t)
     eta0 = 1.0 + np.arange(model.m) / max(model.m, 1)
     for slot in SLOTS:
         if slot in cb.present:

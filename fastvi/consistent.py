@@ -108,7 +108,7 @@ def consistent_state(model: Model, q, v, *, fixed=(), t: float = 0.0, params=Non
     if not model._checked:  # our evaluations below use the plain (unguarded) buffers
         from .check import _check_sizes
 
-        _check_sizes(model, q, v, params=prm)
+        _check_sizes(model, q, v, params=prm, t=t)
     if free.size < m:
         raise ValueError(
             f"`fixed` leaves {free.size} free coordinate(s) for m = {m} constraints: fixing "
@@ -122,7 +122,7 @@ def consistent_state(model: Model, q, v, *, fixed=(), t: float = 0.0, params=Non
         done = gnorm == 0.0 or step_size <= 4.0 * _EPS * scale
         if done or it == iters:
             break
-        G = _jacobian(model, q, prm)
+        G = _jacobian(model, q, t, prm)
         W, S = _reduced(model, q, prm, G, free, fix)
         dq = -W @ np.linalg.solve(S, g)
         lam = 1.0
@@ -139,7 +139,7 @@ def consistent_state(model: Model, q, v, *, fixed=(), t: float = 0.0, params=Non
                                                 "direction reduces |g|", fix))
         q, g = trial, g_trial
         step_size = lam * float(np.abs(dq).max())
-    G = _jacobian(model, q, prm)
+    G = _jacobian(model, q, t, prm)
     gmax = float(np.abs(g).max())
     # converged: the last step at round-off and |g| at the round-off of its terms (|G|·|q|)
     gtol = 1e-12 * max(1.0, float(np.abs(G).max()) * scale)
@@ -153,26 +153,27 @@ def consistent_state(model: Model, q, v, *, fixed=(), t: float = 0.0, params=Non
     return q, v
 
 
-# ----------------------------------------------------------------------------- hooks for g(q, t)
+# ----------------------------------------------------------------------------- g(t, q) and g_t
 def _constraint(model: Model, q: np.ndarray, t: float, prm: np.ndarray) -> np.ndarray:
-    """``g(q, t)``. Time-independent today: when models gain time-dependent constraints,
-    evaluate them at ``t`` here."""
-    g = model.constraint_value(q, prm)
+    """``g(t, q)`` (``t`` is ignored by a model that is not ``time_dependent``)."""
+    g = model.constraint_value(q, prm, t)
     if not np.all(np.isfinite(g)):
         raise ValueError(f"callback `constraint` returned non-finite values at q = {q}: {g}")
     return g
 
 
 def _constraint_time_derivative(model: Model, q: np.ndarray, t: float, prm: np.ndarray) -> np.ndarray:
-    """``g_t = ∂g/∂t`` at ``(q, t)``: zero for the time-independent constraints of today's
-    models. When a model gains a ``constraint_time_derivative`` callback, return its value
-    here; the velocity solve above then enforces ``G v + g_t = 0`` with no other change."""
-    return np.zeros(model.m)
+    """``g_t = ∂g/∂t`` at ``(t, q)``: the callback, a difference in ``t``, or zero for
+    constraints that do not depend on time."""
+    gt = model.constraint_time_derivative_value(q, prm, t)
+    if not np.all(np.isfinite(gt)):
+        raise ValueError(f"∂g/∂t is not finite at t = {t}, q = {q}: {gt}")
+    return gt
 
 
 # ----------------------------------------------------------------------------- helpers
-def _jacobian(model: Model, q: np.ndarray, prm: np.ndarray) -> np.ndarray:
-    G = model.constraint_jacobian_value(q, prm)
+def _jacobian(model: Model, q: np.ndarray, t: float, prm: np.ndarray) -> np.ndarray:
+    G = model.constraint_jacobian_value(q, prm, t)
     if not np.all(np.isfinite(G)):
         raise ValueError(f"callback `constraint_jacobian` returned non-finite values at q = {q}: {G}")
     return G

@@ -43,6 +43,7 @@ def integrate_ensemble(
     h: float,
     t_end: float | None = None,
     n_steps: int | None = None,
+    t0: float = 0.0,
     method: str | Method = "P2L-Q3G",
     params=None,
     save="final",
@@ -57,7 +58,7 @@ def integrate_ensemble(
 
     Parameters
     ----------
-    model, Q0, V0, h, t_end, n_steps, method, params, save, tol, max_iter, newton, check :
+    model, Q0, V0, h, t_end, n_steps, t0, method, params, save, tol, max_iter, newton, check :
         As in :func:`fastvi.integrate_ensemble`.
     client : distributed.Client
         A connected Dask client (``Client("tcp://scheduler:8786")``, a ``LocalCluster``,
@@ -91,7 +92,7 @@ def integrate_ensemble(
         raise ImportError('fastvi.distributed needs Dask: pip install "fastvi[dask]"') from exc
     if not isinstance(model, Model):
         raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
-    opts = _ens._options(h, t_end, n_steps, method, save, tol, max_iter, newton)
+    opts = _ens._options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0)
     if threads is not None:  # the upper bound is the worker's NUMBA_NUM_THREADS: checked there
         threads = _ens.check._count(threads, "threads", 1)
     Q0, V0, P = _ens._members(model, Q0, V0, params)
@@ -103,9 +104,9 @@ def integrate_ensemble(
         chunk_size = math.ceil(N / (CHUNKS_PER_WORKER_THREAD * workers))
     chunk_size = _ens.check._count(chunk_size, "chunk_size", 1)
     if check and not getattr(model, "_checked", True):  # on the client, once, not once per chunk
-        model.check(Q0[0], V0[0], params=P[0], n_random=1)
+        model.check(Q0[0], V0[0], params=P[0], n_random=1, t=opts["t0"])
 
-    t0 = time.perf_counter()
+    t_start = time.perf_counter()
     # The model travels as its pickled recipe (bytes, small); each worker process unpickles
     # and compiles it once and keeps it for later tasks and later calls (_worker_model).
     blob = pickle.dumps(model)
@@ -115,7 +116,7 @@ def integrate_ensemble(
         for a in range(0, N, chunk_size)
     ]
     parts = client.gather(futures)
-    wall = time.perf_counter() - t0
+    wall = time.perf_counter() - t_start
     result = EnsembleResult.concatenate(parts)
     result.method = opts["method"]  # the client's (memoised) Method, not a worker's copy
     result.stats.update(wall_time=wall, worker_time=sum(p.stats["integration_time"] for p in parts),

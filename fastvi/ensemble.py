@@ -22,7 +22,6 @@ from . import _validate as check
 from .integrate import Result, _dispatch_time, _timed
 from .kernels import drive
 from .kernels import layout as lay
-from .kernels.step import velocity_residual
 from .model import Model
 from .results import ResultBase, _finish_figure, _new_figure
 from .status import MESSAGES, Status
@@ -41,7 +40,7 @@ _PARALLEL_LOCK = threading.Lock()
 _MEMBER_FIELDS = ("q", "v", "p", "energy", "constraint_residual", "velocity_residual",
                   "newton_iterations", "max_energy_error", "max_constraint_residual",
                   "max_velocity_residual", "iterations", "max_residual", "residual", "status",
-                  "failed_step", "steps", "n_saved", "initial_energy")
+                  "failed_step", "steps", "n_saved", "initial_energy", "work")
 
 
 @dataclass(repr=False)
@@ -133,6 +132,9 @@ class EnsembleResult(ResultBase):
     stats: dict
     model_name: str = field(default="model")
     initial_energy: np.ndarray | None = None
+    #: (N, K) work of forces and time since t0 at the saved steps (stride mode, a model
+    #: with forces or time), else None; see :attr:`fastvi.Result.energy_balance`
+    work: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.status.shape[0])
@@ -288,6 +290,7 @@ class EnsembleResult(ResultBase):
                        wall_time=float("nan")),
             status=status, method=self.method, h=self.h, model_name=self.model_name,
             failed_step=None if status >= 0 else int(self.failed_step[i]),
+            work=None if self.work is None else self.work[i, :J].copy(),
         )
 
     def save_npz(self, path) -> None:
@@ -329,6 +332,7 @@ def integrate_ensemble(
     h: float,
     t_end: float | None = None,
     n_steps: int | None = None,
+    t0: float = 0.0,
     method: str | Method = "P2L-Q3G",
     params=None,
     save="final",
@@ -358,13 +362,16 @@ def integrate_ensemble(
         Step size (shared).
     t_end, n_steps :
         Exactly one: final time (a whole number of steps) or number of steps.
+    t0 : float, default 0.0
+        Start time of every member, as in :func:`fastvi.integrate`.
     method : str or Method, default "P2L-Q3G"
     params : array_like (N, k) or (k,), optional
         Parameters per member (rows), one vector for all, or None for the model's.
     save : {"final", "diagnostics"} or int, default "final"
         ``"final"``: the last state of each member, memory ``O(N n)``. An integer ``k``: every
         k-th step and the last, memory ``O(N n n_steps / k)``. ``"diagnostics"``: the last
-        state plus, per member, ``max |H − H₀|``, ``max |g|``, ``max |Gv|`` over every step
+        state plus, per member, ``max |H − H₀ − W|`` (``W`` the work of forces and time,
+        zero for a conservative model), ``max |g|``, ``max |Gv + g_t|`` over every step
         and the Newton iterations, with no trajectory (the energy is evaluated every step).
     threads : int, optional
         Numba threads for this call (``1 … NUMBA_NUM_THREADS``); the previous setting is
@@ -406,7 +413,7 @@ def integrate_ensemble(
     run_check = check
     if not isinstance(model, Model):
         raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
-    opts = _options(h, t_end, n_steps, method, save, tol, max_iter, newton)
+    opts = _options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0)
     threads = _validate_threads(threads)
     return _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0)
 
@@ -416,11 +423,13 @@ def _validate_threads(threads):
     return check.threads(threads)
 
 
-def _options(h, t_end, n_steps, method, save, tol, max_iter, newton="auto") -> dict:
+def _options(h, t_end, n_steps, method, save, tol, max_iter, newton="auto", t0=0.0) -> dict:
     """The validated scalar options of a run (cheap: the client of a Dask run calls it too)."""
     h = check.step_size(h)
-    return dict(h=h, total=check.step_count(h, t_end, n_steps), method=check.method(method),
-                save=check.ensemble_save(save), newton=check.newton_options(tol, max_iter, newton))
+    t0 = check.start_time(t0)
+    return dict(h=h, t0=t0, total=check.step_count(h, None if t_end is None else t_end - t0, n_steps),
+                method=check.method(method), save=check.ensemble_save(save),
+                newton=check.newton_options(tol, max_iter, newton))
 
 
 def _members(model: Model, Q0, V0, params):
@@ -438,9 +447,10 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -
     Q0, V0, P = _members(model, Q0, V0, params)
     compile_time = _timed(model._compile)
     check_time = 0.0
+    t0 = opts.get("t0", 0.0)
     if run_check and not getattr(model, "_checked", True):  # as integrate: before the projection
-        check_time = _timed(lambda: model.check(Q0[0], V0[0], params=P[0], n_random=1))
-    X0, H0, g0, gv0 = _initial_states(model, Q0, V0, P, first_member)
+        check_time = _timed(lambda: model.check(Q0[0], V0[0], params=P[0], n_random=1, t=t0))
+    X0, H0, g0, gv0 = _initial_states(model, Q0, V0, P, first_member, t0)
 
     N, n = Q0.shape
     h, total, meth, save = opts["h"], opts["total"], opts["method"], opts["save"]
@@ -453,10 +463,12 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -
         K = total // every + 1 + (1 if total % every else 0)
     fill = np.nan if mode == lay.SAVE_STRIDE else 0.0
     Qs, Vs, Ps = (np.full((N, K, n), fill) for _ in range(3))
-    En, Gr, GVr, It = (np.full((N, K), fill) for _ in range(4))
+    En, Gr, GVr, It, Wk = (np.full((N, K), fill) for _ in range(5))
     if mode == lay.SAVE_STRIDE:  # slot 0 is the initial state, exactly as in integrate
         Qs[:, 0], Ps[:, 0], Vs[:, 0] = X0[:, 0], X0[:, 1], X0[:, 2]
-        En[:, 0], Gr[:, 0], GVr[:, 0], It[:, 0] = H0, g0, gv0, 0.0
+        En[:, 0], Gr[:, 0], GVr[:, 0], It[:, 0], Wk[:, 0] = H0, g0, gv0, 0.0, 0.0
+    # the kernels' parameter rows (with the hidden time entry of a time-aware model)
+    KP = np.ascontiguousarray(np.stack([model.kernel_params(P[i], t0) for i in range(N)]))
     ist = np.zeros((N, lay.E_SIZE), dtype=np.int64)
     fst = np.zeros((N, lay.F_SIZE))
     fst[:, lay.F_G], fst[:, lay.F_GV] = g0, gv0
@@ -470,11 +482,12 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -
                 numba.set_num_threads(threads)
             used = numba.get_num_threads()
             numba.set_parallel_chunksize(max(1, N // (CHUNKS_PER_THREAD * used)))
-            args = (fns, flags, Mc, P, meth.kernel_tables, opts["newton"], h,
+            args = (fns, flags, Mc, KP, model.kernel_data().timed, meth.kernel_tables,
+                    opts["newton"], h, t0,
                     meth.s, meth.r, meth.J, X0, total, mode, every, H0,
-                    Qs, Vs, Ps, En, Gr, GVr, It, ist, fst)
-            compile_time += _dispatch_time(drive.run_ensemble, *args)
-            t0 = time.perf_counter()
+                    Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst)
+            compile_time += _dispatch_time(drive.run_ensemble, args[4], *args)
+            t_loop = time.perf_counter()
             drive.run_ensemble(*args)
             t1 = time.perf_counter()
         finally:
@@ -484,7 +497,7 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -
     steps = ist[:, lay.E_STEPS].copy()
     iterations = fst[:, lay.F_ITERS].astype(np.int64)
     stats = dict(members=N, member_steps=int(steps.sum()), newton_iterations=int(iterations.sum()),
-                 threads=used, integration_time=t1 - t0, setup_time=t0 - t_setup,
+                 threads=used, integration_time=t1 - t_loop, setup_time=t_loop - t_setup,
                  compile_time=compile_time, check_time=check_time, wall_time=t1 - t_setup)
     diag = mode == lay.SAVE_DIAGNOSTICS
     stride = mode == lay.SAVE_STRIDE
@@ -492,7 +505,7 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -
         ks = np.arange(every, total + 1, every)
         if total % every:
             ks = np.append(ks, total)
-        t = np.concatenate(([0.0], ks * h))
+        t = np.concatenate(([t0], t0 + ks * h))
         q, v, p, energy = Qs, Vs, Ps, En
     else:
         t = None
@@ -508,11 +521,11 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -
         residual=fst[:, lay.F_RES].copy(), status=ist[:, lay.E_STATUS].copy(),
         failed_step=ist[:, lay.E_FAILED].copy(), steps=steps, n_saved=ist[:, lay.E_SAVED].copy(),
         method=meth, h=h, n_steps=total, save=save, stats=stats, model_name=model.name,
-        initial_energy=H0.copy(),
+        initial_energy=H0.copy(), work=Wk if (stride and model.timed) else None,
     )
 
 
-def _initial_states(model: Model, Q0, V0, P, first_member: int):
+def _initial_states(model: Model, Q0, V0, P, first_member: int, t0: float = 0.0):
     """Projected ``(q0, p0, v0)`` per member, with ``H0``, ``max|g(q0)|``, ``max|G v0|``.
 
     The same operations as :func:`fastvi.integrate`, so the compiled loop starts from the
@@ -533,7 +546,7 @@ def _initial_states(model: Model, Q0, V0, P, first_member: int):
             prm = P[i]
             seen = len(caught)
             try:
-                q0, v0 = check.initial_state(model, Q0[i], V0[i], prm)
+                q0, v0 = check.initial_state(model, Q0[i], V0[i], prm, t0)
             except ValueError as exc:
                 j = first_member + i
                 raise ValueError(f"member {j} (`Q0[{j}]`, `V0[{j}]`): {exc}") from None
@@ -541,10 +554,11 @@ def _initial_states(model: Model, Q0, V0, P, first_member: int):
                 projected.append((first_member + i, str(caught[-1].message)))
             p0 = model.mass_matrix(q0, prm) @ v0
             X0[i, 0], X0[i, 1], X0[i, 2] = q0, p0, v0
-            H0[i] = 0.5 * v0 @ p0 + model.potential_energy(q0, prm)
+            H0[i] = 0.5 * v0 @ p0 + model.potential_energy(q0, prm, t0)
             if m:
-                g0[i] = np.max(np.abs(model.constraint_value(q0, prm)))
-                gv0[i] = velocity_residual(model.constraint_jacobian_value(q0, prm), v0, n, m)
+                g0[i] = np.max(np.abs(model.constraint_value(q0, prm, t0)))
+                gv0[i] = np.max(np.abs(model.constraint_jacobian_value(q0, prm, t0) @ v0
+                                       + model.constraint_time_derivative_value(q0, prm, t0)))
     if projected:
         j, msg = projected[0]
         warnings.warn(f"{len(projected)} of {N} members' initial states were projected onto the "

@@ -15,8 +15,7 @@ from . import structure
 from ._numba import quiet
 from .kernels import drive
 from .kernels import layout as lay
-from .kernels.layout import ModelData, Samples, make_workspace
-from .kernels.step import velocity_residual
+from .kernels.layout import Samples, make_workspace
 from .model import Model
 from .results import ProgressBar, Result
 from .status import MESSAGES, Status
@@ -60,7 +59,7 @@ class IntegrationError(RuntimeError):
 
 def _alloc(K: int, n: int) -> Samples:
     return Samples(np.zeros(K), np.zeros((K, n)), np.zeros((K, n)), np.zeros((K, n)), np.zeros(K),
-                   np.zeros(K), np.zeros(K), np.zeros(K))
+                   np.zeros(K), np.zeros(K), np.zeros(K), np.zeros(K))
 
 
 def integrate(
@@ -71,6 +70,7 @@ def integrate(
     h: float,
     t_end: float | None = None,
     n_steps: int | None = None,
+    t0: float = 0.0,
     method: str | Method = "P2L-Q3G",
     save_every: int = 1,
     tol: float = valid.DEFAULT_TOL,
@@ -102,7 +102,11 @@ def integrate(
     h : float
         Step size.
     t_end, n_steps :
-        Exactly one: final time (a whole number of steps) or number of steps.
+        Exactly one: final time (a whole number of steps after ``t0``) or number of steps.
+    t0 : float, default 0.0
+        Start time: ``Result.t`` starts there, and step k runs from ``t0 + k h``. It matters
+        to a model with forces or time-dependent callbacks (whose initial data must then
+        satisfy ``g(t0, q0) = 0`` and ``G v0 + g_t(t0, q0) = 0``).
     method : str or Method, default "P2L-Q3G"
         See :mod:`fastvi.tables`. ``P<s>L-Q<r>G`` is order ``2s`` for ``r >= s``.
     save_every : int, default 1
@@ -180,7 +184,8 @@ def integrate(
     v0 = valid.vector(v0, "v0", n)
     prm = valid.params(params, model)
     h = valid.step_size(h)
-    total = valid.step_count(h, t_end, n_steps)
+    t0 = valid.start_time(t0)
+    total = valid.step_count(h, None if t_end is None else t_end - t0, n_steps)
     every = valid.save_every(save_every)
     opts = valid.newton_options(tol, max_iter, newton)
     recover = valid.recover(recover)
@@ -188,31 +193,34 @@ def integrate(
     compile_time = _timed(model._compile)
     check_time = 0.0
     if check and not model._checked:  # before the projection, which trusts G(q)
-        check_time = _timed(lambda: model.check(q0, v0, params=prm, n_random=1))
-    q0, v0 = valid.initial_state(model, q0, v0, prm)
+        check_time = _timed(lambda: model.check(q0, v0, params=prm, n_random=1, t=t0))
+    q0, v0 = valid.initial_state(model, q0, v0, prm, t0)
 
-    md = ModelData(*model.kernel_arguments(), prm)
+    md = model.kernel_data(prm, t0)
     M0 = model.mass_matrix(q0, prm)
     state = np.zeros((6, n))
     state[0], state[1], state[2] = q0, M0 @ v0, v0
     ws = structure.workspace(model, meth, prm, solver)
     K = total // every + 1 + (1 if total % every else 0)
     smp = _alloc(K, n)
+    smp.t[0] = t0
     smp.q[0], smp.v[0], smp.p[0] = q0, v0, state[1]
-    smp.energy[0] = 0.5 * v0 @ state[1] + model.potential_energy(q0, prm)
+    smp.energy[0] = 0.5 * v0 @ state[1] + model.potential_energy(q0, prm, t0)
     if model.m:
-        smp.g[0] = np.max(np.abs(model.constraint_value(q0, prm)))
-        smp.gv[0] = velocity_residual(model.constraint_jacobian_value(q0, prm), v0, n, model.m)
+        smp.g[0] = np.max(np.abs(model.constraint_value(q0, prm, t0)))
+        smp.gv[0] = np.max(np.abs(model.constraint_jacobian_value(q0, prm, t0) @ v0
+                                  + model.constraint_time_derivative_value(q0, prm, t0)))
     info = np.zeros(lay.INFO_SIZE)
     info[lay.I_SLOT] = 1
     info[lay.I_FIRST] = 1
+    info[lay.I_T0] = t0
     tabs = meth.kernel_tables
 
     chunk = total if not progress else max(1, total // _PROGRESS_CHUNKS)
-    compile_time += _dispatch_time(drive.run, md, tabs, opts, h, state, ws, chunk, total, every,
+    compile_time += _dispatch_time(drive.run, md.timed, md, tabs, opts, h, state, ws, chunk, total, every,
                                    smp, info)
     bar = ProgressBar(total) if progress else None
-    t0 = time.perf_counter()
+    t_loop = time.perf_counter()
     status = 0
     recovered = []
     while info[lay.I_STEPS] < total:
@@ -220,14 +228,14 @@ def integrate(
             status = drive.run(md, tabs, opts, h, state, ws, chunk, total, every, smp, info)
         if status != 0 and recover:
             sub = _retry_in_substeps(md, model, meth, h, opts, state, recover, total, every, smp,
-                                     info, ws)
+                                     info, prm=prm, solver=solver)
             if sub:
                 recovered.append((int(info[lay.I_STEPS]) - 1, sub))
                 status = 0
                 continue
         if bar is not None:
             done = int(info[lay.I_STEPS])
-            bar.update(done, f"t = {done * h:.6g}", final=status != 0 or done >= total)
+            bar.update(done, f"t = {t0 + done * h:.6g}", final=status != 0 or done >= total)
         if status != 0:
             break
     t_end_loop = time.perf_counter()
@@ -235,12 +243,13 @@ def integrate(
     status = Status(status)
     result = Result(
         t=smp.t[:J].copy(), q=smp.q[:J].copy(), v=smp.v[:J].copy(), p=smp.p[:J].copy(),
-        energy=smp.energy[:J].copy(), constraint_residual=smp.g[:J].copy(),
+        energy=smp.energy[:J].copy(), work=smp.work[:J].copy() if model.timed else None,
+        constraint_residual=smp.g[:J].copy(),
         velocity_residual=smp.gv[:J].copy(), newton_iterations=smp.iters[:J].copy(),
         stats=dict(steps=int(info[lay.I_STEPS]), newton_iterations=int(info[lay.I_ITERS]),
                    max_residual=float(info[lay.I_MAXRES]), full_newton_steps=int(info[lay.I_FULL]),
-                   recovered_steps=recovered, integration_time=t_end_loop - t0,
-                   setup_time=t0 - t_start, compile_time=compile_time, check_time=check_time,
+                   recovered_steps=recovered, integration_time=t_end_loop - t_loop,
+                   setup_time=t_loop - t_start, compile_time=compile_time, check_time=check_time,
                    wall_time=t_end_loop - t_start),
         status=status, method=meth, h=h, model_name=model.name,
         failed_step=None if status == 0 else int(info[lay.I_FAILED]),
@@ -249,7 +258,7 @@ def integrate(
     if status != 0 and on_failure == "raise":
         k = int(info[lay.I_FAILED])
         culprit = _nonfinite_callback(model, prm, state, ws) if status == Status.NONFINITE else None
-        raise IntegrationError(status, k, k * h, float(info[lay.I_RES]), result, culprit)
+        raise IntegrationError(status, k, t0 + k * h, float(info[lay.I_RES]), result, culprit)
     return result
 
 
@@ -259,19 +268,25 @@ def _timed(fn) -> float:
     return time.perf_counter() - t
 
 
-def _dispatch_time(kernel, *args) -> float:
+#: (kernel, kind) pairs already made ready in this process (see _dispatch_time)
+_READY: set = set()
+
+
+def _dispatch_time(kernel, kind, *args) -> float:
     """Seconds to make ``kernel`` ready for ``args`` (compile, or load from numba's cache).
 
     The types are computed as numba's dispatcher computes them for a call, so the call that
     follows finds the compiled version and the loop's timing holds the loop only. Typing
     the arguments costs ≈ 0.5 ms (the tuple of callbacks), so it is skipped once the kernel
-    has a compiled version: the kernels are called with the same types for every model.
+    is ready for this ``kind`` of model: the kernels are called with the same types for
+    every model of a kind (conservative, or with forces or time: ``ModelData.timed``).
     """
-    if not hasattr(kernel, "compile") or kernel.overloads:  # NUMBA_DISABLE_JIT, or ready
+    if not hasattr(kernel, "compile") or (kernel, kind) in _READY:  # NUMBA_DISABLE_JIT, or ready
         return 0.0
     t = time.perf_counter()
     with quiet():
         kernel.compile(tuple(kernel.typeof_pyval(a) for a in args))
+    _READY.add((kernel, kind))
     return time.perf_counter() - t
 
 
@@ -282,7 +297,7 @@ def _warn_if_energy_explodes(result: Result) -> None:
     step is beyond the method's stability limit (e.g. ``P1L-Q2G`` with ``ωh > √12`` on a
     stiff spring), and the trajectory is then wrong even though every step converged.
     """
-    err = np.abs(result.energy_error[1:])
+    err = np.abs(result.energy_balance[1:])
     if err.size < 20 or not np.all(np.isfinite(err)):
         return
     k = err.size // 10
@@ -297,7 +312,8 @@ def _warn_if_energy_explodes(result: Result) -> None:
         )
 
 
-def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, smp, info, ws):
+def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, smp, info,
+                       prm=None, solver="auto"):
     """Retake the failed step (state rows 0–2 still hold its start) as 2, 4, … substeps.
 
     Returns the number of substeps that succeeded (the step is then accepted and booked as
@@ -307,10 +323,11 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
     for level in range(1, levels + 1):
         sub = 2**level
         trial = state.copy()
-        ws_sub = make_workspace(model.n, model.m, meth.s, meth.r, meth.J)
+        ws_sub = structure.workspace(model, meth, model.params if prm is None else prm, solver)
         smp_sub = _alloc(1, model.n)
         info_sub = np.zeros(lay.INFO_SIZE)
         info_sub[lay.I_FIRST] = 1
+        info_sub[lay.I_T0] = info[lay.I_T0] + info[lay.I_STEPS] * h
         with quiet():
             st = drive.run(md, tabs, opts, h / sub, trial, ws_sub, sub, sub, sub, smp_sub, info_sub)
         if st == 0:
@@ -323,8 +340,9 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
             sout[lay.S_GV] = smp_sub.gv[0]
             sout[lay.S_RES] = info_sub[lay.I_MAXRES]
             sout[lay.S_FULL] = info_sub[lay.I_FULL]
+            sout[lay.S_WORK] = info_sub[lay.I_WORK]
             with quiet():
-                drive.accept(md, h, state, ws, total, every, smp, info, sout)
+                drive.accept(md, h, state, ws_sub, total, every, smp, info, sout)
             return sub
     return 0
 
@@ -337,7 +355,7 @@ def _nonfinite_callback(model, prm, state, ws):
     for q, v in ((state[0], state[2]), (ws.qi, ws.vi)):
         for slot, shape in shapes.items():
             if slot in model._functions:
-                val = model._eval(slot, q, v, params=prm, shape=shape)
+                val = model._eval(slot, q, v, params=prm, shape=shape, t=float(ws.time[0]))
                 if not np.all(np.isfinite(val)):
                     return f"callback `{slot}` returned {val} at q = {np.array2string(np.asarray(q), precision=6)}"
     return None

@@ -38,6 +38,23 @@ argument                    function                                        ``ou
 The last four are optional: a missing one is replaced by central finite differences of the
 first derivative it differentiates (inside the kernel, without allocation). They only enter
 the Newton matrix, so they change the Newton convergence rate, not the solution.
+
+Forces and time (optional; time always first):
+
+===============================  ==========================================  ==============
+argument                         function                                     ``out`` shape
+===============================  ==========================================  ==============
+``force``                        ``force(t, q, v, params, out)``: F(t, q, v)  (n,)
+``force_jacobian_q``             ``(t, q, v, params, out)``: ∂F/∂q            (n, n)
+``force_jacobian_v``             ``(t, q, v, params, out)``: ∂F/∂v            (n, n)
+``constraint_time_derivative``   ``(t, q, params, out)``: ∂g/∂t               (m,)
+===============================  ==========================================  ==============
+
+With ``time_dependent=True`` the potential and constraint callbacks of the first table take
+``t`` first as well (``potential(t, q, params)``, ``constraint(t, q, params, out)``, …). The
+compiled signature stays the one above: the time travels in a hidden entry ``params[k]``
+after the user's ``k`` parameters, written by the kernels before each evaluation and read by
+the wrappers (:meth:`Model.kernel_params`); the other callbacks never look at it.
 """
 
 from __future__ import annotations
@@ -58,6 +75,9 @@ from .kernels.layout import SECOND as _SECOND
 from .kernels.layout import SLOTS
 
 __all__ = ["Model", "CALLBACK_SIGNATURE", "SLOTS"]
+
+#: relative step of the central difference in t of a constraint without ``∂g/∂t``
+_FD_T = 6.0554544523933395e-06
 
 #: The one signature of every compiled model callback: ``void(q*, v*, params*, out*)``.
 CALLBACK_SIGNATURE = types.void(
@@ -98,6 +118,9 @@ def _templates(n, m, k, tag):
     on the closure's values, and a dispatcher pickles with a per-process id, which would
     make every process miss. The closure holds only the sizes and ``tag`` (the source
     fingerprint), so the key identifies the user's function across processes.
+
+    Kinds ending in ``@t`` take the time first: the kernels pass it in the hidden entry
+    ``p[k]`` that follows the user's ``k`` parameters (the user sees ``params`` of length k).
     """
     nn = (n, n)
 
@@ -133,11 +156,58 @@ def _templates(n, m, k, tag):
         tag  # noqa: B018
         jf(carray(q, (n,)), carray(v, (n,)), carray(p, (k,)), carray(out, nn))  # noqa: F821
 
-    return dict(potential=potential, mass=matrix, potential_hessian=matrix,
-                potential_grad=potential_grad, constraint=constraint,
-                constraint_jacobian=constraint_jacobian, constraint_hessian=constraint_hessian,
-                kinetic_grad=kinetic_grad, kinetic_hessian=velocity_matrix,
-                momentum_jacobian=velocity_matrix)
+    # ---- time first: t is the hidden entry p[k]
+    def potential_t(q, v, p, out):
+        tag  # noqa: B018
+        out[0] = jf(p[k], carray(q, (n,)), carray(p, (k,)))  # noqa: F821
+
+    def matrix_t(q, v, p, out):  # potential_hessian
+        tag  # noqa: B018
+        jf(p[k], carray(q, (n,)), carray(p, (k,)), carray(out, nn))  # noqa: F821
+
+    def potential_grad_t(q, v, p, out):
+        tag  # noqa: B018
+        jf(p[k], carray(q, (n,)), carray(p, (k,)), carray(out, (n,)))  # noqa: F821
+
+    def constraint_t(q, v, p, out):  # constraint, constraint_time_derivative
+        tag  # noqa: B018
+        jf(p[k], carray(q, (n,)), carray(p, (k,)), carray(out, (m,)))  # noqa: F821
+
+    def constraint_jacobian_t(q, v, p, out):
+        tag  # noqa: B018
+        jf(p[k], carray(q, (n,)), carray(p, (k,)), carray(out, (m, n)))  # noqa: F821
+
+    def constraint_hessian_t(q, v, p, out):
+        tag  # noqa: B018
+        jf(p[k], carray(q, (n,)), carray(v, (m,)), carray(p, (k,)), carray(out, nn))  # noqa: F821
+
+    def force_t(q, v, p, out):
+        tag  # noqa: B018
+        jf(p[k], carray(q, (n,)), carray(v, (n,)), carray(p, (k,)), carray(out, (n,)))  # noqa: F821
+
+    def force_matrix_t(q, v, p, out):  # force_jacobian_q, force_jacobian_v
+        tag  # noqa: B018
+        jf(p[k], carray(q, (n,)), carray(v, (n,)), carray(p, (k,)), carray(out, nn))  # noqa: F821
+
+    return {"potential": potential, "mass": matrix, "potential_hessian": matrix,
+            "potential_grad": potential_grad, "constraint": constraint,
+            "constraint_jacobian": constraint_jacobian, "constraint_hessian": constraint_hessian,
+            "kinetic_grad": kinetic_grad, "kinetic_hessian": velocity_matrix,
+            "momentum_jacobian": velocity_matrix,
+            "potential@t": potential_t, "potential_hessian@t": matrix_t,
+            "potential_grad@t": potential_grad_t, "constraint@t": constraint_t,
+            "constraint_jacobian@t": constraint_jacobian_t,
+            "constraint_hessian@t": constraint_hessian_t,
+            "constraint_time_derivative@t": constraint_t,
+            "force@t": force_t, "force_jacobian_q@t": force_matrix_t,
+            "force_jacobian_v@t": force_matrix_t}
+
+
+#: callbacks that take the time first when the model is ``time_dependent``
+_TIME_AWARE = ("potential", "potential_grad", "potential_hessian", "constraint",
+               "constraint_jacobian", "constraint_hessian")
+#: callbacks that always take the time first
+_ALWAYS_TIMED = ("force", "force_jacobian_q", "force_jacobian_v", "constraint_time_derivative")
 
 
 def _source_digest(path: str, memo: dict) -> bytes:
@@ -230,6 +300,7 @@ def _compile_callback(kind: str, fn: Callable, n: int, m: int, k: int):
         return nb.cfunc(CALLBACK_SIGNATURE, cache=tag is not None)(cb)
     except Exception as exc:  # numba raises many types (TypingError, UnsupportedBytecodeError, …)
         name = getattr(getattr(fn, "py_func", fn), "__qualname__", repr(fn))
+        kind = kind.split("@")[0]
         lines = []
         for ln in str(exc).splitlines():
             if __file__ in ln or os.path.basename(__file__) + '"' in ln:
@@ -269,7 +340,11 @@ def _as_params(params, name: str = "params") -> np.ndarray:
 
 
 class Model:
-    r"""A mechanical system ``L(q, v) = ½ vᵀ M(q) v − V(q)`` with constraints ``g(q) = 0``.
+    r"""A mechanical system with Lagrangian, constraints and (optionally) forces and time.
+
+    ``L(t, q, v) = ½ vᵀ M(q) v − V(t, q)``, constraints ``g(t, q) = 0``, non-conservative
+    forces ``F(t, q, v)``. A conservative, autonomous model (the default) has neither forces nor time: its
+    callbacks take no ``t`` and the kernels skip the force and time code entirely.
 
     Parameters
     ----------
@@ -292,6 +367,26 @@ class Model:
     potential_hessian, constraint_hessian, kinetic_hessian, momentum_jacobian : callable, optional
         Exact second derivatives (see the module docstring). Missing ones are replaced by
         finite differences of the first derivatives.
+    force : callable, optional
+        ``force(t, q, v, params, out)`` writes the generalized non-conservative force
+        ``F(t, q, v)`` (n): damping, actuation, prescribed loads. It enters the discrete
+        Lagrange–d'Alembert principle quadratured by the action's own rule, so a method of
+        order 2s stays of order 2s (``docs/custom-model.md``, "Forces and time").
+    force_jacobian_q, force_jacobian_v : callable, optional
+        ``force_jacobian_q(t, q, v, params, out)``: ``∂F/∂q``, and ``force_jacobian_v``:
+        ``∂F/∂v`` (n, n), entry [a, b] = ∂F_a/∂q_b (∂v_b). Finite differences otherwise.
+        Like the other second derivatives they only enter Newton's matrix.
+    time_dependent : bool, default False
+        The potential and the constraints depend on time: every potential and constraint
+        callback then takes the time first — ``potential(t, q, params)``,
+        ``potential_grad(t, q, params, out)``, ``potential_hessian(t, q, params, out)``,
+        ``constraint(t, q, params, out)``, ``constraint_jacobian(t, q, params, out)``,
+        ``constraint_hessian(t, q, eta, params, out)`` — and constraints may drive the
+        system (rheonomic: a prescribed crank angle, a moving support). The mass matrix
+        stays a function of ``q`` only.
+    constraint_time_derivative : callable, optional
+        ``constraint_time_derivative(t, q, params, out)``: ``∂g/∂t`` (m); only with
+        ``time_dependent=True``. A central difference in ``t`` of ``constraint`` otherwise.
     name : str, optional
         A label used in summaries and error messages.
 
@@ -323,6 +418,11 @@ class Model:
         constraint_hessian: Callable | None = None,
         kinetic_hessian: Callable | None = None,
         momentum_jacobian: Callable | None = None,
+        force: Callable | None = None,
+        force_jacobian_q: Callable | None = None,
+        force_jacobian_v: Callable | None = None,
+        time_dependent: bool = False,
+        constraint_time_derivative: Callable | None = None,
         name: str | None = None,
     ):
         self.n = _as_int(n, "n", 1)
@@ -340,7 +440,22 @@ class Model:
             constraint_hessian=constraint_hessian,
             kinetic_hessian=kinetic_hessian,
             momentum_jacobian=momentum_jacobian,
+            force=force,
+            force_jacobian_q=force_jacobian_q,
+            force_jacobian_v=force_jacobian_v,
+            constraint_time_derivative=constraint_time_derivative,
         )
+        if not isinstance(time_dependent, (bool, np.bool_)):
+            raise TypeError(f"`time_dependent` must be True or False, got {time_dependent!r}")
+        self.time_dependent = bool(time_dependent)
+        if force is None:
+            for key in ("force_jacobian_q", "force_jacobian_v"):
+                if funcs[key] is not None:
+                    raise ValueError(f"`{key}` was given without `force`; pass the force itself too")
+        if constraint_time_derivative is not None and not self.time_dependent:
+            raise ValueError("`constraint_time_derivative` was given but `time_dependent=False`: "
+                             "constraints that depend on time need `time_dependent=True` (and then "
+                             "every potential and constraint callback takes `t` first)")
         if callable(mass):
             funcs["mass"] = mass
             self.mass_matrix_constant = None
@@ -365,7 +480,8 @@ class Model:
                 if not callable(funcs[key]):
                     raise ValueError(f"`{key}` is required when m = {self.m} > 0")
         else:
-            for key in ("constraint", "constraint_jacobian", "constraint_hessian"):
+            for key in ("constraint", "constraint_jacobian", "constraint_hessian",
+                        "constraint_time_derivative"):
                 if funcs[key] is not None:
                     raise ValueError(f"`{key}` was given but m = 0; pass the number of constraints `m`")
         for key, fn in funcs.items():
@@ -405,17 +521,51 @@ class Model:
                 RuntimeWarning, stacklevel=2,
             )
         funcs = {k: v for k, v in self._functions.items() if k != "mass"}
-        kwargs = dict(params=self.params, mass=self._mass_arg, name=self.name, **funcs)
+        kwargs = dict(params=self.params, mass=self._mass_arg, name=self.name,
+                      time_dependent=self.time_dependent, **funcs)
         return (_model_from_kwargs, (self.n, self.m, kwargs))
 
     # ------------------------------------------------------------------ compiled form
+    @property
+    def has_force(self) -> bool:
+        """Whether the model has a non-conservative force."""
+        return "force" in self._functions
+
+    @property
+    def timed(self) -> bool:
+        """Whether any callback reads the time (a force, or ``time_dependent``): the kernels
+        pass it in a hidden entry after the parameters (:meth:`kernel_params`), and the
+        results carry the work of forces and time."""
+        return self.time_dependent or self.has_force
+
+    def _kind(self, slot: str) -> str:
+        if slot in _ALWAYS_TIMED or (self.time_dependent and slot in _TIME_AWARE):
+            return slot + "@t"
+        return slot
+
+    def kernel_params(self, params=None, t: float = 0.0) -> np.ndarray:
+        """The parameter vector the compiled callbacks receive: ``params`` (default the
+        model's) followed by one hidden entry holding the time ``t``, which the kernels
+        overwrite at every evaluation (time-aware callbacks read it; the others never look).
+        A fresh array of length k + 1."""
+        p = self.params if params is None else np.asarray(params, dtype=np.float64)
+        return np.append(p, float(t))
+
+    def kernel_data(self, params=None, t: float = 0.0):
+        """The :class:`fastvi.kernels.layout.ModelData` the kernels receive: the callbacks,
+        flags, constant mass, :meth:`kernel_params` and the kind marker (``None`` for a
+        conservative, autonomous model: its kernels are compiled without any force or time
+        code)."""
+        return lay.ModelData(*self._compile(), self.kernel_params(params, t),
+                             True if self.timed else None)
+
     def _compile(self):
         if self._compiled is None:
             k = self.params.shape[0]
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", nb.NumbaExperimentalFeatureWarning)
                 cfs = tuple(
-                    _wrap(slot, self._functions[slot], self.n, self.m, k)
+                    _wrap(self._kind(slot), self._functions[slot], self.n, self.m, k)
                     if slot in self._functions
                     else _absent
                     for slot in SLOTS
@@ -430,6 +580,12 @@ class Model:
             Mc = np.ascontiguousarray(M if M is not None else np.zeros((self.n, self.n)))
             # a diagonal constant M lets the kernels use M v and M⁻¹ elementwise
             flags[lay.F_DIAG] = int(M is not None and np.count_nonzero(M - np.diag(np.diag(M))) == 0)
+            flags[lay.F_FORCE] = int(self.has_force)
+            flags[lay.F_EX_FJQ] = int("force_jacobian_q" in self._functions)
+            flags[lay.F_EX_FJV] = int("force_jacobian_v" in self._functions)
+            flags[lay.F_TIME] = int(self.time_dependent)
+            flags[lay.F_EX_GT] = int("constraint_time_derivative" in self._functions)
+            flags[lay.F_TSLOT] = k
             self._compiled = (cfs, flags, Mc)
         return self._compiled
 
@@ -437,8 +593,9 @@ class Model:
         """``(callbacks, flags, constant_mass)``: what the kernels receive for this model.
 
         ``callbacks`` is the tuple of cfuncs in :data:`SLOTS` order (absent ones are a
-        no-op that the kernels never call), ``flags`` an int64 vector
-        ``[n, m, has_mass_function, exact second derivatives (4), constant mass is diagonal]``.
+        no-op that the kernels never call), ``flags`` the int64 vector indexed by the
+        ``F_*`` names of :mod:`fastvi.kernels.layout`. The kernels' parameter vector is
+        :meth:`kernel_params`.
         """
         return self._compile()
 
@@ -448,11 +605,11 @@ class Model:
         return {s: s in self._functions for s in _SECOND}
 
     # ------------------------------------------------------------------ evaluation from Python
-    def _eval(self, slot: str, q, v=None, params=None, shape=()):
+    def _eval(self, slot: str, q, v=None, params=None, shape=(), t: float = 0.0):
         cfs = self._compile()[0]
         q = np.ascontiguousarray(q, dtype=np.float64)
         v = q if v is None else np.ascontiguousarray(v, dtype=np.float64)
-        p = self.params if params is None else np.ascontiguousarray(params, dtype=np.float64)
+        p = self.kernel_params(params, t)
         out = np.zeros(shape if shape else (1,))
         with quiet():
             _call(cfs[SLOTS.index(slot)], q, v, p, out)
@@ -464,26 +621,42 @@ class Model:
             return self.mass_matrix_constant.copy()
         return self._eval("mass", q, params=params, shape=(self.n, self.n))
 
-    def potential_energy(self, q, params=None) -> float:
-        """V(q)."""
-        return self._eval("potential", q, params=params)
+    def potential_energy(self, q, params=None, t: float = 0.0) -> float:
+        """V(t, q) (``t`` is ignored unless the model is ``time_dependent``)."""
+        return self._eval("potential", q, params=params, t=t)
 
-    def constraint_value(self, q, params=None) -> np.ndarray:
-        """g(q), shape (m,)."""
+    def constraint_value(self, q, params=None, t: float = 0.0) -> np.ndarray:
+        """g(t, q), shape (m,)."""
         if self.m == 0:
             return np.zeros(0)
-        return self._eval("constraint", q, params=params, shape=(self.m,))
+        return self._eval("constraint", q, params=params, shape=(self.m,), t=t)
 
-    def constraint_jacobian_value(self, q, params=None) -> np.ndarray:
-        """G(q) = ∂g/∂q, shape (m, n)."""
+    def constraint_jacobian_value(self, q, params=None, t: float = 0.0) -> np.ndarray:
+        """G(t, q) = ∂g/∂q, shape (m, n)."""
         if self.m == 0:
             return np.zeros((0, self.n))
-        return self._eval("constraint_jacobian", q, params=params, shape=(self.m, self.n))
+        return self._eval("constraint_jacobian", q, params=params, shape=(self.m, self.n), t=t)
 
-    def energy(self, q, v, params=None) -> float:
-        """H = ½ vᵀ M(q) v + V(q)."""
+    def constraint_time_derivative_value(self, q, params=None, t: float = 0.0) -> np.ndarray:
+        """g_t = ∂g/∂t at (t, q), shape (m,): the callback, or a central difference in ``t``
+        of the constraint (zero for a model that is not ``time_dependent``)."""
+        if self.m == 0 or not self.time_dependent:
+            return np.zeros(self.m)
+        if "constraint_time_derivative" in self._functions:
+            return self._eval("constraint_time_derivative", q, params=params, shape=(self.m,), t=t)
+        dt = _FD_T * max(1.0, abs(t))
+        return (self.constraint_value(q, params, t + dt) - self.constraint_value(q, params, t - dt)) / (2 * dt)
+
+    def force_value(self, t, q, v, params=None) -> np.ndarray:
+        """F(t, q, v), shape (n,) (zeros for a model without force)."""
+        if not self.has_force:
+            return np.zeros(self.n)
+        return self._eval("force", q, v, params=params, shape=(self.n,), t=t)
+
+    def energy(self, q, v, params=None, t: float = 0.0) -> float:
+        """H = ½ vᵀ M(q) v + V(t, q)."""
         v = np.asarray(v, dtype=np.float64)
-        return 0.5 * v @ self.mass_matrix(q, params) @ v + self.potential_energy(q, params)
+        return 0.5 * v @ self.mass_matrix(q, params) @ v + self.potential_energy(q, params, t)
 
     def check(self, q, v=None, **options):
         """Compare every supplied derivative callback with finite differences.
@@ -499,7 +672,7 @@ class Model:
         v : array_like (n,), optional
             Velocity for the kinetic-energy derivatives (default: random).
         **options
-            ``params``, ``n_random``, ``radius``, ``rtol``, ``seed``, ``raise_on_error``.
+            ``params``, ``t``, ``n_random``, ``radius``, ``rtol``, ``seed``, ``raise_on_error``.
 
         Returns
         -------
@@ -517,7 +690,9 @@ class Model:
 
     def __repr__(self) -> str:
         kind = "constant" if self.mass_matrix_constant is not None else "q-dependent"
-        return f"Model({self.name!r}, n={self.n}, m={self.m}, {kind} mass, k={self.params.shape[0]} params)"
+        extra = (", force" if self.has_force else "") + (", time-dependent" if self.time_dependent else "")
+        return (f"Model({self.name!r}, n={self.n}, m={self.m}, {kind} mass, "
+                f"k={self.params.shape[0]} params{extra})")
 
 
 def _model_from_kwargs(n, m, kwargs):

@@ -92,6 +92,22 @@ class TrajectoryResult(ResultBase):
         """``H(t) − H(0)``."""
         return self.energy - self.energy[0]
 
+    @property
+    def energy_balance(self) -> np.ndarray:
+        r"""``H(t) − H(t0) − W(t)``: the energy error once the work ``W`` done on the system
+        by forces, time-dependent potentials and driving constraints is accounted for
+        (``W = 0`` and this is :attr:`energy_error` for a conservative model). It stays at
+        the size of a conservative run's energy error, without drift, while ``H`` itself
+        may decay (damping) or be pumped (a drive)."""
+        work = getattr(self, "work", None)
+        return self.energy_error if work is None else self.energy_error - work
+
+    def _balance_text(self) -> str:
+        if getattr(self, "work", None) is None:
+            return f"max |ΔH| = {np.max(np.abs(self.energy_error)):.3e}"
+        return (f"ΔH = {self.energy_error[-1]:.3e}, work = {self.work[-1]:.3e}, "
+                f"max |ΔH − W| = {np.max(np.abs(self.energy_balance)):.3e}")
+
     def _repr_items(self) -> list[str]:
         t = self.t
         span = f"[{t[0]:g}, {t[-1]:g}]" if t.size else "[]"
@@ -105,7 +121,7 @@ class TrajectoryResult(ResultBase):
         text = (
             f"{self.model_name}: {self._label()}, h = {self.h:g}, steps = {self.stats['steps']}, "
             f"{self._timing()}, "
-            f"max |ΔH| = {np.max(np.abs(self.energy_error)):.3e}, "
+            f"{self._balance_text()}, "
             f"max |g| = {np.max(self.constraint_residual):.3e}, "
             f"max |Gv| = {np.max(self.velocity_residual):.3e}"
         )
@@ -144,8 +160,17 @@ class TrajectoryResult(ResultBase):
         a0.set_ylabel("q(t)")
         if idx and len(idx) <= 8:
             a0.legend(fontsize="small", ncol=min(len(idx), 4), loc="upper right")
-        a1.plot(self.t, self.energy_error, lw=0.8)
-        a1.set_ylabel("H(t) − H(0)")
+        if getattr(self, "work", None) is None:
+            a1.plot(self.t, self.energy_error, lw=0.8)
+            a1.set_ylabel("H(t) − H(0)")
+        else:
+            a1.plot(self.t, self.energy_error, lw=0.8, label="H − H(t0)")
+            a1.plot(self.t, self.work, lw=0.8, ls="--", label="work W")
+            a1.set_ylabel("energy")
+            a1.legend(fontsize="small", loc="upper right")
+            ab = a1.twinx()
+            ab.plot(self.t, self.energy_balance, lw=0.6, color="tab:red")
+            ab.set_ylabel("balance H − H(t0) − W", color="tab:red")
         _residual_panel(a2, self.t[1:], {"max|g|": self.constraint_residual[1:],
                                           "max|Gv|": self.velocity_residual[1:]})
         a2.set_xlabel("t")
@@ -161,13 +186,19 @@ class Result(TrajectoryResult):
     Attributes
     ----------
     t : ndarray (K,)
-        Times of the samples; ``t[0] = 0`` is the (projected) initial state.
+        Times of the samples; ``t[0] = t0`` is the (projected) initial state.
     q, v, p : ndarray (K, n)
         Positions, velocities ``v = M⁻¹p`` and momenta.
     energy : ndarray (K,)
-        ``H = ½ vᵀ M v + V``.
+        ``H = ½ vᵀ M v + V(t, q)``.
+    work : ndarray (K,) or None
+        For a model with forces or time: the work done on the system since ``t0`` by the
+        forces (``∫ F·v dt``), the time-dependent potential (``∫ ∂V/∂t dt``) and driving
+        constraints (``∫ λ·g_t dt``), quadratured on each step's polynomial; see
+        :attr:`energy_balance`. None for a conservative model.
     constraint_residual, velocity_residual : ndarray (K,)
-        ``max |g(q_k)|`` and ``max |G(q_k) v_k|`` over the steps since the previous sample.
+        ``max |g(t_k, q_k)|`` and ``max |G v_k + g_t|`` over the steps since the previous
+        sample.
     newton_iterations : ndarray (K,)
         Newton iterations spent since the previous sample.
     stats : dict
@@ -198,6 +229,7 @@ class Result(TrajectoryResult):
     h: float
     failed_step: int | None = None
     model_name: str = field(default="model")
+    work: np.ndarray | None = None
 
     def _label(self) -> str:
         return self.method.name
@@ -217,6 +249,7 @@ class Result(TrajectoryResult):
             status=int(self.status), model_name=self.model_name,
             failed_step=-1 if self.failed_step is None else int(self.failed_step),
             stats_recovered_steps=np.asarray(rec, dtype=np.int64).reshape(-1, 2),
+            **({} if self.work is None else {"work": self.work}),
             **{f"stats_{k}": v for k, v in stats.items()},
         )
 
@@ -247,9 +280,10 @@ class Result(TrajectoryResult):
                                         else [tuple(int(x) for x in row) for row in np.reshape(rec, (-1, 2))])
             failed = int(data["failed_step"]) if "failed_step" in data.files else -1
             name = str(data["model_name"]) if "model_name" in data.files else "model"
+            work = data["work"] if "work" in data.files else None
             return cls(**arrays, stats=stats, status=Status(int(data["status"])),
                        method=_method(str(data["method"])), h=float(data["h"]),
-                       failed_step=None if failed < 0 else failed, model_name=name)
+                       failed_step=None if failed < 0 else failed, model_name=name, work=work)
 
 
 # ---------------------------------------------------------------------------- plotting helpers

@@ -71,7 +71,7 @@ def detect_pattern(model, meth, prm=None, n_states: int = PATTERN_STATES, seed: 
     rng = np.random.default_rng(seed)
     n, m, s, J = model.n, model.m, meth.s, meth.J
     N = s * n + J * m
-    md = lay.ModelData(*model.kernel_arguments(), prm)
+    md = model.kernel_data(prm)
     ws = lay.make_workspace(n, m, s, meth.r, J)
     PG = np.zeros((m, n), dtype=bool)
     PA = np.zeros((N, N), dtype=bool)

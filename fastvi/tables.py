@@ -332,7 +332,8 @@ class Method:
         mech = invertible and s >= 2
         W = self.Lc[1:, 1:].T @ Ainv @ self.Lc[:s, :J]
         return Tables(self.b, self.L, self.Ld, self.Lc, self.E, self.tau,
-                      np.ascontiguousarray(Ainv), np.ascontiguousarray(W), As, mech)
+                      np.ascontiguousarray(Ainv), np.ascontiguousarray(W), As, mech,
+                      np.ascontiguousarray(self.c), np.ascontiguousarray(self.d))
 
 
 def _constraint_points(code: str, k: int | None, tau: np.ndarray) -> tuple[str, np.ndarray]:

@@ -13,7 +13,7 @@ def one_step(model, meth, h, q, p, v, *, ws=None, first=True, tol=1e-14, max_ite
     n = model.n
     if ws is None:
         ws = lay.make_workspace(n, model.m, meth.s, meth.r, meth.J)
-    md = lay.ModelData(*model.kernel_arguments(), model.params if params is None else params)
+    md = model.kernel_data(params)
     opts = lay.NewtonOptions(tol, max_iter, lay.NEWTON_MODES[newton])
     state = np.zeros((6, n))
     state[0], state[1], state[2] = q, p, v

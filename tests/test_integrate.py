@@ -83,12 +83,23 @@ def test_unconstrained_and_q_dependent_mass_models_run():
     assert s.success and np.abs(s.energy_error).max() < 1e-6  # measured 2e-8
 
 
+def _kinds(kernel):
+    """The ``ModelData.timed`` types the kernel was compiled for (one per kind of model)."""
+    return [str(sig[0].types[-1]) if hasattr(sig[0], "types") else str(sig[0]) for sig in kernel.signatures]
+
+
 def test_kernels_compile_once_for_every_model(double_pendulum, dp_start):
-    """Every model's cfuncs share one type, so no model triggers a recompile."""
+    """Every model's cfuncs share one type, so no model triggers a recompile: one
+    signature for conservative models and (once any ran) one for models with forces or time."""
     fastvi.integrate(double_pendulum, *dp_start, h=0.01, n_steps=5)
     fastvi.integrate(models.polar_pendulum(), [1.0, 0.5], [0.0, 0.0], h=0.01, n_steps=5)
     fastvi.integrate(models.quartic(), [1.0, 0.5], [0.0, 0.0], h=0.01, n_steps=5, method="P3L-Q3L")
-    assert len(drive.run.signatures) == 1
+    damped = fastvi.scenes.double_pendulum(damping=0.1)
+    fastvi.integrate(damped, *dp_start, h=0.01, n_steps=5)
+    kapitza = fastvi.scenes.kapitza_pendulum()
+    fastvi.integrate(kapitza, *kapitza.initial_state(3.0), h=1e-3, n_steps=5)
+    kinds = _kinds(drive.run)
+    assert len(kinds) == 2 and sorted(kinds) == ["bool", "none"], kinds
     assert len(step.step.signatures) <= 1  # compiled only inside `run` unless called directly
 
 

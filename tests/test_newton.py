@@ -57,7 +57,7 @@ def test_mechanics_solve_equals_a_dense_solve_of_the_mechanics_matrix(double_pen
     # the G_j the workspace holds now, as newton_mech does on its first iteration
     from fastvi.kernels.step import _mech_rows, _schur
 
-    md = lay.ModelData(*model.kernel_arguments(), model.params)
+    md = model.kernel_data()
     for j in range(J):
         _mech_rows(md, ws, j, n, m)
     assert _schur(meth.kernel_tables, 0.01, ws, n, m, J) == 0

@@ -68,7 +68,7 @@ def test_detected_pattern_of_a_chain_is_its_structure():
     # the Newton matrix at another random state has no non-zero outside the pattern
     rng = np.random.default_rng(99)
     ws = lay.make_workspace(12, 6, P2.s, P2.r, P2.J)
-    md = lay.ModelData(*model.kernel_arguments(), model.params)
+    md = model.kernel_data()
     ws.X[:] = rng.standard_normal(ws.X.size)
     q = rng.standard_normal(12)
     ws.G[0] = model.constraint_jacobian_value(q)
@@ -120,6 +120,9 @@ def _scene_cases():
     yield "rotary_rod_slider", fastvi.scenes.rotary_rod_slider(), (0.3,)
     yield "chain12", chain(12), (np.linspace(0.2, 1.4, 12),)
     yield "coupled_chain10", _coupled_chain(10), None
+    yield "damped_chain12", chain(12, damping=0.3), (np.linspace(0.2, 1.4, 12),)  # forces
+    yield "kapitza_pendulum", fastvi.scenes.kapitza_pendulum(), (2.5,)  # rheonomic constraint
+    yield "slider_crank", fastvi.scenes.slider_crank(), (0.3,)
 
 
 @pytest.mark.parametrize("newton", ["auto", "full"])

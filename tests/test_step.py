@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import fastvi
-from fastvi.kernels.layout import ModelData, make_workspace
+from fastvi.kernels.layout import make_workspace
 from fastvi.kernels.step import assemble
 
 from . import models, reference
@@ -34,7 +34,7 @@ MODELS = _models()
 
 
 def _kernel(model, meth, h, qk, pk, X, jac=True):
-    md = ModelData(*model.kernel_arguments(), model.params)
+    md = model.kernel_data()
     ws = make_workspace(model.n, model.m, meth.s, meth.r, meth.J)
     ws.X[:] = X
     if model.m:

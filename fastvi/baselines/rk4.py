@@ -451,6 +451,7 @@ def rk4(model: Model, q0, v0, *, h: float, t_end: float | None = None, n_steps: 
     q0 = check.vector(q0, "q0", n)
     v0 = check.vector(v0, "v0", n)
     prm = check.params(params, model)
+    check.conservative(model, "rk4")
     h = check.step_size(h)
     total = check.step_count(h, t_end, n_steps)
     every = check.save_every(save_every)

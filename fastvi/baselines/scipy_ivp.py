@@ -49,11 +49,13 @@ def _bound_rhs(model: Model):
     and then ~5 µs per call.
     """
     if model not in _BOUND:
-        f0, f1, f2, f3, f4, f5, f6, f7, f8, f9 = model.kernel_arguments()[0]
+        (f0, f1, f2, f3, f4, f5, f6, f7, f8, f9, f10, f11, f12,
+         f13) = model.kernel_arguments()[0]
 
         @nb.njit
         def rhs(flags, Mc, prm, y, dy, ws):
-            return _rhs((f0, f1, f2, f3, f4, f5, f6, f7, f8, f9), flags, Mc, prm, y, dy, ws)
+            return _rhs((f0, f1, f2, f3, f4, f5, f6, f7, f8, f9, f10, f11, f12, f13), flags, Mc,
+                        prm, y, dy, ws)
 
         _BOUND[model] = rhs
     return _BOUND[model]
@@ -98,6 +100,7 @@ def solve_ivp(model: Model, q0, v0, *, t_end: float, method: str = "DOP853", rto
     q0 = check.vector(q0, "q0", n)
     v0 = check.vector(v0, "v0", n)
     prm = check.params(params, model)
+    check.conservative(model, "solve_ivp")
     if isinstance(t_end, bool) or not isinstance(t_end, (int, float, np.integer, np.floating)) \
             or not (np.isfinite(t_end) and t_end > 0):
         raise ValueError(f"`t_end` must be positive and finite, got {t_end!r}")

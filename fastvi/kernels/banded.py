@@ -245,10 +245,11 @@ def mech_rows_sparse(ws, j, m):
 
 
 @hot
-def project_banded(Mc, q1, P, p1, v1, G1, ws, n, m):
+def project_banded(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic):
     """The end projection of :func:`.step.end_momentum` for a diagonal constant mass with
     ``G M⁻¹ Gᵀ`` built over the pattern of ``G Gᵀ`` and factored banded:
-    ``p1 = P − G1ᵀ η``, ``(G M⁻¹ Gᵀ) η = G M⁻¹ P``, ``v1 = M⁻¹ p1``."""
+    ``p1 = P − G1ᵀ η``, ``(G M⁻¹ Gᵀ) η = G M⁻¹ P (+ g_t in ws.gt if rheonomic)``,
+    ``v1 = M⁻¹ p1``."""
     si, sb = ws.si, ws.sb
     kl = si[SI_S_KL]
     ku = si[SI_S_KU]
@@ -268,7 +269,7 @@ def project_banded(Mc, q1, P, p1, v1, G1, ws, n, m):
         ab[k] = 0.0
     for c in range(m):
         i = ip[c]
-        acc = 0.0
+        acc = ws.gt[c] if rheonomic else 0.0
         for k in range(si[gp + c], si[gp + c + 1]):
             a = si[gc + k]
             acc += G1[c, a] * v1[a]

@@ -12,18 +12,20 @@ from numba import prange
 
 from .._numba import hot, njit, ptr
 from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_ITERS, F_M,
-                     F_MAXRES, F_N, F_RES, I_FAILED, I_FIRST, I_FULL, I_ITERS, I_MAXRES, I_RES,
-                     I_SLOT, I_STEPS, I_WIN_G, I_WIN_GV, I_WIN_IT, INFO_SIZE, POT, S_FULL, S_G,
-                     S_GV, S_ITERS, S_RES, SAVE_DIAGNOSTICS, SAVE_FINAL, SAVE_STRIDE,
-                     STEP_OUT_SIZE, ModelData, Samples, make_workspace)
+                     F_MAXRES, F_N, F_RES, F_TSLOT, I_FAILED, I_FIRST, I_FULL, I_ITERS, I_MAXRES,
+                     I_RES, I_SLOT, I_STEPS, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK, INFO_SIZE,
+                     POT, S_FULL, S_G, S_GV, S_ITERS, S_RES, S_WORK, SAVE_DIAGNOSTICS, SAVE_FINAL,
+                     SAVE_STRIDE, STEP_OUT_SIZE, ModelData, Samples, is_timed, make_workspace)
 from .step import step
 
 __all__ = ["run", "run_member", "run_ensemble", "energy", "accept", "record", "INFO_SIZE"]
 
 
 @hot
-def energy(md, q, p, v, scratch):
-    """H = ½ vᵀp + V(q) with v = M⁻¹p already known."""
+def energy(md, t, q, p, v, scratch):
+    """H = ½ vᵀp + V(t, q) with v = M⁻¹p already known."""
+    if is_timed(md):
+        md.prm[md.flags[F_TSLOT]] = t
     md.fns[POT](ptr(q), ptr(q), ptr(md.prm), ptr(scratch))
     e = scratch[0]
     for a in range(q.shape[0]):
@@ -32,15 +34,17 @@ def energy(md, q, p, v, scratch):
 
 
 @hot
-def record(md, state, ws, smp, slot, info):
-    """Write the state (rows q, p, v) into sample ``slot`` with the residual windows of
-    ``info``, and open new windows."""
+def record(md, t, state, ws, smp, slot, info):
+    """Write the state (rows q, p, v) at time ``t`` into sample ``slot`` with the residual
+    windows and the work of ``info``, and open new windows."""
     q, p, v = state[0], state[1], state[2]
     for a in range(q.shape[0]):
         smp.q[slot, a] = q[a]
         smp.v[slot, a] = v[a]
         smp.p[slot, a] = p[a]
-    smp.energy[slot] = energy(md, q, p, v, ws.g)
+    smp.t[slot] = t
+    smp.energy[slot] = energy(md, t, q, p, v, ws.g)
+    smp.work[slot] = info[I_WORK]
     smp.g[slot] = info[I_WIN_G]
     smp.gv[slot] = info[I_WIN_GV]
     smp.iters[slot] = info[I_WIN_IT]
@@ -58,12 +62,12 @@ def accept(md, h, state, ws, n_total, save_every, smp, info, sout):
     info[I_WIN_GV] = max(info[I_WIN_GV], sout[S_GV])
     info[I_WIN_IT] += sout[S_ITERS]
     info[I_FULL] += sout[S_FULL]
+    info[I_WORK] += sout[S_WORK]
     k = int(info[I_STEPS]) + 1
     info[I_STEPS] = k
     if save_every > 0 and (k % save_every == 0 or k == n_total):
         j = int(info[I_SLOT])
-        smp.t[j] = k * h
-        record(md, state, ws, smp, j, info)
+        record(md, info[I_T0] + k * h, state, ws, smp, j, info)
         info[I_SLOT] = j + 1
 
 
@@ -71,6 +75,9 @@ def accept(md, h, state, ws, n_total, save_every, smp, info, sout):
 def _take(md, tabs, opts, h, state, ws, info, sout):
     """One step from state rows 0–2; on success the new state is copied into them."""
     k = int(info[I_STEPS])
+    # step k runs from t0 + k h to t0 + (k+1) h, each computed from t0 (no drift)
+    ws.time[0] = info[I_T0] + k * h
+    ws.time[1] = info[I_T0] + (k + 1) * h
     status = step(md, tabs, opts, h, state, ws, info[I_FIRST] != 0.0, sout)
     info[I_ITERS] += sout[S_ITERS]
     info[I_RES] = sout[S_RES]
@@ -87,7 +94,8 @@ def _take(md, tabs, opts, h, state, ws, info, sout):
 
 @njit
 def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info):
-    """Advance ``state`` (rows q, p, v, then scratch) by up to ``n_chunk`` steps.
+    """Advance ``state`` (rows q, p, v, then scratch) by up to ``n_chunk`` steps, step k
+    running from ``info[I_T0] + k h``.
 
     Saves every ``save_every``-th step and the last one into the :class:`Samples` ``smp``,
     the residuals and iterations being the maxima/sums over the steps since the previous
@@ -106,13 +114,14 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info):
 
 # ----------------------------------------------------------------------------- ensembles
 @njit
-def run_member(md, tabs, opts, h, state, ws, n_total, mode, every, H0, smp, ist, fst):
+def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, ist, fst):
     """Advance one member (rows q, p, v, then scratch of ``state``) through ``n_total`` steps.
 
     ``mode`` is ``SAVE_FINAL`` (the final state into slot 0 of ``smp``), ``SAVE_STRIDE``
     (every ``every``-th step and the last into slots 1, 2, …, exactly as ``run`` fills its
     samples; slot 0 is the caller's) or ``SAVE_DIAGNOSTICS`` (the final state, and
-    ``max |H − H0|``, ``max |g|``, ``max |Gv|`` over every step into ``fst``; the caller
+    ``max |H − H0 − W|`` (W the work of forces and time, zero for a conservative model),
+    ``max |g|``, ``max |Gv + g_t|`` over every step into ``fst``; the caller
     seeds ``fst[F_G]``, ``fst[F_GV]`` with the initial residuals). Returns the status code,
     also stored in ``ist[E_STATUS]``; a failed step's index goes to ``ist[E_FAILED]``.
     """
@@ -120,6 +129,7 @@ def run_member(md, tabs, opts, h, state, ws, n_total, mode, every, H0, smp, ist,
     info = np.zeros(INFO_SIZE)
     info[I_FIRST] = 1.0
     info[I_SLOT] = 1.0
+    info[I_T0] = t0
     dh = 0.0
     gmax = fst[F_G]
     gvmax = fst[F_GV]
@@ -134,14 +144,14 @@ def run_member(md, tabs, opts, h, state, ws, n_total, mode, every, H0, smp, ist,
             break
         accept(md, h, state, ws, n_total, stride, smp, info, sout)
         if mode == SAVE_DIAGNOSTICS:
-            e = energy(md, state[0], state[1], state[2], ws.g)
-            dh = max(dh, abs(e - H0))
+            e = energy(md, ws.time[1], state[0], state[1], state[2], ws.g)
+            dh = max(dh, abs(e - H0 - info[I_WORK]))
             gmax = max(gmax, sout[S_G])
             gvmax = max(gvmax, sout[S_GV])
     slot = int(info[I_SLOT])
     if mode != SAVE_STRIDE:
         # the last good state (the final one unless the member failed)
-        record(md, state, ws, smp, 0, info)
+        record(md, t0 + info[I_STEPS] * h, state, ws, smp, 0, info)
         slot = 1
     ist[E_STATUS] = status
     ist[E_STEPS] = int(info[I_STEPS])
@@ -155,14 +165,16 @@ def run_member(md, tabs, opts, h, state, ws, n_total, mode, every, H0, smp, ist,
 
 
 @njit(parallel=True)
-def run_ensemble(fns, flags, Mc, P, tabs, opts, h, s, r, J, X0, n_total, mode, every, H0,
-                 Qs, Vs, Ps, En, Gr, GVr, It, ist, fst):
+def run_ensemble(fns, flags, Mc, P, timed, tabs, opts, h, t0, s, r, J, X0, n_total, mode, every,
+                 H0, Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst):
     """``run_member`` for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in parallel.
 
-    ``P`` (N, k) holds each member's parameters; the outputs are indexed by member first
-    (``Qs`` (N, K, n), ``En`` (N, K), ``ist`` (N, E_SIZE), ``fst`` (N, F_SIZE)). Each member
-    gets its own workspace and state, allocated inside the loop body, so threads share
-    nothing but read-only model and method data.
+    ``P`` (N, k + 1) holds each member's kernel parameters (the kernels write the time into
+    the last entry of a member's own row) and ``timed`` the kind marker of
+    ``ModelData``; the outputs are indexed by
+    member first (``Qs`` (N, K, n), ``En``, ``Wk`` (N, K), ``ist`` (N, E_SIZE), ``fst``
+    (N, F_SIZE)). Each member gets its own workspace and state, allocated inside the loop
+    body, so threads share nothing but read-only model and method data.
     """
     n = flags[F_N]
     m = flags[F_M]
@@ -174,6 +186,7 @@ def run_ensemble(fns, flags, Mc, P, tabs, opts, h, s, r, J, X0, n_total, mode, e
             state[1, a] = X0[i, 1, a]
             state[2, a] = X0[i, 2, a]
         # the member's times are the caller's grid, so they go to scratch
-        smp = Samples(np.zeros(En.shape[1]), Qs[i], Vs[i], Ps[i], En[i], Gr[i], GVr[i], It[i])
-        run_member(ModelData(fns, flags, Mc, P[i]), tabs, opts, h, state, ws, n_total, mode,
+        smp = Samples(np.zeros(En.shape[1]), Qs[i], Vs[i], Ps[i], En[i], Gr[i], GVr[i], It[i],
+                      Wk[i])
+        run_member(ModelData(fns, flags, Mc, P[i], timed), tabs, opts, h, t0, state, ws, n_total, mode,
                    every, H0[i], smp, ist[i], fst[i])

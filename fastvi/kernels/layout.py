@@ -6,10 +6,17 @@ imported by :mod:`fastvi.model`, the step and drive kernels, the RK4 baseline an
 yardstick in ``bench/``. Kernels receive a handful of named tuples instead of long
 positional argument lists:
 
-``ModelData(fns, flags, Mc, prm)``
+``ModelData(fns, flags, Mc, prm, timed)``
     the model's compiled callbacks (tuple in :data:`SLOTS` order), its int64 flags vector
     (indices ``F_*``), the constant mass matrix (zeros when ``M`` is a function) and the
-    parameter vector of this trajectory;
+    parameter vector of this trajectory, always built by
+    :meth:`fastvi.Model.kernel_params` (k + 1 entries: the kernels write the time into the
+    last one, so a bare ``model.params`` would be written past its end), and ``timed``:
+    ``None`` for a conservative, autonomous model, ``True`` for one with forces or time.
+    ``timed`` is a *type-level* switch: numba compiles the kernels once for each kind and
+    removes the force and time code from the conservative ones (:func:`is_timed`; a
+    run-time flag there cost 6–10 % of a conservative step, measured side by side). Build
+    it with :meth:`fastvi.Model.kernel_data`;
 ``NewtonOptions(tol, max_iter, mode)``
     the stopping tolerance, the iteration cap and the Newton variant (``NEWTON_*``);
 ``Tables`` (:meth:`fastvi.tables.Method.kernel_tables`)
@@ -24,7 +31,7 @@ from collections import namedtuple
 
 import numpy as np
 
-from .._numba import njit
+from .._numba import hot_inline, njit
 from ..status import Status
 
 # ----------------------------------------------------------------------------- model callbacks
@@ -40,10 +47,17 @@ SLOTS = (
     "constraint_hessian",
     "kinetic_hessian",
     "momentum_jacobian",
+    "force",
+    "force_jacobian_q",
+    "force_jacobian_v",
+    "constraint_time_derivative",
 )
-MASS, KGRAD, POT, PGRAD, CON, CJAC, PHESS, CHESS, KHESS, MJAC = range(len(SLOTS))
+(MASS, KGRAD, POT, PGRAD, CON, CJAC, PHESS, CHESS, KHESS, MJAC, FORCE, FJQ, FJV,
+ GT) = range(len(SLOTS))
 #: the optional second derivatives, in SLOTS order (finite differences when absent)
-SECOND = SLOTS[PHESS:]
+SECOND = SLOTS[PHESS:FORCE]
+#: the optional derivatives of forces and time (finite differences when absent)
+TIME_DERIVATIVES = ("force_jacobian_q", "force_jacobian_v", "constraint_time_derivative")
 
 # ----------------------------------------------------------------------------- flags vector
 # int64 vector built by Model._compile: sizes, which callbacks exist, structure of M
@@ -55,7 +69,18 @@ F_EX_CHESS = 4  # exact constraint Hessian given
 F_EX_KHESS = 5  # exact kinetic Hessian given
 F_EX_MJAC = 6  # exact momentum Jacobian given
 F_DIAG = 7  # the constant M is diagonal: M v and M⁻¹ elementwise
-FLAGS_SIZE = 8
+F_FORCE = 8  # a non-conservative force F(t, q, v) is given
+F_EX_FJQ = 9  # exact ∂F/∂q given
+F_EX_FJV = 10  # exact ∂F/∂v given
+F_TIME = 11  # potential and constraints depend on time (rheonomic)
+F_EX_GT = 12  # exact ∂g/∂t given
+#: index of the hidden trailing entry of the kernel's parameter vector that carries the
+#: time to the callbacks (= k, the number of user parameters; every model has the entry,
+#: so that writing the time needs no branch). One callback signature serves every model:
+#: the kernels write the time of each evaluation there, the wrappers of time-aware
+#: callbacks read it, the others never look (docs/api.md).
+F_TSLOT = 13
+FLAGS_SIZE = 14
 #: flag index of each optional second derivative, in SECOND order
 F_EXACT = (F_EX_PHESS, F_EX_CHESS, F_EX_KHESS, F_EX_MJAC)
 
@@ -95,14 +120,18 @@ SI_HEADER = 22
 # ----------------------------------------------------------------------------- step output
 # float64 vector filled by step(): Newton iterations, max|g(q1)|, max|G v1|, last residual,
 # and whether the step fell back from the mechanics matrix to the full Newton
-S_ITERS, S_G, S_GV, S_RES, S_FULL = range(5)
-STEP_OUT_SIZE = 5
+# and the work done on the system over the step by the forces, the time-dependent potential
+# and driving constraints (docs/api.md, energy balance)
+S_ITERS, S_G, S_GV, S_RES, S_FULL, S_WORK = range(6)
+STEP_OUT_SIZE = 6
 
 # ----------------------------------------------------------------------------- run counters
 # float64 ``info`` vector of drive.run, kept across chunks
+# (I_WORK: the work of forces and time since t0, the energy balance's right-hand side;
+# I_T0: the start time of the run, so that step k starts at t0 + k h exactly)
 (I_STEPS, I_ITERS, I_WIN_G, I_WIN_GV, I_WIN_IT, I_RES, I_FAILED, I_SLOT, I_FIRST, I_MAXRES,
- I_FULL) = range(11)
-INFO_SIZE = 11
+ I_FULL, I_WORK, I_T0) = range(13)
+INFO_SIZE = 13
 
 # ----------------------------------------------------------------------------- ensembles
 #: save modes of ``run_ensemble``
@@ -117,14 +146,18 @@ F_SIZE = 6
 
 # ----------------------------------------------------------------------------- named tuples
 #: the saved samples of one trajectory (drive.run): time, q, v, p, energy, and the maxima of
-#: |g|, |G v| and the sum of Newton iterations over the steps since the previous sample
-Samples = namedtuple("Samples", ["t", "q", "v", "p", "energy", "g", "gv", "iters"])
-ModelData = namedtuple("ModelData", ["fns", "flags", "Mc", "prm"])
+#: |g|, |G v| and the sum of Newton iterations over the steps since the previous sample, and
+#: the work of forces and time since the start (zero for a conservative model)
+Samples = namedtuple("Samples", ["t", "q", "v", "p", "energy", "g", "gv", "iters", "work"])
+ModelData = namedtuple("ModelData", ["fns", "flags", "Mc", "prm", "timed"])
 NewtonOptions = namedtuple("NewtonOptions", ["tol", "max_iter", "mode"])
-Tables = namedtuple("Tables", ["b", "L", "Ld", "Lc", "E", "tau", "Ainv", "W", "As", "mech"])
+Tables = namedtuple("Tables", ["b", "L", "Ld", "Lc", "E", "tau", "Ainv", "W", "As", "mech",
+                               "c", "d"])
 Tables.__doc__ = """Method tables read by the step kernel (see :class:`fastvi.tables.Method`).
 
-b (r,), L, Ld (s+1, r), Lc (s+1, J+1), E (s+1, s+1), tau (s+1,) as in ``Method``; for the
+b (r,), L, Ld (s+1, r), Lc (s+1, J+1), E (s+1, s+1), tau (s+1,) as in ``Method``; the
+quadrature nodes c (r,) and constraint points d (J+1,) in [0, 1] (the times of the
+callbacks of a time-aware model: ``t_k + c_i h``, ``t_k + d_j h``); for the
 mechanics Newton matrix: Ainv (s, s) the inverse of ``A[ν, μ−1] = Σ_i b_i ℓ'_ν(c_i) ℓ'_μ(c_i)``
 (ν = 0…s−1, μ = 1…s), W (J, J) ``W[j−1, j'] = Σ ℓ_μ(d_j) Ainv[μ−1, ν] ℓ_ν(d_j')`` and
 As (s,) ``As[μ−1] = Σ_i b_i ℓ'_s(c_i) ℓ'_μ(c_i)``; mech (bool) whether ``newton="auto"``
@@ -160,10 +193,20 @@ Workspace = namedtuple(
         "Xprev",  # (N,) the previous step's unknowns (predictor)
         "P",  # (n,) end momentum before the projection
         "hold",  # (2,) int64: [steps left on the full Newton after a fallback, M̄ factored]
+        "Fv",  # (n, n) ∂F/∂v of the non-conservative force
+        "gt",  # (m,) ∂g/∂t at the step end (stays zero for an autonomous model)
+        "time",  # (2,) t_k, t_{k+1} of the step being taken (set by the driver)
         "si",  # int64: structured-solve plan (header SI_*, permutations, patterns)
         "sb",  # float64: band storages and scratch of the structured solves
     ],
 )
+
+
+@hot_inline
+def is_timed(md):
+    """Whether the model reads the time or has a force: a compile-time constant (see
+    ``ModelData.timed``), so the branches it guards vanish from conservative kernels."""
+    return md.timed is not None
 
 
 @njit
@@ -188,5 +231,6 @@ def make_workspace(n, m, s, r, J):
         np.zeros((Jm, Jm)), np.zeros(Jm, dtype=np.int64),
         np.zeros((s, n)), np.zeros((s, n)),
         np.zeros(N), np.zeros(n), np.zeros(2, dtype=np.int64),
+        np.zeros((n, n)), np.zeros(mm), np.zeros(2),
         np.zeros(SI_HEADER, dtype=np.int64), np.zeros(1),
     )

@@ -30,18 +30,23 @@ here allocates.
 import numpy as np
 
 from .._numba import hot, hot_inline, ptr
-from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_KHESS, F_EX_MJAC, F_EX_PHESS,
-                     F_M, F_MASSFN, F_N, KGRAD, MASS, MJAC, NEWTON_FAILED, NEWTON_FULL, NONFINITE,
-                     OK, PGRAD, PHESS, KHESS, S_FULL, S_G, S_GV, S_ITERS, S_RES, SINGULAR,
-                     SINGULAR_CONSTRAINTS, SINGULAR_MASS, SI_A, SI_S, SI_SC, SOLVE_BANDED,
-                     make_workspace)
 from .banded import (g_sub, gt_times, mech_rows_sparse, newton_banded, project_banded,
                      schur_banded, schur_solve_banded)
+from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
+                     F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_M, F_MASSFN, F_N, F_TIME,
+                     F_TSLOT, FJQ, FJV, FORCE, GT, KGRAD, MASS, MJAC, NEWTON_FAILED, NEWTON_FULL,
+                     NONFINITE, OK, PGRAD, PHESS, POT, KHESS, S_FULL, S_G, S_GV, S_ITERS, S_RES,
+                     S_WORK, SI_A, SI_S, SI_SC, SINGULAR, SINGULAR_CONSTRAINTS, SINGULAR_MASS,
+                     SOLVE_BANDED, is_timed, make_workspace)
 from .linalg import lu_factor, lu_solve
 
-__all__ = ["make_workspace", "assemble", "step", "end_momentum", "velocity_residual"]
+__all__ = ["make_workspace", "assemble", "step", "end_momentum", "velocity_residual",
+           "hidden_residual", "constraint_rate"]
 
 _FD_REL = 6.0554544523933395e-06  # cbrt(machine epsilon): central differences' best step
+#: eps^(1/5): the best step of the five-point difference in time (error ~ eps^(4/5)); the
+#: time derivatives enter the hidden constraint and the energy balance, not just Newton
+_FD_T = 7.4009597974140505e-04
 #: the mechanics matrix is abandoned for the full Newton when successive increments shrink
 #: by less than this factor: each of its iterations costs a residual, and at θ = 0.25 it
 #: needs about as many as the full Newton costs in assembly and LU (docs/benchmarks.md)
@@ -121,10 +126,69 @@ def _fd_constraint_hessian(fjac, q, eta, prm, out, qa, Gp, Gm, n, m):
             out[b, a] = t
 
 
+@hot
+def _fd_force_v(fn, q, v, prm, out, va, fa, fb, n):
+    """out[:, b] = ∂F/∂v_b by central differences of the force callback F(q, v)."""
+    for b in range(n):
+        for a in range(n):
+            va[a] = v[a]
+        dv = _FD_REL * max(1.0, abs(v[b]))
+        va[b] = v[b] + dv
+        fn(ptr(q), ptr(va), ptr(prm), ptr(fa))
+        va[b] = v[b] - dv
+        fn(ptr(q), ptr(va), ptr(prm), ptr(fb))
+        inv = 0.5 / dv
+        for a in range(n):
+            out[a, b] = (fa[a] - fb[a]) * inv
+
+
+# ----------------------------------------------------------------------------- time
+@hot_inline
+def _at(md, ws, h, x):
+    """Set the time the callbacks read to ``t_k + x h`` (``x = 1``: ``t_{k+1}`` exactly, the
+    value the next step starts from). Compiled away for a conservative model
+    (:func:`.layout.is_timed`)."""
+    if is_timed(md):
+        md.prm[md.flags[F_TSLOT]] = ws.time[1] if x == 1.0 else ws.time[0] + x * h
+
+
+@hot_inline
+def _d_dt(md, fn, q, t, out, scratch, k):
+    """``out[:k] = ∂f/∂t`` of the callback ``fn(q)`` at time ``t`` by the five-point
+    difference (leaves the time entry at ``t``)."""
+    slot = md.flags[F_TSLOT]
+    prm = md.prm
+    dt = _FD_T * max(1.0, abs(t))
+    for a in range(k):
+        out[a] = 0.0
+    for e in range(4):
+        sgn = 2.0 - e if e < 2 else 1.0 - e  # +2, +1, −1, −2
+        wgt = -1.0 if e == 0 else (8.0 if e == 1 else (-8.0 if e == 2 else 1.0))
+        prm[slot] = t + sgn * dt
+        fn(ptr(q), ptr(q), ptr(prm), ptr(scratch))
+        for a in range(k):
+            out[a] += wgt * scratch[a]
+    inv = 1.0 / (12.0 * dt)
+    for a in range(k):
+        out[a] *= inv
+    prm[slot] = t
+
+
+@hot
+def constraint_rate(md, q, t, out, scratch):
+    """``out = g_t(t, q)``: the callback, or a five-point difference of the constraint."""
+    m = md.flags[F_M]
+    if md.flags[F_EX_GT] != 0:
+        md.prm[md.flags[F_TSLOT]] = t
+        md.fns[GT](ptr(q), ptr(q), ptr(md.prm), ptr(out))
+    else:
+        _d_dt(md, md.fns[CON], q, t, out, scratch, m)
+
+
 # ----------------------------------------------------------------------------- assembly
 @hot_inline
 def _point_force(md, ws, Mi, has_mass, n):
-    """At ``(ws.qi, ws.vi)``: ``ws.F = ∂T/∂q − ∇V``, ``ws.fa = ∇V`` and, for a mass
+    """At ``(ws.qi, ws.vi)``: ``ws.F = ∂T/∂q − ∇V + F_nc``, ``ws.fa = ∇V`` and, for a mass
     function, ``Mi = M(q_i)``."""
     fns, prm = md.fns, md.prm
     qi, vi, F, fa = ws.qi, ws.vi, ws.F, ws.fa
@@ -137,6 +201,11 @@ def _point_force(md, ws, Mi, has_mass, n):
     else:
         for a in range(n):
             F[a] = -fa[a]
+    if is_timed(md) and md.flags[F_FORCE] != 0:
+        fb = ws.fb
+        fns[FORCE](ptr(qi), ptr(vi), ptr(prm), ptr(fb))
+        for a in range(n):
+            F[a] += fb[a]
 
 
 @hot
@@ -146,7 +215,7 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
     Also leaves ``ws.D`` (∂S_u/∂Q^ν) and ``ws.G[j]`` (G at the constraint points j ≥ 1).
     Returns 0, or ``NONFINITE`` when a callback produced NaN/inf.
     """
-    fns, flags, Mc, prm = md
+    fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     b, L, Ld, Lc = tabs.b, tabs.L, tabs.Ld, tabs.Lc
     X, R, A = ws.X, ws.R, ws.A
     D, G = ws.D, ws.G
@@ -175,7 +244,10 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
             D[nu, a] = 0.0
 
     Mi = Mc if not has_mass else ws.Mi
+    has_force = is_timed(md) and flags[F_FORCE] != 0
+    Fv = ws.Fv
     for i in range(r):
+        _at(md, ws, h, tabs.c[i])
         for a in range(n):
             qa = qk[a]
             va = 0.0
@@ -223,6 +295,19 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
                 fns[MJAC](ptr(qi), ptr(vi), ptr(prm), ptr(Cq))
             else:
                 _fd_momentum_jacobian(fns[MASS], qi, vi, prm, Cq, fa, Ma, n)
+        if has_force:
+            # ∂F_nc/∂q joins the force block, ∂F_nc/∂v the mixed block (forces.md §2)
+            if flags[F_EX_FJQ] != 0:
+                fns[FJQ](ptr(qi), ptr(vi), ptr(prm), ptr(Hc))
+            else:
+                _fd_vec_jacobian(fns[FORCE], 0, qi, vi, prm, Hc, fa, F, Pm, n)
+            for a in range(n):
+                for c in range(n):
+                    Aq[a, c] += Hc[a, c]
+            if flags[F_EX_FJV] != 0:
+                fns[FJV](ptr(qi), ptr(vi), ptr(prm), ptr(Fv))
+            else:
+                _fd_force_v(fns[FORCE], qi, vi, prm, Fv, Ma[0], fa, F, n)
         for nu in range(s):
             for mu in range(1, s + 1):
                 cA = w * L[nu, i] * L[mu, i]
@@ -239,6 +324,11 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
                     for a in range(n):
                         for c in range(n):
                             A[r0 + a, c0 + c] += cB * Cq[c, a] + cC * Cq[a, c]
+                if has_force:
+                    cB = b[i] * L[nu, i] * Ld[mu, i]
+                    for a in range(n):
+                        for c in range(n):
+                            A[r0 + a, c0 + c] += cB * Fv[a, c]
 
     for a in range(n):
         R[a] = pk[a]
@@ -249,6 +339,7 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
     if m > 0:
         qd = qi
         for j in range(1, J + 1):
+            _at(md, ws, h, tabs.d[j])
             for a in range(n):
                 qa = qk[a]
                 for nu in range(1, s + 1):
@@ -418,7 +509,7 @@ def newton_full(md, tabs, opts, h, qk, pk, ws, out):
 def _mass_bar(md, qk, ws, n):
     """Prepare ``M̄⁻¹`` for this step: ``1/diag(M)``, or the LU of ``M(q_k)`` (of the
     constant ``M`` once per trajectory). Returns a status code."""
-    fns, flags, Mc, prm = md
+    fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     if flags[F_DIAG] != 0:
         if ws.hold[1] == 0:
             for a in range(n):
@@ -473,7 +564,7 @@ def residual(md, tabs, h, qk, pk, ws):
     latency of their additions. It differs from ``assemble(jac=False)`` at round-off.
     Returns 0, or ``NONFINITE`` when a callback produced NaN/inf.
     """
-    fns, flags, Mc, prm = md
+    fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     b, L, Ld, Lc = tabs.b, tabs.L, tabs.Ld, tabs.Lc
     X, R, D, G = ws.X, ws.R, ws.D, ws.G
     qi, vi, F, Pm, fa = ws.qi, ws.vi, ws.F, ws.Pm, ws.fa
@@ -492,6 +583,7 @@ def residual(md, tabs, h, qk, pk, ws):
         for a in range(n):
             D[nu, a] = 0.0
     for i in range(r):
+        _at(md, ws, h, tabs.c[i])
         for a in range(n):
             qi[a] = qk[a]
             vi[a] = 0.0
@@ -528,6 +620,7 @@ def residual(md, tabs, h, qk, pk, ws):
     if m > 0:
         gj = ws.g
         for j in range(1, J + 1):
+            _at(md, ws, h, tabs.d[j])
             for a in range(n):
                 qi[a] = qk[a]
             for nu in range(1, s + 1):
@@ -746,7 +839,7 @@ def _finish_mech(md, tabs, h, qk, ws, q1, n, m, s, J):
     O(|δ| h |∂M/∂q|) otherwise): ``D_s −= (1/h) Σ_μ As_μ M̄ δQ^μ``. The force part moves by
     O(h |∂F/∂q| |δ|), below round-off of the momentum. Returns max|g(q1)|.
     """
-    fns, flags, Mc, prm = md
+    fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     X, R, D, G = ws.X, ws.R, ws.D, ws.G
     As = tabs.As
     inv_h = 1.0 / h
@@ -773,6 +866,7 @@ def _finish_mech(md, tabs, h, qk, ws, q1, n, m, s, J):
     gmax = 0.0
     if m > 0:
         gj = ws.g
+        _at(md, ws, h, 1.0)
         fns[CON](ptr(q1), ptr(q1), ptr(prm), ptr(gj))
         fns[CJAC](ptr(q1), ptr(q1), ptr(prm), ptr(G[J]))
         for a in range(m):
@@ -789,7 +883,7 @@ def step(md, tabs, opts, h, state, ws, first, out):
     max|G(q1) v1|, the max-norm of the last residual and 1 if the step used the full
     Newton as a fallback. Returns a status code (0 on success).
     """
-    fns, flags, Mc, prm = md
+    fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     qk, pk, vk, q1, p1, v1 = state[0], state[1], state[2], state[3], state[4], state[5]
     X, R, D, G = ws.X, ws.R, ws.D, ws.G
     Lc = tabs.Lc
@@ -803,6 +897,7 @@ def step(md, tabs, opts, h, state, ws, first, out):
     if m > 0:
         G0 = G[0]
         if first:
+            _at(md, ws, h, 0.0)
             fns[CJAC](ptr(qk), ptr(qk), ptr(prm), ptr(G0))
         else:
             # the previous step ended with G at q(d_J) = q_k, bit for bit: reuse it
@@ -872,7 +967,10 @@ def step(md, tabs, opts, h, state, ws, first, out):
     if st != OK:
         return st
     out[S_G] = gmax
-    out[S_GV] = velocity_residual(G[J], v1, n, m)
+    out[S_GV] = hidden_residual(G[J], v1, ws.gt, n, m)
+    out[S_WORK] = 0.0
+    if is_timed(md):
+        out[S_WORK] = _step_work(md, tabs, h, qk, q1, ws, n, m, s, J)
     # keep this step's unknowns for the next predictor
     Xp = ws.Xprev
     for k in range(N):
@@ -892,14 +990,89 @@ def velocity_residual(G1, v1, n, m):
     return gv
 
 
+@hot_inline
+def hidden_residual(G1, v1, gt, n, m):
+    """max_a |(G v + g_t)_a|: the hidden constraint of a (possibly rheonomic) constraint."""
+    gv = 0.0
+    for a in range(m):
+        acc = gt[a]
+        for c in range(n):
+            acc += G1[a, c] * v1[c]
+        gv = max(gv, abs(acc))
+    return gv
+
+
+@hot
+def _step_work(md, tabs, h, qk, q1, ws, n, m, s, J):
+    r"""The work done on the system over the step (``docs/api.md``, energy balance)::
+
+        W = h Σ_i b_i [F(t_i, q_i, v_i)·v_i + ∂V/∂t(t_i, q_i)] + Σ_{j≤J} η_j·g_t(t_j, q(d_j))
+
+    on the converged step polynomial, with the action's quadrature for the forces and the
+    time-dependent potential, and the constraint impulses (``η_J`` the projection's) for
+    driving constraints: the constraint force ``−Gᵀλ`` has power ``−λ·Gv = λ·g_t``.
+    """
+    fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
+    b, L, Ld, Lc = tabs.b, tabs.L, tabs.Ld, tabs.Lc
+    X, qi, vi, fb = ws.X, ws.qi, ws.vi, ws.fb
+    timed = flags[F_TIME] != 0
+    inv_h = 1.0 / h
+    w = 0.0
+    for i in range(b.shape[0]):
+        ti = ws.time[0] + tabs.c[i] * h
+        for a in range(n):
+            qi[a] = qk[a]
+            vi[a] = 0.0
+        for nu in range(1, s + 1):
+            cl = L[nu, i]
+            cd = Ld[nu, i] * inv_h
+            off = (nu - 1) * n
+            for a in range(n):
+                x = X[off + a]
+                qi[a] += cl * x
+                vi[a] += cd * x
+        p = 0.0
+        if flags[F_FORCE] != 0:
+            prm[flags[F_TSLOT]] = ti
+            fns[FORCE](ptr(qi), ptr(vi), ptr(prm), ptr(fb))
+            for a in range(n):
+                p += fb[a] * vi[a]
+        if timed:
+            _d_dt(md, fns[POT], qi, ti, fb, ws.fa, 1)
+            p += fb[0]
+        w += h * b[i] * p
+    if timed and m > 0:
+        sn = s * n
+        gt = ws.Gp[0]  # (n,) row of scratch, m ≤ n entries used
+        for j in range(J):
+            for a in range(n):
+                qi[a] = qk[a]
+            for nu in range(1, s + 1):
+                cl = Lc[nu, j]
+                if cl != 0.0:
+                    off = (nu - 1) * n
+                    for a in range(n):
+                        qi[a] += cl * X[off + a]
+            constraint_rate(md, qi, ws.time[0] + tabs.d[j] * h, gt, ws.g)
+            for c in range(m):
+                w += X[sn + j * m + c] * gt[c]
+        for c in range(m):
+            w += ws.etaJ[c] * ws.gt[c]
+    return w
+
+
 @hot
 def end_momentum(md, q1, P, p1, v1, G1, ws):
-    """p1 = P − G1ᵀ η with (G M⁻¹ Gᵀ) η = G M⁻¹ P, and v1 = M⁻¹ p1 (hidden constraint)."""
-    fns, flags, Mc, prm = md
+    """p1 = P − G1ᵀ η with (G M⁻¹ Gᵀ) η = G M⁻¹ P (+ g_t at t_{k+1} for a rheonomic
+    constraint), and v1 = M⁻¹ p1: the hidden constraint G v1 + g_t = 0."""
+    fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     n = flags[F_N]
     m = flags[F_M]
     if ws.si[SI_S] == SOLVE_BANDED:  # large sparse models, diagonal mass (banded.py)
-        return project_banded(Mc, q1, P, p1, v1, G1, ws, n, m)
+        rheonomic = is_timed(md) and flags[F_TIME] != 0
+        if rheonomic:
+            constraint_rate(md, q1, ws.time[1], ws.gt, ws.g)
+        return project_banded(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic)
     Mlu = ws.Ma
     pivn = ws.pivp
     Y = ws.Gp
@@ -932,8 +1105,12 @@ def end_momentum(md, q1, P, p1, v1, G1, ws):
             else:
                 lu_solve(Mlu, pivn, Yc, n)  # row c of (M⁻¹ Gᵀ)ᵀ
         eta = ws.etaJ
+        rheonomic = is_timed(md) and flags[F_TIME] != 0
+        if rheonomic:
+            # G v1 + g_t = 0 at t_{k+1}: (G M⁻¹ Gᵀ) η = G M⁻¹ P + g_t (forces.md §3)
+            constraint_rate(md, q1, ws.time[1], ws.gt, ws.g)
         for c in range(m):
-            acc = 0.0
+            acc = ws.gt[c] if rheonomic else 0.0
             for a in range(n):
                 acc += G1[c, a] * v1[a]
             eta[c] = acc

@@ -8,8 +8,10 @@ registered in :data:`SCENES` by name.
 from .chain import chain
 from .double_pendulum import double_pendulum
 from .four_bar import four_bar
+from .kapitza import kapitza_pendulum
 from .pendulum import pendulum
 from .rotary_rod_slider import rotary_rod_slider
+from .slider_crank import slider_crank
 from .spherical_pendulum import spherical_pendulum
 from .triple_pendulum import triple_pendulum
 
@@ -22,7 +24,9 @@ SCENES = {
     "triple_pendulum": triple_pendulum,
     "four_bar": four_bar,
     "chain": chain,
+    "kapitza_pendulum": kapitza_pendulum,
+    "slider_crank": slider_crank,
 }
 
 __all__ = ["SCENES", "pendulum", "double_pendulum", "rotary_rod_slider", "triple_pendulum",
-           "spherical_pendulum", "four_bar", "chain"]
+           "spherical_pendulum", "four_bar", "chain", "kapitza_pendulum", "slider_crank"]

@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Model
+from . import damping as damping_
 from ._common import attach, check_positive
 
 #: the smallest chain (a single link is :func:`fastvi.scenes.pendulum`)
@@ -159,7 +160,7 @@ def _per_link(name: str, value, N: int) -> tuple[float, ...]:
     return tuple(float(x) for x in vals)
 
 
-def chain(N: int, m=1.0, l=1.0, g: float = 9.81) -> Model:
+def chain(N: int, m=1.0, l=1.0, g: float = 9.81, damping: float = 0.0) -> Model:
     r"""Planar chain of ``N`` point masses on rigid links from the origin (n = 2N, m = N).
 
     Parameters
@@ -172,6 +173,10 @@ def chain(N: int, m=1.0, l=1.0, g: float = 9.81) -> Model:
         Link lengths (m), origin to body 1, body 1 to body 2, …
     g : float, default 9.81
         Gravitational acceleration along ``−y`` (m/s²).
+    damping : float, default 0
+        Viscous damping ``c`` (N s/m): a force ``−c ṙ_i`` on every mass
+        (:mod:`fastvi.scenes.damping`; ``params`` then end with ``c``). Zero: a
+        conservative model without any force callback.
 
     Returns
     -------
@@ -193,10 +198,12 @@ def chain(N: int, m=1.0, l=1.0, g: float = 9.81) -> Model:
     ms = _per_link("m", m, N)
     ls = _per_link("l", l, N)
     check_positive(g=g)
+    c = damping_.check(damping)
     model = Model(
-        2 * N, N, params=(*ms, *ls, g), mass=np.diag(np.repeat(ms, 2)), potential=_V,
-        potential_grad=_dV, potential_hessian=_ddV, constraint=_g, constraint_jacobian=_G,
-        constraint_hessian=_ddg, name=f"chain{N}",
+        2 * N, N, params=(*ms, *ls, g) + ((c,) if c else ()), mass=np.diag(np.repeat(ms, 2)),
+        potential=_V, potential_grad=_dV, potential_hessian=_ddV, constraint=_g,
+        constraint_jacobian=_G, constraint_hessian=_ddg, name=f"chain{N}" + ("-damped" if c else ""),
+        **damping_.options(c),
     )
     lengths = np.array(ls)
 
@@ -206,5 +213,6 @@ def chain(N: int, m=1.0, l=1.0, g: float = 9.81) -> Model:
             raise ValueError(f"`thetas` must have N = {N} entries, got shape {th.shape}")
         return state_from_angles(th, omegas, lengths)
 
-    kw = dict(N=N, m=ms if len(set(ms)) > 1 else ms[0], l=ls if len(set(ls)) > 1 else ls[0], g=g)
+    kw = dict(N=N, m=ms if len(set(ms)) > 1 else ms[0], l=ls if len(set(ls)) > 1 else ls[0], g=g,
+              damping=c)
     return attach(model, "chain", kw, initial_state=initial_state, angles=angles)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Model
+from . import damping as damping_
 from ._common import attach, check_positive
 
 # params = (m1, m2, l1, l2, g)
@@ -84,22 +85,26 @@ def angles(q):
 
 
 def double_pendulum(m1: float = 1.0, m2: float = 1.0, l1: float = 1.0, l2: float = 1.0,
-                    g: float = 9.81) -> Model:
+                    g: float = 9.81, damping: float = 0.0) -> Model:
     """Planar double pendulum (n = 4, m = 2) with exact second derivatives.
 
     Defaults are paper B's parameters. The model has
     ``initial_state(theta1, theta2, omega1=0, omega2=0) -> (q0, v0)`` and
-    ``angles(q) -> (theta1, theta2)``.
+    ``angles(q) -> (theta1, theta2)``. ``damping = c > 0`` adds the force ``−c ṙ_i`` on
+    both masses (:mod:`fastvi.scenes.damping`; ``params`` then end with ``c``): with unit
+    masses the angle equations simply gain ``−c θ̇``.
     """
     check_positive(m1=m1, m2=m2, l1=l1, l2=l2, g=g)
+    c = damping_.check(damping)
     model = Model(
-        4, 2, params=(m1, m2, l1, l2, g), mass=np.diag([m1, m1, m2, m2]), potential=_V,
-        potential_grad=_dV, potential_hessian=_ddV, constraint=_g, constraint_jacobian=_G,
-        constraint_hessian=_ddg, name="double_pendulum",
+        4, 2, params=(m1, m2, l1, l2, g) + ((c,) if c else ()), mass=np.diag([m1, m1, m2, m2]),
+        potential=_V, potential_grad=_dV, potential_hessian=_ddV, constraint=_g,
+        constraint_jacobian=_G, constraint_hessian=_ddg,
+        name="double_pendulum" + ("-damped" if c else ""), **damping_.options(c),
     )
 
     def initial_state(theta1, theta2, omega1=0.0, omega2=0.0):
         return state_from_angles(theta1, theta2, omega1, omega2, l1, l2)
 
-    return attach(model, "double_pendulum", dict(m1=m1, m2=m2, l1=l1, l2=l2, g=g),
+    return attach(model, "double_pendulum", dict(m1=m1, m2=m2, l1=l1, l2=l2, g=g, damping=c),
                   initial_state=initial_state, angles=angles)

@@ -17,7 +17,7 @@ import numpy as np
 import fastvi
 from fastvi._numba import njit, ptr, quiet
 from fastvi.kernels import layout as lay
-from fastvi.kernels.layout import ModelData, make_workspace
+from fastvi.kernels.layout import make_workspace
 from fastvi.kernels.linalg import lu_factor, lu_solve
 from fastvi.kernels.step import _mech_solve, assemble, end_momentum, residual, step
 
@@ -120,8 +120,8 @@ def profile_step(model, q0, v0, method: str = "P2L-Q3G", h: float = 0.01, warm: 
     ``iterations_full`` (Newton iterations per step) and ``N`` (unknowns per step).
     """
     meth = fastvi.method(method)
-    prm = np.asarray(model.params, float)
-    md = ModelData(*model.kernel_arguments(), prm)
+    prm = model.kernel_params()
+    md = model.kernel_data()
     tabs = meth.kernel_tables
     n, m, s, J = model.n, model.m, meth.s, meth.J
     N = s * n + J * m

@@ -78,7 +78,7 @@ from fastvi.baselines.rk4 import BaselineResult, acceleration, observe
 from fastvi.baselines.rk4 import make_workspace as rk_workspace
 from fastvi.kernels.linalg import lu_factor, lu_solve
 from fastvi.kernels.layout import PGRAD as _PGRAD
-from fastvi.kernels.layout import NEWTON_FULL, STEP_OUT_SIZE, ModelData, NewtonOptions
+from fastvi.kernels.layout import NEWTON_FULL, STEP_OUT_SIZE, NewtonOptions
 from fastvi.kernels.layout import make_workspace as vi_workspace
 from fastvi.kernels.step import assemble
 from fastvi.kernels.step import step as _vi_step
@@ -519,7 +519,7 @@ def newton_matrix(model, q, p, v, method: str, h: float) -> np.ndarray:
     Its sparsity matters for timing: the LU of :mod:`fastvi.kernels.linalg` skips zero
     multipliers, so a random dense matrix of the same size would overstate its cost."""
     meth = fastvi.method(method)
-    md = ModelData(*model.kernel_arguments(), np.asarray(model.params, float))
+    md = model.kernel_data()
     n, m = model.n, model.m
     N = meth.s * n + meth.J * m
     q, p, v = (np.ascontiguousarray(x, dtype=float) for x in (q, p, v))
@@ -573,9 +573,8 @@ def profile_step(model, q0, v0, method: str, h: float, n_steps: int = 2000, roun
         timings more than the step's.
     """
     meth = fastvi.method(method)
-    fns, flags, Mc = model.kernel_arguments()
-    prm = np.asarray(model.params, float)
-    md = ModelData(fns, flags, Mc, prm)
+    md = model.kernel_data()
+    fns, prm = md.fns, md.prm
     tabs = meth.kernel_tables
     n, m = model.n, model.m
     N = meth.s * n + meth.J * m

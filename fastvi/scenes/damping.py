@@ -1,0 +1,44 @@
+r"""Linear viscous damping ``F = −c v`` on every coordinate, shared by the scenes.
+
+The damping coefficient is the **last** entry of the scene's parameter vector, so a scene
+appends it to its own parameters and these functions serve every scene. For point masses in
+Cartesian coordinates ``−c v`` is a dashpot to the ground on every mass (force ``−c ṙ_i``).
+"""
+
+from __future__ import annotations
+
+
+def force(t, q, v, p, out):
+    c = p[p.shape[0] - 1]
+    for a in range(q.shape[0]):
+        out[a] = -c * v[a]
+
+
+def jacobian_q(t, q, v, p, out):
+    out[:, :] = 0.0
+
+
+def jacobian_v(t, q, v, p, out):
+    c = p[p.shape[0] - 1]
+    out[:, :] = 0.0
+    for a in range(q.shape[0]):
+        out[a, a] = -c
+
+
+def options(damping) -> dict:
+    """The ``Model`` keyword arguments of a scene with ``damping`` (none for ``0``)."""
+    if not damping:
+        return {}
+    return dict(force=force, force_jacobian_q=jacobian_q, force_jacobian_v=jacobian_v)
+
+
+def check(damping) -> float:
+    """``damping`` as a float: zero (no force at all) or positive and finite."""
+    import math
+
+    if isinstance(damping, bool) or not isinstance(damping, (int, float)) and not hasattr(damping, "__float__"):
+        raise TypeError(f"`damping` must be a float, got {damping!r}")
+    c = float(damping)
+    if not (math.isfinite(c) and c >= 0.0):
+        raise ValueError(f"`damping` must be >= 0 and finite, got {damping!r}")
+    return c

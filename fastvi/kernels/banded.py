@@ -23,7 +23,7 @@ from .layout import (NONFINITE, OK, SI_S_BAND, SI_S_IPERM, SI_S_KL, SI_S_KU, SI_
                      SI_SC_BAND, SI_SC_IPERM, SI_SC_KL, SI_SC_KU, SI_SC_PERM, SI_SCOL, SI_SPTR)
 
 __all__ = ["band_factor", "band_solve", "band_pack", "newton_banded", "schur_banded",
-           "schur_solve_banded", "g_times", "gt_times", "band_ld", "mech_rows_sparse",
+           "schur_solve_banded", "mech_impulses_banded", "g_times", "gt_times", "band_ld", "mech_rows_sparse",
            "project_banded"]
 
 
@@ -115,7 +115,7 @@ def band_pack(A, perm, ab, N, kl, ku):
             ab[ld * j + kv + i - j] = A[perm[i], pj]
 
 
-@hot_inline
+@hot
 def newton_banded(ws, N):
     """Full Newton: ``ws.R`` ← ``A⁻¹ ws.R`` through the banded LU of the permuted ``ws.A``.
     Returns 0, or non-zero when a pivot vanished."""
@@ -163,7 +163,7 @@ def gt_times(si, Gj, y, out, scale, m):
                 out[a] += Gj[c, a] * e
 
 
-@hot_inline
+@hot
 def schur_banded(ws, W, h, m, J):
     """Build ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` over the pattern of ``G Gᵀ`` straight into band
     storage (diagonal ``M̄``: ``ws.Y[j']`` holds ``G_{j'} M̄⁻¹`` on the pattern of G) and
@@ -230,7 +230,7 @@ def g_sub(si, Gj, x, R, off, m):
         R[off + c] -= acc
 
 
-@hot_inline
+@hot
 def mech_rows_sparse(ws, j, m):
     """``ws.Y[j]`` = ``G_j M̄⁻¹`` on the pattern of G (diagonal ``M̄``; the rest of ``Y``
     stays zero in a structured workspace)."""
@@ -297,3 +297,37 @@ def project_banded(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic):
         if not (np.isfinite(p1[a]) and np.isfinite(v1[a])):
             return NONFINITE
     return OK
+
+
+@hot
+def mech_impulses_banded(ws, Lc, Ainv, h, n, m, s, J):
+    """The impulse part of :func:`.step._mech_solve` with the pattern of G: from the stage
+    increments ``ws.U`` (``h (A⁻¹ ⊗ M̄⁻¹) r_E``), subtract ``C U`` from the constraint rows of
+    ``ws.R``, solve the banded Schur complement for ``δη``, and add
+    ``h (A⁻¹ ⊗ M̄⁻¹) B δη`` to ``ws.U``. Not inlined, so that the step of small models
+    compiles to the code it had before."""
+    R, Z, U, Y, G = ws.R, ws.Z, ws.U, ws.Y, ws.G
+    T = ws.fa
+    sn = s * n
+    for j in range(1, J + 1):
+        for a in range(n):
+            T[a] = 0.0
+        for mu in range(1, s + 1):
+            cl = Lc[mu, j]
+            if cl != 0.0:
+                for a in range(n):
+                    T[a] += cl * U[mu - 1, a]
+        g_sub(ws.si, G[j], T, R, sn + (j - 1) * m, m)
+    schur_solve_banded(ws, R[sn:], J * m)
+    for nu in range(s):
+        for a in range(n):
+            Z[nu, a] = 0.0
+        for jp in range(J):
+            cl = Lc[nu, jp]
+            if cl != 0.0:
+                gt_times(ws.si, Y[jp], R[sn + jp * m:], Z[nu], cl, m)
+    for mu in range(s):
+        for nu in range(s):
+            c = h * Ainv[mu, nu]
+            for a in range(n):
+                U[mu, a] += c * Z[nu, a]

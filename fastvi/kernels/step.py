@@ -30,8 +30,8 @@ here allocates.
 import numpy as np
 
 from .._numba import hot, hot_inline, ptr
-from .banded import (g_sub, gt_times, mech_rows_sparse, newton_banded, project_banded,
-                     schur_banded, schur_solve_banded)
+from .banded import (gt_times, mech_impulses_banded, mech_rows_sparse, newton_banded,
+                     project_banded, schur_banded)
 from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
                      F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_M, F_MASSFN, F_N, F_TIME,
                      F_TSLOT, FJQ, FJV, FORCE, GT, KGRAD, MASS, MJAC, NEWTON_FAILED, NEWTON_FULL,
@@ -707,30 +707,9 @@ def _mech_solve(md, tabs, h, ws, n, m, s, J):
             c = h * Ainv[mu, nu]
             for a in range(n):
                 U[mu, a] += c * Z[nu, a]
-    if m > 0 and ws.si[SI_SC] == SOLVE_BANDED:  # the same with the pattern of G (banded.py)
-        Jm = J * m
-        for j in range(1, J + 1):
-            for a in range(n):
-                T[a] = 0.0
-            for mu in range(1, s + 1):
-                cl = Lc[mu, j]
-                if cl != 0.0:
-                    for a in range(n):
-                        T[a] += cl * U[mu - 1, a]
-            g_sub(ws.si, G[j], T, R, sn + (j - 1) * m, m)
-        schur_solve_banded(ws, R[sn:], Jm)
-        for nu in range(s):
-            for a in range(n):
-                Z[nu, a] = 0.0
-            for jp in range(J):
-                cl = Lc[nu, jp]
-                if cl != 0.0:
-                    gt_times(ws.si, Y[jp], R[sn + jp * m:], Z[nu], cl, m)
-        for mu in range(s):
-            for nu in range(s):
-                c = h * Ainv[mu, nu]
-                for a in range(n):
-                    U[mu, a] += c * Z[nu, a]
+    if m > 0 and ws.si[SI_SC] == SOLVE_BANDED:
+        # the same with the pattern of G, not inlined: small models' code stays as it was
+        mech_impulses_banded(ws, Lc, Ainv, h, n, m, s, J)
     elif m > 0:
         Jm = J * m
         for j in range(1, J + 1):

@@ -217,15 +217,16 @@ def integrate(
     tabs = meth.kernel_tables
 
     chunk = total if not progress else max(1, total // _PROGRESS_CHUNKS)
-    compile_time += _dispatch_time(drive.run, md.timed, md, tabs, opts, h, state, ws, chunk, total, every,
-                                   smp, info)
+    sout = np.zeros(lay.STEP_OUT_SIZE)
+    compile_time += _dispatch_time(drive.run, md.timed, md, tabs, opts, h, state, ws, chunk, total,
+                                   every, smp, info, sout)
     bar = ProgressBar(total) if progress else None
     t_loop = time.perf_counter()
     status = 0
     recovered = []
     while info[lay.I_STEPS] < total:
         with quiet():
-            status = drive.run(md, tabs, opts, h, state, ws, chunk, total, every, smp, info)
+            status = drive.run(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout)
         if status != 0 and recover:
             sub = _retry_in_substeps(md, model, meth, h, opts, state, recover, total, every, smp,
                                      info, prm=prm, solver=solver)
@@ -329,7 +330,8 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
         info_sub[lay.I_FIRST] = 1
         info_sub[lay.I_T0] = info[lay.I_T0] + info[lay.I_STEPS] * h
         with quiet():
-            st = drive.run(md, tabs, opts, h / sub, trial, ws_sub, sub, sub, sub, smp_sub, info_sub)
+            st = drive.run(md, tabs, opts, h / sub, trial, ws_sub, sub, sub, sub, smp_sub, info_sub,
+                           np.zeros(lay.STEP_OUT_SIZE))
         if st == 0:
             state[:3] = trial[:3]
             info[lay.I_ITERS] += info_sub[lay.I_ITERS]

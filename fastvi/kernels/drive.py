@@ -10,7 +10,7 @@ ensemble equals :func:`fastvi.integrate` of that member bit for bit by construct
 import numpy as np
 from numba import prange
 
-from .._numba import hot, njit, ptr
+from .._numba import hot, hot_inline, njit, ptr
 from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_ITERS, F_M,
                      F_MAXRES, F_N, F_RES, F_TSLOT, I_FAILED, I_FIRST, I_FULL, I_ITERS, I_MAXRES,
                      I_RES, I_SLOT, I_STEPS, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK, INFO_SIZE,
@@ -53,7 +53,7 @@ def record(md, t, state, ws, smp, slot, info):
     info[I_WIN_IT] = 0.0
 
 
-@hot
+@hot_inline
 def accept(md, h, state, ws, n_total, save_every, smp, info, sout):
     """Book-keeping after a step has been taken (state rows 0–2 already hold the new state):
     counters, residual windows, and the sample when one is due."""
@@ -71,7 +71,7 @@ def accept(md, h, state, ws, n_total, save_every, smp, info, sout):
         info[I_SLOT] = j + 1
 
 
-@hot
+@hot_inline
 def _take(md, tabs, opts, h, state, ws, info, sout):
     """One step from state rows 0–2; on success the new state is copied into them."""
     k = int(info[I_STEPS])
@@ -92,16 +92,21 @@ def _take(md, tabs, opts, h, state, ws, info, sout):
     return 0
 
 
-@njit
-def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info):
+@hot
+def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, sout):
     """Advance ``state`` (rows q, p, v, then scratch) by up to ``n_chunk`` steps, step k
-    running from ``info[I_T0] + k h``.
+    running from ``info[I_T0] + k h``; ``sout`` is the step's output scratch
+    (``STEP_OUT_SIZE``).
+
+    The time loop is ``hot`` (no reference counting) with the bookkeeping inlined: with
+    reference counting on, the inlined helpers' array views cost 15 % of a step; without
+    it, inlining saves the flattened-argument copies of two calls a step (7–10 % on
+    ``P2L-Q3G``/``P3L-Q4G``, docs/benchmarks.md).
 
     Saves every ``save_every``-th step and the last one into the :class:`Samples` ``smp``,
     the residuals and iterations being the maxima/sums over the steps since the previous
     sample. Returns a status code; on failure ``info[I_FAILED]`` holds the failed step.
     """
-    sout = np.zeros(STEP_OUT_SIZE)  # once per chunk, not per step
     for _ in range(n_chunk):
         if int(info[I_STEPS]) >= n_total:
             break
@@ -113,8 +118,9 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info):
 
 
 # ----------------------------------------------------------------------------- ensembles
-@njit
-def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, ist, fst):
+@hot
+def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, ist, fst, sout,
+               info):
     """Advance one member (rows q, p, v, then scratch of ``state``) through ``n_total`` steps.
 
     ``mode`` is ``SAVE_FINAL`` (the final state into slot 0 of ``smp``), ``SAVE_STRIDE``
@@ -125,8 +131,8 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
     seeds ``fst[F_G]``, ``fst[F_GV]`` with the initial residuals). Returns the status code,
     also stored in ``ist[E_STATUS]``; a failed step's index goes to ``ist[E_FAILED]``.
     """
-    sout = np.zeros(STEP_OUT_SIZE)
-    info = np.zeros(INFO_SIZE)
+    for k in range(INFO_SIZE):
+        info[k] = 0.0
     info[I_FIRST] = 1.0
     info[I_SLOT] = 1.0
     info[I_T0] = t0
@@ -189,4 +195,4 @@ def run_ensemble(fns, flags, Mc, P, timed, tabs, opts, h, t0, s, r, J, X0, n_tot
         smp = Samples(np.zeros(En.shape[1]), Qs[i], Vs[i], Ps[i], En[i], Gr[i], GVr[i], It[i],
                       Wk[i])
         run_member(ModelData(fns, flags, Mc, P[i], timed), tabs, opts, h, t0, state, ws, n_total, mode,
-                   every, H0[i], smp, ist[i], fst[i])
+                   every, H0[i], smp, ist[i], fst[i], np.zeros(STEP_OUT_SIZE), np.zeros(INFO_SIZE))

@@ -108,6 +108,23 @@ NEWTON_FULL = 0
 NEWTON_AUTO = 1
 NEWTON_MODES = {"full": NEWTON_FULL, "auto": NEWTON_AUTO}
 
+# ----------------------------------------------------------------------------- structured solves
+# (issue 12) how each linear system of a step is solved, planned once per model and method
+# by :func:`fastvi.structure.plan` and stored in two workspace arrays: ``ws.si`` (int64: the
+# header below, then permutations and sparsity patterns at the offsets the header names) and
+# ``ws.sb`` (float64: band storages and a right-hand-side scratch, at named offsets).
+#: the solvers of a system: dense LU (linalg.py) or banded LU after a fill-reducing ordering
+SOLVE_DENSE, SOLVE_BANDED = 0, 1
+(SI_A, SI_A_KL, SI_A_KU, SI_A_PERM, SI_A_BAND,  # full Newton matrix (s n + J m rows)
+ SI_SC, SI_SC_KL, SI_SC_KU, SI_SC_PERM, SI_SC_IPERM, SI_SC_BAND,  # Schur complement (J m)
+ SI_S, SI_S_KL, SI_S_KU, SI_S_PERM, SI_S_IPERM, SI_S_BAND,  # projection G M⁻¹ Gᵀ (m)
+ SI_GPTR, SI_GCOL,  # pattern of G, compressed rows: columns of row c at si[GCOL + GPTR[c] …]
+ SI_SPTR, SI_SCOL,  # pattern of G Gᵀ (m × m), compressed rows
+ SI_RHS) = range(22)  # offset in sb of the right-hand-side scratch
+#: length of the header of ``ws.si``; with ``si[SI_SC]`` or ``si[SI_S]`` banded the kernels
+#: use the pattern of G (a diagonal constant mass is then required)
+SI_HEADER = 22
+
 # ----------------------------------------------------------------------------- step output
 # float64 vector filled by step(): Newton iterations, max|g(q1)|, max|G v1|, last residual,
 # and whether the step fell back from the mechanics matrix to the full Newton
@@ -195,6 +212,8 @@ Workspace = namedtuple(
         "Fv",  # (n, n) ∂F/∂v of the non-conservative force
         "gt",  # (m,) ∂g/∂t at the step end (stays zero for an autonomous model)
         "time",  # (2,) t_k, t_{k+1} of the step being taken (set by the driver)
+        "si",  # int64: structured-solve plan (header SI_*, permutations, patterns)
+        "sb",  # float64: band storages and scratch of the structured solves
     ],
 )
 
@@ -208,7 +227,10 @@ def is_timed(md):
 
 @njit
 def make_workspace(n, m, s, r, J):
-    """Scratch arrays for one trajectory (allocated once, outside the time loop)."""
+    """Scratch arrays for one trajectory (allocated once, outside the time loop).
+
+    Every linear system is solved densely; :func:`fastvi.structure.workspace` replaces
+    ``si``/``sb`` with a structured plan for large models."""
     N = s * n + J * m
     mm = max(m, 1)
     Jm = max(J * m, 1)
@@ -226,4 +248,5 @@ def make_workspace(n, m, s, r, J):
         np.zeros((s, n)), np.zeros((s, n)),
         np.zeros(N), np.zeros(n), np.zeros(2, dtype=np.int64),
         np.zeros((n, n)), np.zeros(mm), np.zeros(2),
+        np.zeros(SI_HEADER, dtype=np.int64), np.zeros(1),
     )

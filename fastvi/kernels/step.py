@@ -30,12 +30,14 @@ here allocates.
 import numpy as np
 
 from .._numba import hot, hot_inline, ptr
+from .banded import (gt_times, mech_impulses_banded, mech_rows_sparse, newton_banded,
+                     project_banded, schur_banded)
 from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
                      F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_M, F_MASSFN, F_N, F_TIME,
                      F_TSLOT, FJQ, FJV, FORCE, GT, KGRAD, MASS, MJAC, NEWTON_FAILED, NEWTON_FULL,
                      NONFINITE, OK, PGRAD, PHESS, POT, KHESS, S_FULL, S_G, S_GV, S_ITERS, S_RES,
-                     S_WORK, SINGULAR, SINGULAR_CONSTRAINTS, SINGULAR_MASS, is_timed,
-                     make_workspace)
+                     S_WORK, SI_A, SI_S, SI_SC, SINGULAR, SINGULAR_CONSTRAINTS, SINGULAR_MASS,
+                     SOLVE_BANDED, is_timed, make_workspace)
 from .linalg import lu_factor, lu_solve
 
 __all__ = ["make_workspace", "assemble", "step", "end_momentum", "velocity_residual",
@@ -472,9 +474,13 @@ def newton_full(md, tabs, opts, h, qk, pk, ws, out):
         st = assemble(md, tabs, h, qk, pk, ws, True)
         if st != OK:
             return st
-        if lu_factor(A, piv, N) != 0:
-            return SINGULAR
-        lu_solve(A, piv, R, N)
+        if ws.si[SI_A] == SOLVE_BANDED:  # large sparse models (banded.py)
+            if newton_banded(ws, N) != 0:
+                return SINGULAR
+        else:
+            if lu_factor(A, piv, N) != 0:
+                return SINGULAR
+            lu_solve(A, piv, R, N)
         dn = _apply_increment(X, R, N, sn, qscale)
         if not np.isfinite(dn):
             return NONFINITE
@@ -538,6 +544,9 @@ def _minv(md, ws, x, n):
 @hot_inline
 def _mech_rows(md, ws, j, n, m):
     """``ws.Y[j]`` = (M̄⁻¹ G_jᵀ)ᵀ from ``ws.G[j]``."""
+    if ws.si[SI_SC] == SOLVE_BANDED:
+        mech_rows_sparse(ws, j, m)
+        return
     for c in range(m):
         Yc = ws.Y[j, c]
         for a in range(n):
@@ -633,6 +642,9 @@ def residual(md, tabs, h, qk, pk, ws):
                 if cl == 0.0:
                     continue
                 r0 = nu * n
+                if ws.si[SI_SC] == SOLVE_BANDED:  # over the pattern of G (banded.py)
+                    gt_times(ws.si, Gj, X[col:], R[r0:], -cl, m)
+                    continue
                 for c in range(m):
                     e = cl * X[col + c]
                     for a in range(n):
@@ -648,6 +660,10 @@ def _schur(tabs, h, ws, n, m, J):
     """Build and factor the Schur complement ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` on the
     impulses from ``ws.G`` and ``ws.Y``. Returns a status code."""
     G, Y, Sc, W = ws.G, ws.Y, ws.Sc, tabs.W
+    if ws.si[SI_SC] == SOLVE_BANDED:  # large sparse models (banded.py)
+        if schur_banded(ws, W, h, m, J) != 0:
+            return SINGULAR
+        return OK
     for j in range(1, J + 1):
         for jp in range(J):
             w = h * W[j - 1, jp]
@@ -691,7 +707,10 @@ def _mech_solve(md, tabs, h, ws, n, m, s, J):
             c = h * Ainv[mu, nu]
             for a in range(n):
                 U[mu, a] += c * Z[nu, a]
-    if m > 0:
+    if m > 0 and ws.si[SI_SC] == SOLVE_BANDED:
+        # the same with the pattern of G, not inlined: small models' code stays as it was
+        mech_impulses_banded(ws, Lc, Ainv, h, n, m, s, J)
+    elif m > 0:
         Jm = J * m
         for j in range(1, J + 1):
             row = sn + (j - 1) * m
@@ -1028,6 +1047,11 @@ def end_momentum(md, q1, P, p1, v1, G1, ws):
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     n = flags[F_N]
     m = flags[F_M]
+    if ws.si[SI_S] == SOLVE_BANDED:  # large sparse models, diagonal mass (banded.py)
+        rheonomic = is_timed(md) and flags[F_TIME] != 0
+        if rheonomic:
+            constraint_rate(md, q1, ws.time[1], ws.gt, ws.g)
+        return project_banded(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic)
     Mlu = ws.Ma
     pivn = ws.pivp
     Y = ws.Gp

@@ -6,6 +6,7 @@ registered in :data:`SCENES` by name.
 """
 
 from .chain import chain
+from .closed_chain import closed_chain
 from .double_pendulum import double_pendulum
 from .four_bar import four_bar
 from .kapitza import kapitza_pendulum
@@ -24,9 +25,10 @@ SCENES = {
     "triple_pendulum": triple_pendulum,
     "four_bar": four_bar,
     "chain": chain,
+    "closed_chain": closed_chain,
     "kapitza_pendulum": kapitza_pendulum,
     "slider_crank": slider_crank,
 }
 
 __all__ = ["SCENES", "pendulum", "double_pendulum", "rotary_rod_slider", "triple_pendulum",
-           "spherical_pendulum", "four_bar", "chain", "kapitza_pendulum", "slider_crank"]
+           "spherical_pendulum", "four_bar", "chain", "closed_chain", "kapitza_pendulum", "slider_crank"]

@@ -1,0 +1,333 @@
+r"""Structured linear solves of a step (issue 12): banded LU and sparse products with G.
+
+Large mechanisms give sparse Newton matrices: ordered by body, a chain's is banded. Each
+linear system of a step — the full Newton matrix, the Schur complement of the mechanics
+iteration on the impulses and the end projection ``G M⁻¹ Gᵀ`` — is solved either by the
+dense LU of :mod:`.linalg` or, when :func:`fastvi.structure.plan` chose it for the model and
+method, by a banded LU with partial pivoting after a fill-reducing (reverse Cuthill–McKee)
+ordering computed once in NumPy. The choice and the data sit in two workspace arrays,
+``ws.si`` (int64, header ``SI_*`` of :mod:`.layout`) and ``ws.sb`` (float64).
+
+Band storage is LAPACK's (``dgbtrf``): with ``kv = kl + ku`` and ``ld = 2 kl + ku + 1``,
+entry ``(i, j)`` of the permuted matrix sits at ``ab[kv + i − j + ld j]`` (column-major,
+one flat array); the top ``kl`` rows take the fill of row interchanges. Hand-written rather
+than LAPACK through ``cython_lapack``: the bands here are narrow (``kl + ku`` ≈ 10–20) and
+a plain numba loop needs no function pointer baked into a cached kernel.
+"""
+
+import numpy as np
+
+from .._numba import hot, hot_inline
+from .layout import (NONFINITE, OK, SI_S_BAND, SI_S_IPERM, SI_S_KL, SI_S_KU, SI_S_PERM,
+                     SINGULAR_CONSTRAINTS, SI_A_BAND, SI_A_KL, SI_A_KU, SI_A_PERM, SI_GCOL, SI_GPTR, SI_RHS,
+                     SI_SC_BAND, SI_SC_IPERM, SI_SC_KL, SI_SC_KU, SI_SC_PERM, SI_SCOL, SI_SPTR)
+
+__all__ = ["band_factor", "band_solve", "band_pack", "newton_banded", "schur_banded",
+           "schur_solve_banded", "mech_impulses_banded", "g_times", "gt_times", "band_ld", "mech_rows_sparse",
+           "project_banded"]
+
+
+@hot_inline
+def band_ld(kl, ku):
+    """Leading dimension of the band storage: ``2 kl + ku + 1``."""
+    return 2 * kl + ku + 1
+
+
+@hot
+def band_factor(ab, piv, N, kl, ku):
+    """Factor the band matrix in ``ab`` in place as P A = L U (LAPACK ``dgbtf2``).
+
+    Returns 0, or ``k + 1`` if the pivot of column ``k`` is zero or not finite.
+    """
+    kv = kl + ku
+    ld = 2 * kl + ku + 1
+    ju = 0
+    for j in range(N):
+        km = min(kl, N - 1 - j)
+        cj = ld * j
+        jp = 0
+        big = abs(ab[cj + kv])
+        for i in range(1, km + 1):
+            a = abs(ab[cj + kv + i])
+            if a > big:
+                big = a
+                jp = i
+        piv[j] = j + jp
+        if not (big > 0.0) or not np.isfinite(big):
+            return j + 1
+        ju = max(ju, min(j + ku + jp, N - 1))
+        if jp != 0:
+            for c in range(j, ju + 1):
+                o = ld * c + kv + j - c
+                t = ab[o]
+                ab[o] = ab[o + jp]
+                ab[o + jp] = t
+        if km > 0:
+            inv = 1.0 / ab[cj + kv]
+            for i in range(1, km + 1):
+                ab[cj + kv + i] *= inv
+            for c in range(j + 1, ju + 1):
+                o = ld * c + kv + j - c
+                u = ab[o]
+                if u != 0.0:
+                    for i in range(1, km + 1):
+                        ab[o + i] -= ab[cj + kv + i] * u
+    return 0
+
+
+@hot
+def band_solve(ab, piv, b, N, kl, ku):
+    """Solve with the factors of :func:`band_factor`; ``b`` (length ≥ N) is overwritten."""
+    kv = kl + ku
+    ld = 2 * kl + ku + 1
+    if kl > 0:
+        for j in range(N - 1):
+            lm = min(kl, N - 1 - j)
+            p = piv[j]
+            if p != j:
+                t = b[p]
+                b[p] = b[j]
+                b[j] = t
+            bj = b[j]
+            if bj != 0.0:
+                cj = ld * j + kv
+                for i in range(1, lm + 1):
+                    b[j + i] -= ab[cj + i] * bj
+    for j in range(N - 1, -1, -1):
+        cj = ld * j + kv
+        b[j] /= ab[cj]
+        bj = b[j]
+        if bj != 0.0:
+            for i in range(max(0, j - kv), j):
+                b[i] -= ab[cj + i - j] * bj
+
+
+@hot
+def band_pack(A, perm, ab, N, kl, ku):
+    """``ab`` ← the band of ``A[perm][:, perm]`` (entries outside the band are dropped)."""
+    kv = kl + ku
+    ld = 2 * kl + ku + 1
+    for k in range(ld * N):
+        ab[k] = 0.0
+    for j in range(N):
+        pj = perm[j]
+        for i in range(max(0, j - ku), min(N, j + kl + 1)):
+            ab[ld * j + kv + i - j] = A[perm[i], pj]
+
+
+@hot
+def newton_banded(ws, N):
+    """Full Newton: ``ws.R`` ← ``A⁻¹ ws.R`` through the banded LU of the permuted ``ws.A``.
+    Returns 0, or non-zero when a pivot vanished."""
+    si, sb = ws.si, ws.sb
+    kl = si[SI_A_KL]
+    ku = si[SI_A_KU]
+    perm = si[si[SI_A_PERM]: si[SI_A_PERM] + N]
+    ab = sb[si[SI_A_BAND]: si[SI_A_BAND] + band_ld(kl, ku) * N]
+    t = sb[si[SI_RHS]: si[SI_RHS] + N]
+    band_pack(ws.A, perm, ab, N, kl, ku)
+    if band_factor(ab, ws.piv, N, kl, ku) != 0:
+        return 1
+    R = ws.R
+    for i in range(N):
+        t[i] = R[perm[i]]
+    band_solve(ab, ws.piv, t, N, kl, ku)
+    for i in range(N):
+        R[perm[i]] = t[i]
+    return 0
+
+
+@hot_inline
+def g_times(si, Gj, x, out, m):
+    """``out[c] = (G_j x)_c`` over the pattern of G."""
+    gp = si[SI_GPTR]
+    gc = si[SI_GCOL]
+    for c in range(m):
+        acc = 0.0
+        for k in range(si[gp + c], si[gp + c + 1]):
+            a = si[gc + k]
+            acc += Gj[c, a] * x[a]
+        out[c] = acc
+
+
+@hot_inline
+def gt_times(si, Gj, y, out, scale, m):
+    """``out += scale · G_jᵀ y`` over the pattern of G."""
+    gp = si[SI_GPTR]
+    gc = si[SI_GCOL]
+    for c in range(m):
+        e = scale * y[c]
+        if e != 0.0:
+            for k in range(si[gp + c], si[gp + c + 1]):
+                a = si[gc + k]
+                out[a] += Gj[c, a] * e
+
+
+@hot
+def schur_banded(ws, W, h, m, J):
+    """Build ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` over the pattern of ``G Gᵀ`` straight into band
+    storage (diagonal ``M̄``: ``ws.Y[j']`` holds ``G_{j'} M̄⁻¹`` on the pattern of G) and
+    factor it. Returns 0, or non-zero when a pivot vanished."""
+    si, sb, G, Y = ws.si, ws.sb, ws.G, ws.Y
+    Jm = J * m
+    kl = si[SI_SC_KL]
+    ku = si[SI_SC_KU]
+    kv = kl + ku
+    ld = band_ld(kl, ku)
+    ip = si[si[SI_SC_IPERM]: si[SI_SC_IPERM] + Jm]
+    ab = sb[si[SI_SC_BAND]: si[SI_SC_BAND] + ld * Jm]
+    gp = si[SI_GPTR]
+    gc = si[SI_GCOL]
+    sp = si[SI_SPTR]
+    sc = si[SI_SCOL]
+    for k in range(ld * Jm):
+        ab[k] = 0.0
+    for j in range(1, J + 1):
+        for jp in range(J):
+            w = h * W[j - 1, jp]
+            if w == 0.0:
+                continue
+            for c in range(m):
+                i = ip[(j - 1) * m + c]
+                for k in range(si[sp + c], si[sp + c + 1]):
+                    e = si[sc + k]
+                    acc = 0.0
+                    for kk in range(si[gp + c], si[gp + c + 1]):
+                        a = si[gc + kk]
+                        acc += G[j, c, a] * Y[jp, e, a]
+                    col = ip[jp * m + e]
+                    ab[ld * col + kv + i - col] = w * acc
+    return band_factor(ab, ws.pivs, Jm, kl, ku)
+
+
+@hot_inline
+def schur_solve_banded(ws, x, Jm):
+    """``x`` (the impulse rows of ``ws.R``) ← ``Sc⁻¹ x`` with the factors of
+    :func:`schur_banded`."""
+    si, sb = ws.si, ws.sb
+    kl = si[SI_SC_KL]
+    ku = si[SI_SC_KU]
+    perm = si[si[SI_SC_PERM]: si[SI_SC_PERM] + Jm]
+    ab = sb[si[SI_SC_BAND]: si[SI_SC_BAND] + band_ld(kl, ku) * Jm]
+    t = sb[si[SI_RHS]: si[SI_RHS] + Jm]
+    for i in range(Jm):
+        t[i] = x[perm[i]]
+    band_solve(ab, ws.pivs, t, Jm, kl, ku)
+    for i in range(Jm):
+        x[perm[i]] = t[i]
+
+
+@hot_inline
+def g_sub(si, Gj, x, R, off, m):
+    """``R[off + c] −= (G_j x)_c`` over the pattern of G."""
+    gp = si[SI_GPTR]
+    gc = si[SI_GCOL]
+    for c in range(m):
+        acc = 0.0
+        for k in range(si[gp + c], si[gp + c + 1]):
+            a = si[gc + k]
+            acc += Gj[c, a] * x[a]
+        R[off + c] -= acc
+
+
+@hot
+def mech_rows_sparse(ws, j, m):
+    """``ws.Y[j]`` = ``G_j M̄⁻¹`` on the pattern of G (diagonal ``M̄``; the rest of ``Y``
+    stays zero in a structured workspace)."""
+    si = ws.si
+    gp = si[SI_GPTR]
+    gc = si[SI_GCOL]
+    minv = ws.minv
+    for c in range(m):
+        for k in range(si[gp + c], si[gp + c + 1]):
+            a = si[gc + k]
+            ws.Y[j, c, a] = ws.G[j, c, a] * minv[a]
+
+
+@hot
+def project_banded(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic):
+    """The end projection of :func:`.step.end_momentum` for a diagonal constant mass with
+    ``G M⁻¹ Gᵀ`` built over the pattern of ``G Gᵀ`` and factored banded:
+    ``p1 = P − G1ᵀ η``, ``(G M⁻¹ Gᵀ) η = G M⁻¹ P (+ g_t in ws.gt if rheonomic)``,
+    ``v1 = M⁻¹ p1``."""
+    si, sb = ws.si, ws.sb
+    kl = si[SI_S_KL]
+    ku = si[SI_S_KU]
+    kv = kl + ku
+    ld = band_ld(kl, ku)
+    ip = si[si[SI_S_IPERM]: si[SI_S_IPERM] + m]
+    perm = si[si[SI_S_PERM]: si[SI_S_PERM] + m]
+    ab = sb[si[SI_S_BAND]: si[SI_S_BAND] + ld * m]
+    t = sb[si[SI_RHS]: si[SI_RHS] + m]
+    gp = si[SI_GPTR]
+    gc = si[SI_GCOL]
+    sp = si[SI_SPTR]
+    sc = si[SI_SCOL]
+    for a in range(n):
+        v1[a] = P[a] / Mc[a, a]
+    for k in range(ld * m):
+        ab[k] = 0.0
+    for c in range(m):
+        i = ip[c]
+        acc = ws.gt[c] if rheonomic else 0.0
+        for k in range(si[gp + c], si[gp + c + 1]):
+            a = si[gc + k]
+            acc += G1[c, a] * v1[a]
+        t[i] = acc
+        for k in range(si[sp + c], si[sp + c + 1]):
+            e = si[sc + k]
+            acc = 0.0
+            for kk in range(si[gp + c], si[gp + c + 1]):
+                a = si[gc + kk]
+                acc += G1[c, a] * G1[e, a] / Mc[a, a]
+            col = ip[e]
+            ab[ld * col + kv + i - col] = acc
+    if band_factor(ab, ws.pivm, m, kl, ku) != 0:
+        return SINGULAR_CONSTRAINTS
+    band_solve(ab, ws.pivm, t, m, kl, ku)
+    eta = ws.etaJ
+    for i in range(m):
+        eta[perm[i]] = t[i]
+    for a in range(n):
+        p1[a] = P[a]
+    gt_times(si, G1, eta, p1, -1.0, m)
+    for a in range(n):
+        v1[a] = p1[a] / Mc[a, a]
+    for a in range(n):
+        if not (np.isfinite(p1[a]) and np.isfinite(v1[a])):
+            return NONFINITE
+    return OK
+
+
+@hot
+def mech_impulses_banded(ws, Lc, Ainv, h, n, m, s, J):
+    """The impulse part of :func:`.step._mech_solve` with the pattern of G: from the stage
+    increments ``ws.U`` (``h (A⁻¹ ⊗ M̄⁻¹) r_E``), subtract ``C U`` from the constraint rows of
+    ``ws.R``, solve the banded Schur complement for ``δη``, and add
+    ``h (A⁻¹ ⊗ M̄⁻¹) B δη`` to ``ws.U``. Not inlined, so that the step of small models
+    compiles to the code it had before."""
+    R, Z, U, Y, G = ws.R, ws.Z, ws.U, ws.Y, ws.G
+    T = ws.fa
+    sn = s * n
+    for j in range(1, J + 1):
+        for a in range(n):
+            T[a] = 0.0
+        for mu in range(1, s + 1):
+            cl = Lc[mu, j]
+            if cl != 0.0:
+                for a in range(n):
+                    T[a] += cl * U[mu - 1, a]
+        g_sub(ws.si, G[j], T, R, sn + (j - 1) * m, m)
+    schur_solve_banded(ws, R[sn:], J * m)
+    for nu in range(s):
+        for a in range(n):
+            Z[nu, a] = 0.0
+        for jp in range(J):
+            cl = Lc[nu, jp]
+            if cl != 0.0:
+                gt_times(ws.si, Y[jp], R[sn + jp * m:], Z[nu], cl, m)
+    for mu in range(s):
+        for nu in range(s):
+            c = h * Ainv[mu, nu]
+            for a in range(n):
+                U[mu, a] += c * Z[nu, a]

@@ -1,0 +1,151 @@
+r"""Planar closed chain: N equal rigid links between two ground pivots, N − 1 point masses.
+
+The links join ``A = (0, 0)``, the bodies ``r_1 … r_{N−1}`` and ``D = (d, 0)``; gravity ``−g ŷ``.
+``q = (x1, y1, …, x_{N−1}, y_{N−1})`` (n = 2N − 2), N constraints
+
+    g_i = ½ (|r_i − r_{i−1}|² − l²),   i = 1 … N,   r_0 = A, r_N = D,
+
+so N − 2 degrees of freedom (N ≥ 3). The loop closes through the ground: the last
+constraint couples the last body to a fixed point, and the Newton matrix stays banded in
+body order (bandwidth independent of N). When ``d = N l`` the loop is stretched straight
+and every configuration is singular; for ``d`` close to ``N l`` the loop is nearly taut.
+Constant diagonal mass, linear potential, exact second derivatives.
+
+``params = (m, l, d, g)`` (equal masses and lengths); the functions read the number of bodies
+from ``len(q) // 2``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model import Model
+from ._common import attach, check_positive
+
+MIN_LINKS = 3
+
+
+def _V(q, p):
+    acc = 0.0
+    for i in range(q.shape[0] // 2):
+        acc += q[2 * i + 1]
+    return p[0] * p[3] * acc
+
+
+def _dV(q, p, out):
+    for i in range(q.shape[0] // 2):
+        out[2 * i] = 0.0
+        out[2 * i + 1] = p[0] * p[3]
+
+
+def _ddV(q, p, out):
+    out[:, :] = 0.0
+
+
+def _g(q, p, out):
+    nb = q.shape[0] // 2
+    px = 0.0
+    py = 0.0
+    for i in range(nb + 1):
+        x = q[2 * i] if i < nb else p[2]
+        y = q[2 * i + 1] if i < nb else 0.0
+        dx = x - px
+        dy = y - py
+        out[i] = 0.5 * (dx * dx + dy * dy - p[1] * p[1])
+        px = x
+        py = y
+
+
+def _G(q, p, out):
+    nb = q.shape[0] // 2
+    out[:, :] = 0.0
+    px = 0.0
+    py = 0.0
+    for i in range(nb + 1):
+        x = q[2 * i] if i < nb else p[2]
+        y = q[2 * i + 1] if i < nb else 0.0
+        dx = x - px
+        dy = y - py
+        if i < nb:
+            out[i, 2 * i] = dx
+            out[i, 2 * i + 1] = dy
+        if i > 0:
+            out[i, 2 * i - 2] = -dx
+            out[i, 2 * i - 1] = -dy
+        px = x
+        py = y
+
+
+def _ddg(q, eta, p, out):
+    nb = q.shape[0] // 2
+    out[:, :] = 0.0
+    for i in range(nb):
+        d = eta[i] + eta[i + 1]
+        out[2 * i, 2 * i] = d
+        out[2 * i + 1, 2 * i + 1] = d
+        if i + 1 < nb:
+            e = -eta[i + 1]
+            out[2 * i, 2 * i + 2] = e
+            out[2 * i + 2, 2 * i] = e
+            out[2 * i + 1, 2 * i + 3] = e
+            out[2 * i + 3, 2 * i + 1] = e
+
+
+def _arc(N: int, l: float, d: float) -> np.ndarray:
+    """Vertices of N equal chords of length l on a circular arc from (0, 0) to (d, 0),
+    sagging below the ground line (d < N l)."""
+    # half-angle α of one chord: l = 2R sin α, d = 2R sin(N α) → sin(Nα)/sin(α) = d/l
+    ratio = d / l
+    lo, hi = 1e-12, np.pi / N
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if np.sin(N * mid) / np.sin(mid) > ratio:
+            lo = mid
+        else:
+            hi = mid
+    a = 0.5 * (lo + hi)
+    R = l / (2.0 * np.sin(a))
+    cx, cy = 0.5 * d, R * np.cos(N * a)  # centre above the chord line
+    phi0 = np.arctan2(0.0 - cy, 0.0 - cx)
+    ang = phi0 + 2.0 * a * np.arange(1, N)
+    return np.column_stack((cx + R * np.cos(ang), cy + R * np.sin(ang)))
+
+
+def closed_chain(N: int = 8, m: float = 1.0, l: float = 1.0, d: float | None = None,
+                 g: float = 9.81) -> Model:
+    r"""Closed planar chain of ``N`` equal links pinned at ``(0, 0)`` and ``(d, 0)``
+    (n = 2N − 2, m = N, N − 2 degrees of freedom).
+
+    Parameters
+    ----------
+    N : int, default 8
+        Number of links, ``N >= 3``.
+    m, l : float
+        Mass of each of the N − 1 bodies and length of each link.
+    d : float, optional
+        Distance between the pivots, ``0 < d < N l``; default ``0.7 N l``.
+    g : float
+        Gravity along ``−y``.
+
+    Returns
+    -------
+    Model
+        With ``initial_state() -> (q0, v0)``: at rest on a circular arc through both pivots
+        (consistent: ``g(q0) = 0`` to round-off).
+    """
+    if isinstance(N, bool) or not isinstance(N, (int, np.integer)) or N < MIN_LINKS:
+        raise ValueError(f"`N` must be an integer >= {MIN_LINKS}, got {N!r}")
+    N = int(N)
+    d = 0.7 * N * l if d is None else d
+    check_positive(m=m, l=l, d=d, g=g)
+    if not d < N * l:
+        raise ValueError(f"`d` must be below N·l = {N * l:g} (the loop would be stretched), got {d!r}")
+    n = 2 * (N - 1)
+    model = Model(n, N, params=(m, l, d, g), mass=np.full(n, float(m)) * np.eye(n), potential=_V,
+                  potential_grad=_dV, potential_hessian=_ddV, constraint=_g,
+                  constraint_jacobian=_G, constraint_hessian=_ddg, name=f"closed_chain{N}")
+
+    def initial_state():
+        return _arc(N, l, d).ravel(), np.zeros(n)
+
+    return attach(model, "closed_chain", dict(N=N, m=m, l=l, d=d, g=g), initial_state=initial_state)

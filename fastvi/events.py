@@ -30,7 +30,8 @@ import numpy as np
 from .kernels.layout import EVENT_SLOTS, Events
 from .tables import lagrange_basis
 
-__all__ = ["DenseSolution", "prepare", "grow", "collect"]
+#: the public name; ``prepare``, ``grow`` and ``collect`` serve :func:`fastvi.integrate`
+__all__ = ["DenseSolution"]
 
 _INITIAL_CAPACITY = 64
 
@@ -139,13 +140,12 @@ def _direction(fn, i) -> int:
 
 
 def prepare(model, method, events, dense_steps: int):
-    """The :class:`~fastvi.kernels.layout.Events` of a run, or None (no events, no dense
-    output). ``dense_steps`` rows of control points are kept (0: no dense output)."""
+    """The :class:`~fastvi.kernels.layout.Events` of a run (with ``count = 0`` and no dense
+    rows when there is nothing to watch: the time loop then skips it). ``dense_steps`` rows
+    of control points are kept (0: no dense output)."""
     from .model import _absent, _wrap
 
     fns = _as_list(events)
-    if not fns and dense_steps == 0:
-        return None
     if len(fns) > EVENT_SLOTS:
         raise ValueError(f"`events` may hold at most {EVENT_SLOTS} functions, got {len(fns)}")
     k = model.params.shape[0]
@@ -162,7 +162,7 @@ def prepare(model, method, events, dense_steps: int):
     cbs = tuple(compiled) + (_absent,) * (EVENT_SLOTS - len(compiled))
     n, s = model.n, method.s
     E = max(1, len(fns))
-    cap = _INITIAL_CAPACITY
+    cap = _INITIAL_CAPACITY if fns else 1
     return Events(cbs, len(fns), dirs, term, np.zeros(EVENT_SLOTS), np.full((E, cap), np.nan),
                   np.full((E, cap, n), np.nan), np.full((E, cap, n), np.nan),
                   np.zeros(EVENT_SLOTS, dtype=np.int64), np.zeros((dense_steps, s + 1, n)),

@@ -17,7 +17,7 @@ from .kernels.events import event_values
 from ._numba import quiet
 from .kernels import drive
 from .kernels import layout as lay
-from .kernels.layout import Samples, make_workspace
+from .kernels.layout import Samples
 from .model import Model
 from .results import ProgressBar, Result
 from .status import MESSAGES, Status
@@ -238,12 +238,12 @@ def integrate(
     info[lay.I_T0] = t0
     tabs = meth.kernel_tables
     ev = events_.prepare(model, meth, events, total if dense_output else 0)
-    if ev is not None and ev.count:
+    if ev.count:
         event_values(md, ev, t0, q0, v0)
 
     chunk = total if not progress else max(1, total // _PROGRESS_CHUNKS)
     sout = np.zeros(lay.STEP_OUT_SIZE)
-    compile_time += _dispatch_time(drive.run, (md.timed, ev is None), md, tabs, opts, h, state, ws,
+    compile_time += _dispatch_time(drive.run, md.timed, md, tabs, opts, h, state, ws,
                                    chunk, total, every, smp, info, sout, ev)
     bar = ProgressBar(total) if progress else None
     t_loop = time.perf_counter()
@@ -279,12 +279,11 @@ def integrate(
     J = int(info[lay.I_SLOT])
     status = Status(status)
     ev_out = {}
-    if ev is not None:
-        if events is not None:
-            ev_out.update(zip(("t_events", "q_events", "v_events"), events_.collect(ev)))
-        if dense_output:
-            steps_done = int(info[lay.I_STEPS])
-            ev_out["sol"] = events_.DenseSolution(t0, h, meth.tau, ev.dense[:steps_done].copy())
+    if events is not None:
+        ev_out.update(zip(("t_events", "q_events", "v_events"), events_.collect(ev)))
+    if dense_output:
+        steps_done = int(info[lay.I_STEPS])
+        ev_out["sol"] = events_.DenseSolution(t0, h, meth.tau, ev.dense[:steps_done].copy())
     result = Result(
         t=smp.t[:J].copy(), q=smp.q[:J].copy(), v=smp.v[:J].copy(), p=smp.p[:J].copy(),
         energy=smp.energy[:J].copy(), work=smp.work[:J].copy() if model.timed else None,
@@ -375,7 +374,7 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
         info_sub[lay.I_T0] = info[lay.I_T0] + info[lay.I_STEPS] * h
         with quiet():
             st = drive.run(md, tabs, opts, h / sub, trial, ws_sub, sub, sub, sub, smp_sub, info_sub,
-                           np.zeros(lay.STEP_OUT_SIZE), None)
+                           np.zeros(lay.STEP_OUT_SIZE), events_.prepare(model, meth, None, 0))
         if st == 0:
             state[:3] = trial[:3]
             info[lay.I_ITERS] += info_sub[lay.I_ITERS]

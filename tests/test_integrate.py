@@ -85,7 +85,7 @@ def test_unconstrained_and_q_dependent_mass_models_run():
 
 def _kinds(kernel):
     """The ``ModelData.timed`` types the kernel was compiled for (one per kind of model)."""
-    return [str(sig[0].types[-1]) if hasattr(sig[0], "types") else str(sig[0]) for sig in kernel.signatures]
+    return [str(sig[0].types[-1]) for sig in kernel.signatures]
 
 
 def test_kernels_compile_once_for_every_model(double_pendulum, dp_start):

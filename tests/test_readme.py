@@ -55,7 +55,8 @@ def test_readme_python_blocks_run(tmp_path):
 # ----------------------------------------------------------------------------- docs/api.md
 API = ROOT / "docs" / "api.md"
 PUBLIC_MODULES = ["fastvi.check", "fastvi.symbolic", "fastvi.scenes", "fastvi.tables", "fastvi.status",
-                  "fastvi.model", "fastvi.ensemble", "fastvi.distributed", "fastvi.baselines"]
+                  "fastvi.model", "fastvi.ensemble", "fastvi.distributed", "fastvi.baselines",
+                  "fastvi.events"]
 # Public modules written for issue 8, held to the full docstring rule below for every name.
 STRICT_MODULES = ["fastvi.check", "fastvi.symbolic"]
 SECTIONS = ("Parameters", "Returns", "Raises", "Attributes", "Notes", "Examples", "References",

@@ -254,6 +254,7 @@ def test_conservative_trajectories_bit_for_bit_as_before_forces(case):
 
 
 # ----------------------------------------------------------------------------- API details
+@pytest.mark.slow  # compiles the ensemble kernel for timed models: ≈ 50 s on an empty cache
 def test_ensemble_member_equals_integrate_for_a_forced_model(damped_dp):
     states = [damped_dp.initial_state(a, b) for a, b in [(0.5, 1.0), (2.0, -1.0), (3.0, 0.0)]]
     Q0, V0 = np.array([s[0] for s in states]), np.array([s[1] for s in states])

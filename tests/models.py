@@ -97,7 +97,9 @@ def quartic(eps=1.0):
 # Crank pin A on a circle of radius r about the origin, slider B on the x axis, a rod of
 # length L from A to B with its mass at its midpoint C, in redundant Cartesian coordinates
 # q = (xa, ya, xc, yc, xb, yb); five constraints leave one degree of freedom.
-# params = (r, L, ma, mc, mb, g)
+# params = (r, L, ma, mc, mb, g). The same mechanism as fastvi.scenes.slider_crank, written
+# here as an autonomous user model (callbacks without t): the consistent-state tests need a
+# model a user would write, and the scene's callbacks take the time (its driven variant).
 def sc_V(q, p):
     return p[5] * (p[2] * q[1] + p[3] * q[3] + p[4] * q[5])
 
@@ -165,11 +167,6 @@ def slider_crank():
 
 def slider_crank_state(phi, omega):
     """The exact ``(q, v)`` for crank angle ``phi`` and crank speed ``omega`` (slider to the right)."""
-    r, L = SLIDER_CRANK_PARAMS[:2]
-    xa, ya = r * np.cos(phi), r * np.sin(phi)
-    vxa, vya = -r * np.sin(phi) * omega, r * np.cos(phi) * omega
-    s = np.sqrt(L * L - ya * ya)
-    xb, vxb = xa + s, vxa - ya * vya / s
-    q = np.array([xa, ya, 0.5 * (xa + xb), 0.5 * ya, xb, 0.0])
-    v = np.array([vxa, vya, 0.5 * (vxa + vxb), 0.5 * vya, vxb, 0.0])
-    return q, v
+    from fastvi.scenes.slider_crank import state
+
+    return state(phi, omega, *SLIDER_CRANK_PARAMS[:2])

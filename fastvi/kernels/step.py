@@ -56,21 +56,34 @@ FULL_HOLD = 32
 
 
 # ----------------------------------------------------------------------------- derivatives
+#: what _fd_vec_jacobian differentiates: by q, by q and symmetrised (a Hessian), by v
+_FD_Q, _FD_HESSIAN, _FD_V = 0, 1, 2
+
+
 @hot
-def _fd_vec_jacobian(fn, slot_kind, q, v, prm, out, qa, fa, fb, n):
-    """out[:, b] = ∂f/∂q_b by central differences of a vector callback f(q, v)."""
+def _fd_vec_jacobian(fn, kind, q, v, prm, out, xa, fa, fb, n):
+    """out[:, b] = ∂f/∂x_b by central differences of a vector callback f(q, v), with x = q
+    (``kind`` ``_FD_Q``, or ``_FD_HESSIAN``: symmetrised) or x = v (``_FD_V``)."""
+    wrt_v = kind == _FD_V
+    x = v if wrt_v else q
     for b in range(n):
         for a in range(n):
-            qa[a] = q[a]
-        dq = _FD_REL * max(1.0, abs(q[b]))
-        qa[b] = q[b] + dq
-        fn(ptr(qa), ptr(v), ptr(prm), ptr(fa))
-        qa[b] = q[b] - dq
-        fn(ptr(qa), ptr(v), ptr(prm), ptr(fb))
-        inv = 0.5 / dq
+            xa[a] = x[a]
+        dx = _FD_REL * max(1.0, abs(x[b]))
+        xa[b] = x[b] + dx
+        if wrt_v:
+            fn(ptr(q), ptr(xa), ptr(prm), ptr(fa))
+        else:
+            fn(ptr(xa), ptr(v), ptr(prm), ptr(fa))
+        xa[b] = x[b] - dx
+        if wrt_v:
+            fn(ptr(q), ptr(xa), ptr(prm), ptr(fb))
+        else:
+            fn(ptr(xa), ptr(v), ptr(prm), ptr(fb))
+        inv = 0.5 / dx
         for a in range(n):
             out[a, b] = (fa[a] - fb[a]) * inv
-    if slot_kind == 1:  # a Hessian: symmetrise
+    if kind == _FD_HESSIAN:
         for a in range(n):
             for b in range(a + 1, n):
                 t = 0.5 * (out[a, b] + out[b, a])
@@ -124,22 +137,6 @@ def _fd_constraint_hessian(fjac, q, eta, prm, out, qa, Gp, Gm, n, m):
             t = 0.5 * (out[a, b] + out[b, a])
             out[a, b] = t
             out[b, a] = t
-
-
-@hot
-def _fd_force_v(fn, q, v, prm, out, va, fa, fb, n):
-    """out[:, b] = ∂F/∂v_b by central differences of the force callback F(q, v)."""
-    for b in range(n):
-        for a in range(n):
-            va[a] = v[a]
-        dv = _FD_REL * max(1.0, abs(v[b]))
-        va[b] = v[b] + dv
-        fn(ptr(q), ptr(va), ptr(prm), ptr(fa))
-        va[b] = v[b] - dv
-        fn(ptr(q), ptr(va), ptr(prm), ptr(fb))
-        inv = 0.5 / dv
-        for a in range(n):
-            out[a, b] = (fa[a] - fb[a]) * inv
 
 
 # ----------------------------------------------------------------------------- time
@@ -279,7 +276,7 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
         if flags[F_EX_PHESS] != 0:
             fns[PHESS](ptr(qi), ptr(qi), ptr(prm), ptr(Aq))
         else:
-            _fd_vec_jacobian(fns[PGRAD], 1, qi, qi, prm, Aq, fa, F, Pm, n)  # F, Pm: spent scratch
+            _fd_vec_jacobian(fns[PGRAD], _FD_HESSIAN, qi, qi, prm, Aq, fa, F, Pm, n)  # F, Pm: spent scratch
         for a in range(n):
             for c in range(n):
                 Aq[a, c] = -Aq[a, c]
@@ -287,7 +284,7 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
             if flags[F_EX_KHESS] != 0:
                 fns[KHESS](ptr(qi), ptr(vi), ptr(prm), ptr(Hc))
             else:
-                _fd_vec_jacobian(fns[KGRAD], 1, qi, vi, prm, Hc, fa, F, Pm, n)
+                _fd_vec_jacobian(fns[KGRAD], _FD_HESSIAN, qi, vi, prm, Hc, fa, F, Pm, n)
             for a in range(n):
                 for c in range(n):
                     Aq[a, c] += Hc[a, c]
@@ -300,14 +297,14 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
             if flags[F_EX_FJQ] != 0:
                 fns[FJQ](ptr(qi), ptr(vi), ptr(prm), ptr(Hc))
             else:
-                _fd_vec_jacobian(fns[FORCE], 0, qi, vi, prm, Hc, fa, F, Pm, n)
+                _fd_vec_jacobian(fns[FORCE], _FD_Q, qi, vi, prm, Hc, fa, F, Pm, n)
             for a in range(n):
                 for c in range(n):
                     Aq[a, c] += Hc[a, c]
             if flags[F_EX_FJV] != 0:
                 fns[FJV](ptr(qi), ptr(vi), ptr(prm), ptr(Fv))
             else:
-                _fd_force_v(fns[FORCE], qi, vi, prm, Fv, Ma[0], fa, F, n)
+                _fd_vec_jacobian(fns[FORCE], _FD_V, qi, vi, prm, Fv, Ma[0], fa, F, n)
         for nu in range(s):
             for mu in range(1, s + 1):
                 cA = w * L[nu, i] * L[mu, i]

@@ -88,8 +88,8 @@ def start_time(t0) -> float:
     return t0
 
 
-def step_count(h: float, t_end, n_steps) -> int:
-    """Exactly one of ``t_end`` and ``n_steps``; ``t_end`` must be a multiple of ``h``."""
+def step_count(h: float, t_end, n_steps, t0: float = 0.0) -> int:
+    """Exactly one of ``t_end`` and ``n_steps``; ``t_end − t0`` must be a multiple of ``h``."""
     if (t_end is None) == (n_steps is None):
         raise ValueError("give exactly one of `t_end` and `n_steps`"
                          f" (got t_end={t_end!r}, n_steps={n_steps!r})")
@@ -98,14 +98,17 @@ def step_count(h: float, t_end, n_steps) -> int:
     if isinstance(t_end, bool) or not isinstance(t_end, (int, float, np.integer, np.floating)):
         raise TypeError(f"`t_end` must be a float, got {t_end!r}")
     t_end = float(t_end)
-    if not (t_end > 0.0 and math.isfinite(t_end)):
-        raise ValueError(f"`t_end` must be positive and finite, got {t_end}")
-    k = round(t_end / h)
-    if k < 1 or abs(k * h - t_end) > 1e-9 * t_end:
+    if not (t_end > t0 and math.isfinite(t_end)):
+        after = "positive" if t0 == 0.0 else f"after `t0` = {t0:g}"
+        raise ValueError(f"`t_end` must be finite and {after}, got {t_end}")
+    span = t_end - t0
+    k = round(span / h)
+    if k < 1 or abs(k * h - span) > 1e-9 * span:
+        start = "" if t0 == 0.0 else " − t0"
         raise ValueError(
-            f"`t_end` = {t_end} is not a whole number of steps of `h` = {h} "
-            f"(t_end/h = {t_end / h:.6g}); fixed-step integration needs t_end = n·h: "
-            f"pass `n_steps` or choose h = {t_end / max(1, k):.6g}"
+            f"`t_end`{start} = {span} is not a whole number of steps of `h` = {h} "
+            f"(({'t_end' + start})/h = {span / h:.6g}); fixed-step integration needs "
+            f"t_end = {'t0 + ' if t0 else ''}n·h: pass `n_steps` or choose h = {span / max(1, k):.6g}"
         )
     return int(k)
 

@@ -427,7 +427,7 @@ def _options(h, t_end, n_steps, method, save, tol, max_iter, newton="auto", t0=0
     """The validated scalar options of a run (cheap: the client of a Dask run calls it too)."""
     h = check.step_size(h)
     t0 = check.start_time(t0)
-    return dict(h=h, t0=t0, total=check.step_count(h, None if t_end is None else t_end - t0, n_steps),
+    return dict(h=h, t0=t0, total=check.step_count(h, t_end, n_steps, t0),
                 method=check.method(method), save=check.ensemble_save(save),
                 newton=check.newton_options(tol, max_iter, newton))
 

@@ -202,7 +202,7 @@ def integrate(
     prm = valid.params(params, model)
     h = valid.step_size(h)
     t0 = valid.start_time(t0)
-    total = valid.step_count(h, None if t_end is None else t_end - t0, n_steps)
+    total = valid.step_count(h, t_end, n_steps, t0)
     every = valid.save_every(save_every)
     opts = valid.newton_options(tol, max_iter, newton)
     recover = valid.recover(recover)

@@ -316,3 +316,13 @@ def test_forced_result_saves_and_loads_its_work(tmp_path, damped_dp):
     r.save(tmp_path / "r.npz")
     back = fastvi.Result.load(tmp_path / "r.npz")
     assert np.array_equal(back.work, r.work) and "max |ΔH − W|" in back.summary()
+
+
+def test_t_end_is_measured_from_t0_and_a_bad_one_is_named(kapitza):
+    q0, v0 = kapitza.initial_state(np.pi - 0.3, 0.0, t0=1.0)
+    r = fastvi.integrate(kapitza, q0, v0, h=2.0 ** -10, t_end=2.0, t0=1.0)
+    assert r.stats["steps"] == 1024 and r.t[-1] == 2.0
+    with pytest.raises(ValueError, match=r"`t_end` must be finite and after `t0` = 1"):
+        fastvi.integrate(kapitza, q0, v0, h=0.125, t_end=0.5, t0=1.0)
+    with pytest.raises(TypeError, match="`t_end` must be a float"):
+        fastvi.integrate(kapitza, q0, v0, h=0.125, t_end="2", t0=1.0)

@@ -53,6 +53,8 @@ def integrate_ensemble(
     newton: str = "auto",
     check: bool = True,
     chunk_size: int | None = None,
+    events=None,
+    keep_events: int = 1,
 ) -> EnsembleResult:
     """:func:`fastvi.integrate_ensemble` with the members spread over a Dask cluster.
 
@@ -60,6 +62,10 @@ def integrate_ensemble(
     ----------
     model, Q0, V0, h, t_end, n_steps, t0, method, params, save, tol, max_iter, newton, check :
         As in :func:`fastvi.integrate_ensemble`.
+    events, keep_events :
+        As in :func:`fastvi.integrate_ensemble`. The event functions travel with each task
+        (Dask pickles them: module-level functions by reference, so a worker must be able to
+        import their module) and are compiled once per worker process.
     client : distributed.Client
         A connected Dask client (``Client("tcp://scheduler:8786")``, a ``LocalCluster``,
         a dask-jobqueue cluster, ...). Every worker must be able to import fastvi (and the
@@ -92,7 +98,8 @@ def integrate_ensemble(
         raise ImportError('fastvi.distributed needs Dask: pip install "fastvi[dask]"') from exc
     if not isinstance(model, Model):
         raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
-    opts = _ens._options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0)
+    opts = _ens._options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0, keep_events)
+    _ens.events_.check_list(events)
     if threads is not None:  # the upper bound is the worker's NUMBA_NUM_THREADS: checked there
         threads = _ens.check._count(threads, "threads", 1)
     Q0, V0, P = _ens._members(model, Q0, V0, params)
@@ -112,7 +119,7 @@ def integrate_ensemble(
     blob = pickle.dumps(model)
     futures = [
         client.submit(_run_chunk, blob, Q0[a:a + chunk_size], V0[a:a + chunk_size],
-                      P[a:a + chunk_size], opts, threads, a, pure=False)
+                      P[a:a + chunk_size], opts, threads, a, events, pure=False)
         for a in range(0, N, chunk_size)
     ]
     parts = client.gather(futures)
@@ -124,13 +131,14 @@ def integrate_ensemble(
     return result
 
 
-def _run_chunk(blob, Q0, V0, P, opts, threads, first_member) -> EnsembleResult:
+def _run_chunk(blob, Q0, V0, P, opts, threads, first_member, events=None) -> EnsembleResult:
     """One task: members ``first_member …`` of the ensemble, with the local prange driver."""
     model = _worker_model(blob)
     if threads is None:
         threads = _worker_threads()
     threads = _ens._validate_threads(threads)
-    return _ens._ensemble(model, Q0, V0, P, opts, threads, run_check=False, first_member=first_member)
+    return _ens._ensemble(model, Q0, V0, P, opts, threads, run_check=False,
+                          first_member=first_member, events=events)
 
 
 def _worker_model(blob: bytes) -> Model:

@@ -19,6 +19,7 @@ import numba
 import numpy as np
 
 from . import _validate as check
+from . import events as events_
 from .integrate import Result, _dispatch_time, _timed
 from .kernels import drive
 from .kernels import layout as lay
@@ -40,7 +41,8 @@ _PARALLEL_LOCK = threading.Lock()
 _MEMBER_FIELDS = ("q", "v", "p", "energy", "constraint_residual", "velocity_residual",
                   "newton_iterations", "max_energy_error", "max_constraint_residual",
                   "max_velocity_residual", "iterations", "max_residual", "residual", "status",
-                  "failed_step", "steps", "n_saved", "initial_energy", "work")
+                  "failed_step", "steps", "n_saved", "initial_energy", "work", "t_events",
+                  "q_events", "v_events", "n_events")
 
 
 @dataclass(repr=False)
@@ -64,12 +66,23 @@ class EnsembleResult(ResultBase):
     ========================  ==========================  ===================  ==================
 
     In stride mode the samples of a member that failed stop at ``n_saved[i]``; later slots
-    are NaN.
+    are NaN. A member ended by a terminal event (status ``TERMINATED``) is a success; its
+    last sample is the step that contains the event, at ``t_final[i]`` (not on the grid
+    ``t``).
+
+    With ``events``, each member keeps its first ``K = keep_events`` crossings of each of
+    the ``E`` events (SciPy's ``t_events`` per member, padded with NaN):
+
+    ========================  ===============================================================
+    ``t_events``              (N, E, K) times of the first K crossings, NaN where none
+    ``q_events, v_events``    (N, E, K, n) the states at those times
+    ``n_events``              (N, E) crossings of each event in all (kept or not)
+    ========================  ===============================================================
 
     Attributes
     ----------
     t : ndarray (K,) or None
-        Sample times ``0, k h, 2k h, …`` and the final time (stride mode).
+        Sample times ``t0, t0 + k h, t0 + 2k h, …`` and the final time (stride mode).
     q, v, p, energy : ndarray
         Positions, velocities ``v = M⁻¹p``, momenta, ``H = ½ vᵀp + V``.
     constraint_residual, velocity_residual, newton_iterations : ndarray (N, K) or None
@@ -105,6 +118,10 @@ class EnsembleResult(ResultBase):
         ``compile_time``, and ``wall_time`` (the total).
     initial_energy : ndarray (N,) or None
         ``H`` of each member's (projected) initial state.
+    t0 : float
+        Start time of every member.
+    t_events, q_events, v_events, n_events : ndarray or None
+        The event records (table above); None without ``events``.
     """
 
     t: np.ndarray | None
@@ -135,6 +152,11 @@ class EnsembleResult(ResultBase):
     #: (N, K) work of forces and time since t0 at the saved steps (stride mode, a model
     #: with forces or time), else None; see :attr:`fastvi.Result.energy_balance`
     work: np.ndarray | None = None
+    t0: float = 0.0
+    t_events: np.ndarray | None = None
+    q_events: np.ndarray | None = None
+    v_events: np.ndarray | None = None
+    n_events: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.status.shape[0])
@@ -229,14 +251,27 @@ class EnsembleResult(ResultBase):
 
     @property
     def t_final(self) -> np.ndarray:
-        """(N,) time of each member's last good state (``steps · h``)."""
-        return self.steps * self.h
+        """(N,) time of each member's last good state (``t0 + steps · h``)."""
+        return self.t0 + self.steps * self.h
+
+    @property
+    def terminated(self) -> np.ndarray:
+        """Indices of the members that a terminal event ended."""
+        return np.flatnonzero(self.status == Status.TERMINATED)
+
+    def first_event_time(self) -> np.ndarray:
+        """(N,) the earliest crossing of any event per member (NaN where none was kept)."""
+        if self.t_events is None:
+            raise ValueError("this ensemble was run without `events`")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows: no event
+            return np.nanmin(self.t_events.reshape(len(self), -1), axis=1)
 
     def failures(self) -> list[dict]:
         """One dict per failed member: ``member, status, step, time, residual, message``."""
         return [
             dict(member=int(i), status=Status(int(self.status[i])), step=int(self.failed_step[i]),
-                 time=float(self.failed_step[i] * self.h), residual=float(self.residual[i]),
+                 time=float(self.t0 + self.failed_step[i] * self.h), residual=float(self.residual[i]),
                  message=MESSAGES[Status(int(self.status[i]))])
             for i in self.failed
         ]
@@ -258,8 +293,12 @@ class EnsembleResult(ResultBase):
                          f"max |g| = {np.max(self.max_constraint_residual):.3e}, "
                          f"max |Gv| = {np.max(self.max_velocity_residual):.3e}")
         failed = self.failed
+        ended = self.terminated.size
+        if ended:
+            lines.append(f"{ended} of {N} members ended by a terminal event")
         if failed.size == 0:
-            lines.append("all members reached the final time")
+            lines.append("all members reached the final time" if not ended else
+                         "no member failed")
         else:
             codes, counts = np.unique(self.status[failed], return_counts=True)
             causes = ", ".join(f"{c} × {Status(int(s)).name}" for s, c in zip(codes, counts))
@@ -280,8 +319,21 @@ class EnsembleResult(ResultBase):
         i = int(i)
         J = int(self.n_saved[i])
         status = Status(int(self.status[i]))
+        t = self.t[:J].copy()
+        if status == Status.TERMINATED:
+            t[-1] = self.t0 + self.steps[i] * self.h  # the step that contained the event
+        kept = {}
+        if self.t_events is not None:
+            K = self.t_events.shape[2]
+            if self.n_events[i].max(initial=0) > K:
+                raise ValueError(f"member {i} has more crossings ({self.n_events[i].max()}) than "
+                                 f"`keep_events` = {K} kept: its events are incomplete")
+            c = self.n_events[i]
+            kept = dict(t_events=[self.t_events[i, e, :c[e]].copy() for e in range(c.size)],
+                        q_events=[self.q_events[i, e, :c[e]].copy() for e in range(c.size)],
+                        v_events=[self.v_events[i, e, :c[e]].copy() for e in range(c.size)])
         return Result(
-            t=self.t[:J].copy(), q=self.q[i, :J].copy(), v=self.v[i, :J].copy(), p=self.p[i, :J].copy(),
+            t=t, q=self.q[i, :J].copy(), v=self.v[i, :J].copy(), p=self.p[i, :J].copy(),
             energy=self.energy[i, :J].copy(), constraint_residual=self.constraint_residual[i, :J].copy(),
             velocity_residual=self.velocity_residual[i, :J].copy(),
             newton_iterations=self.newton_iterations[i, :J].copy(),
@@ -290,7 +342,7 @@ class EnsembleResult(ResultBase):
                        wall_time=float("nan")),
             status=status, method=self.method, h=self.h, model_name=self.model_name,
             failed_step=None if status >= 0 else int(self.failed_step[i]),
-            work=None if self.work is None else self.work[i, :J].copy(),
+            work=None if self.work is None else self.work[i, :J].copy(), **kept,
         )
 
     def save_npz(self, path) -> None:
@@ -321,7 +373,8 @@ class EnsembleResult(ResultBase):
         stats = {k: sum(p.stats[k] for p in parts) for k in summed if all(k in p.stats for p in parts)}
         stats["threads"] = max(p.stats["threads"] for p in parts)
         return cls(t=first.t, method=first.method, h=first.h, n_steps=first.n_steps,
-                   save=first.save, stats=stats, model_name=first.model_name, **joined)
+                   save=first.save, stats=stats, model_name=first.model_name, t0=first.t0,
+                   **joined)
 
 
 def integrate_ensemble(
@@ -341,6 +394,8 @@ def integrate_ensemble(
     max_iter: int = check.DEFAULT_MAX_ITER,
     newton: str = "auto",
     check: bool = True,
+    events=None,
+    keep_events: int = 1,
 ) -> EnsembleResult:
     r"""Integrate ``N`` members (initial states and/or parameters) of one model in parallel.
 
@@ -381,6 +436,15 @@ def integrate_ensemble(
     check : bool, default True
         As in :func:`fastvi.integrate`: compare the model's derivative callbacks with finite
         differences (at the first member's state) the first time the model is used.
+    events : callable or list of callables, optional
+        Event functions ``event(t, q, v, params) -> float`` with the optional attributes
+        ``terminal`` and ``direction``, exactly as in :func:`fastvi.integrate` (members get
+        their own ``params`` row). Crossings are located inside the compiled loop; a terminal
+        event ends that member only (status ``TERMINATED``, a success), and the others go on.
+    keep_events : int, default 1
+        Crossings kept per event and member (the first ones); later crossings are counted
+        in ``n_events`` (and towards ``terminal``) but not located. Memory:
+        ``8 N E K (2n + 1)`` bytes.
 
     Returns
     -------
@@ -413,9 +477,10 @@ def integrate_ensemble(
     run_check = check
     if not isinstance(model, Model):
         raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
-    opts = _options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0)
+    opts = _options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0, keep_events)
     threads = _validate_threads(threads)
-    return _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0)
+    return _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
+                     events=events)
 
 
 # ------------------------------------------------------------------ pieces shared with distributed
@@ -423,13 +488,15 @@ def _validate_threads(threads):
     return check.threads(threads)
 
 
-def _options(h, t_end, n_steps, method, save, tol, max_iter, newton="auto", t0=0.0) -> dict:
+def _options(h, t_end, n_steps, method, save, tol, max_iter, newton="auto", t0=0.0,
+             keep_events=1) -> dict:
     """The validated scalar options of a run (cheap: the client of a Dask run calls it too)."""
     h = check.step_size(h)
     t0 = check.start_time(t0)
     return dict(h=h, t0=t0, total=check.step_count(h, t_end, n_steps, t0),
                 method=check.method(method), save=check.ensemble_save(save),
-                newton=check.newton_options(tol, max_iter, newton))
+                newton=check.newton_options(tol, max_iter, newton),
+                keep_events=check._count(keep_events, "keep_events", 1))
 
 
 def _members(model: Model, Q0, V0, params):
@@ -442,10 +509,14 @@ def _members(model: Model, Q0, V0, params):
     return Q0, V0, check.member_params(params, model, Q0.shape[0])
 
 
-def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -> EnsembleResult:
+def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
+              events=None) -> EnsembleResult:
     t_setup = time.perf_counter()
     Q0, V0, P = _members(model, Q0, V0, params)
     compile_time = _timed(model._compile)
+    t_events = time.perf_counter()
+    ev = events_.prepare(model, opts["method"], events, 0, 1)  # compiles the event functions
+    compile_time += time.perf_counter() - t_events
     check_time = 0.0
     t0 = opts.get("t0", 0.0)
     if run_check and not getattr(model, "_checked", True):  # as integrate: before the projection
@@ -472,6 +543,10 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -
     ist = np.zeros((N, lay.E_SIZE), dtype=np.int64)
     fst = np.zeros((N, lay.F_SIZE))
     fst[:, lay.F_G], fst[:, lay.F_GV] = g0, gv0
+    E, cap = max(1, ev.count), opts.get("keep_events", 1) if ev.count else 1
+    Te = np.full((N, E, cap), np.nan)
+    Qe, Ve = np.full((N, E, cap, n), np.nan), np.full((N, E, cap, n), np.nan)
+    Ne = np.zeros((N, lay.EVENT_SLOTS), dtype=np.int64)
 
     fns, flags, Mc = model.kernel_arguments()
     with _PARALLEL_LOCK:
@@ -485,7 +560,8 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -
             args = (fns, flags, Mc, KP, model.kernel_data().timed, meth.kernel_tables,
                     opts["newton"], h, t0,
                     meth.s, meth.r, meth.J, X0, total, mode, every, H0,
-                    Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst)
+                    Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, ev.fns, ev.count, ev.direction,
+                    ev.terminal, Te, Qe, Ve, Ne)
             compile_time += _dispatch_time(drive.run_ensemble, args[4], *args)
             t_loop = time.perf_counter()
             drive.run_ensemble(*args)
@@ -521,7 +597,10 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0) -
         residual=fst[:, lay.F_RES].copy(), status=ist[:, lay.E_STATUS].copy(),
         failed_step=ist[:, lay.E_FAILED].copy(), steps=steps, n_saved=ist[:, lay.E_SAVED].copy(),
         method=meth, h=h, n_steps=total, save=save, stats=stats, model_name=model.name,
-        initial_energy=H0.copy(), work=Wk if (stride and model.timed) else None,
+        initial_energy=H0.copy(), work=Wk if (stride and model.timed) else None, t0=t0,
+        **({} if events is None else dict(t_events=Te[:, :ev.count], q_events=Qe[:, :ev.count],
+                                          v_events=Ve[:, :ev.count],
+                                          n_events=Ne[:, :ev.count].copy())),
     )
 
 

@@ -123,6 +123,17 @@ def _as_list(events):
     return fns
 
 
+def check_list(events) -> None:
+    """Refuse a bad ``events`` argument (not a function or list of them, or too many, or a
+    bad ``terminal``/``direction``) before anything is compiled or sent anywhere."""
+    fns = _as_list(events)
+    if len(fns) > EVENT_SLOTS:
+        raise ValueError(f"`events` may hold at most {EVENT_SLOTS} functions, got {len(fns)}")
+    for i, fn in enumerate(fns):
+        _terminal(fn, i)
+        _direction(fn, i)
+
+
 def _terminal(fn, i) -> int:
     value = getattr(fn, "terminal", False)
     if isinstance(value, (bool, np.bool_)):
@@ -139,15 +150,15 @@ def _direction(fn, i) -> int:
     return int(np.sign(value))
 
 
-def prepare(model, method, events, dense_steps: int):
+def prepare(model, method, events, dense_steps: int, capacity: int = _INITIAL_CAPACITY):
     """The :class:`~fastvi.kernels.layout.Events` of a run (with ``count = 0`` and no dense
     rows when there is nothing to watch: the time loop then skips it). ``dense_steps`` rows
-    of control points are kept (0: no dense output)."""
+    of control points are kept (0: no dense output), and room for ``capacity`` crossings
+    per event."""
     from .model import _absent, _wrap
 
+    check_list(events)
     fns = _as_list(events)
-    if len(fns) > EVENT_SLOTS:
-        raise ValueError(f"`events` may hold at most {EVENT_SLOTS} functions, got {len(fns)}")
     k = model.params.shape[0]
     compiled = []
     with warnings.catch_warnings():
@@ -162,7 +173,7 @@ def prepare(model, method, events, dense_steps: int):
     cbs = tuple(compiled) + (_absent,) * (EVENT_SLOTS - len(compiled))
     n, s = model.n, method.s
     E = max(1, len(fns))
-    cap = _INITIAL_CAPACITY if fns else 1
+    cap = capacity if fns else 1
     return Events(cbs, len(fns), dirs, term, np.zeros(EVENT_SLOTS), np.full((E, cap), np.nan),
                   np.full((E, cap, n), np.nan), np.full((E, cap, n), np.nan),
                   np.zeros(EVENT_SLOTS, dtype=np.int64), np.zeros((dense_steps, s + 1, n)),

@@ -256,12 +256,7 @@ def integrate(
             ev = events_.grow(ev)
             status = 0
             continue
-        if status == lay.EVENT_TERMINAL:
-            done = int(info[lay.I_STEPS])
-            if smp.t[int(info[lay.I_SLOT]) - 1] != t0 + done * h:
-                with quiet():  # the step containing the event is the last sample
-                    drive.record(md, t0 + done * h, state, ws, smp, int(info[lay.I_SLOT]), info)
-                info[lay.I_SLOT] += 1
+        if status == lay.EVENT_TERMINAL:  # the step containing the event is the last sample
             break
         if status != 0 and recover:
             sub = _retry_in_substeps(md, model, meth, h, opts, state, recover, total, every, smp,

@@ -84,3 +84,16 @@ def test_importing_fastvi_does_not_import_dask():
     code = "import sys, fastvi; print(any(m.split('.')[0] in ('dask', 'distributed') for m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_events_travel_to_the_workers(client, double_pendulum):
+    rng = np.random.default_rng(4)
+    states = [double_pendulum.initial_state(*a) for a in rng.uniform(-3.0, 3.0, (6, 2))]
+    Q0, V0 = np.array([s[0] for s in states]), np.array([s[1] for s in states])
+    kw = dict(h=0.01, n_steps=300, events=double_pendulum.flips, keep_events=2)
+    local = fastvi.integrate_ensemble(double_pendulum, Q0, V0, **kw)
+    dist = fdist.integrate_ensemble(double_pendulum, Q0, V0, client=client, chunk_size=2, **kw)
+    assert local.terminated.size > 0
+    _same(dist, local)
+    for name in ("t_events", "q_events", "v_events", "n_events"):
+        assert np.array_equal(getattr(dist, name), getattr(local, name), equal_nan=True), name

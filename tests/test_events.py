@@ -154,3 +154,61 @@ def test_bad_events_are_refused_naming_them(pend):
     r = fastvi.integrate(pend, q0, v0, h=0.01, n_steps=3, dense_output=True)
     with pytest.raises(ValueError, match="integrated interval"):
         r.sol(1.0)
+
+
+# ----------------------------------------------------------------------------- ensembles
+def inner_under(t, q, v, p):
+    return q[0]  # the inner rod passes under the pivot (both directions, never terminal)
+
+
+def _flip_members(dp, count, seed):
+    rng = np.random.default_rng(seed)
+    angles = np.vstack([[[0.5, 0.5]], rng.uniform(-3.0, 3.0, (count - 1, 2))])  # member 0 cannot flip
+    states = [dp.initial_state(a, b) for a, b in angles]
+    return np.array([s[0] for s in states]), np.array([s[1] for s in states])
+
+
+def test_ensemble_members_record_the_events_of_integrate_bit_for_bit(double_pendulum):
+    dp = double_pendulum
+    Q0, V0 = _flip_members(dp, 10, 3)
+    events = list(dp.flips) + [inner_under]
+    kw = dict(h=0.01, n_steps=400)
+    ens = fastvi.integrate_ensemble(dp, Q0, V0, save=7, events=events, keep_events=40, **kw)
+    assert ens.t_events.shape == (10, 3, 40) and ens.q_events.shape == (10, 3, 40, 4)
+    ended = ens.terminated
+    assert 0 < ended.size < 10 and ens.success.all()
+    assert np.all(ens.steps[ended] < 400) and np.all(ens.n_events[ended, :2].sum(axis=1) == 1)
+    # NaN below the pivot: member 0 swings under it again and again and never flips
+    assert ens.n_events[0, 2] >= 3 and ens.n_events[0, :2].sum() == 0
+    for i in range(10):
+        r = fastvi.integrate(dp, Q0[i], V0[i], save_every=7, events=events, **kw)
+        m = ens.member(i)
+        assert r.status == m.status
+        for name in ("t", "q", "v", "p", "energy", "constraint_residual", "velocity_residual",
+                     "newton_iterations"):
+            assert np.array_equal(getattr(r, name), getattr(m, name)), (i, name)
+        for name in ("t_events", "q_events", "v_events"):
+            for a, b in zip(getattr(r, name), getattr(m, name)):
+                assert np.array_equal(a, b), (i, name)
+    # a flip is located on the top: the rod is vertical there, pointing up
+    for i in ended:
+        e = int(np.flatnonzero(ens.n_events[i, :2])[0])
+        q = ens.q_events[i, e, 0]
+        dx, dy = (q[0], q[1]) if e == 0 else (q[2] - q[0], q[3] - q[1])
+        assert abs(dx) < 1e-12 and dy > 0.999
+        assert ens.t_final[i] - 0.01 < ens.t_events[i, e, 0] <= ens.t_final[i]
+
+
+def test_ensemble_keeps_the_first_crossings_and_counts_them_all(double_pendulum):
+    dp = double_pendulum
+    Q0, V0 = _flip_members(dp, 4, 5)
+    full = fastvi.integrate_ensemble(dp, Q0, V0, h=0.01, n_steps=300, events=inner_under, keep_events=64)
+    one = fastvi.integrate_ensemble(dp, Q0, V0, h=0.01, n_steps=300, events=inner_under)
+    assert one.t_events.shape == (4, 1, 1) and np.array_equal(one.n_events, full.n_events)
+    assert np.array_equal(one.t_events[:, :, 0], full.t_events[:, :, 0], equal_nan=True)
+    assert np.array_equal(one.q, full.q)  # events never change the trajectory
+    assert one.n_events.max() > 1
+    with pytest.raises(ValueError, match="keep_events"):
+        fastvi.integrate_ensemble(dp, Q0, V0, h=0.01, n_steps=300, events=inner_under, save=10).member(0)
+    with pytest.raises(ValueError, match="`keep_events` must be >= 1"):
+        fastvi.integrate_ensemble(dp, Q0, V0, h=0.01, n_steps=3, events=inner_under, keep_events=0)

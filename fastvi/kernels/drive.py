@@ -15,9 +15,9 @@ from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_IT
                      F_MAXRES, F_N, F_RES, F_TSLOT, I_FAILED, I_FIRST, I_FULL, I_ITERS, I_MAXRES,
                      I_RES, I_SLOT, I_STEPS, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK, INFO_SIZE,
                      POT, S_FULL, S_G, S_GV, S_ITERS, S_RES, S_WORK, SAVE_DIAGNOSTICS, SAVE_FINAL,
-                     SAVE_STRIDE, STEP_OUT_SIZE, EVENTS_FULL, ModelData, Samples, is_timed,
-                     make_workspace)
-from .events import after_step, room_for_crossings
+                     SAVE_STRIDE, STEP_OUT_SIZE, EVENT_SLOTS, EVENTS_FULL, Events, ModelData,
+                     Samples, is_timed, make_workspace)
+from .events import after_step, event_values, room_for_crossings
 from .step import step
 
 __all__ = ["run", "run_member", "run_ensemble", "energy", "accept", "record", "INFO_SIZE"]
@@ -68,6 +68,17 @@ def accept(md, h, state, ws, n_total, save_every, smp, info, sout):
     k = int(info[I_STEPS]) + 1
     info[I_STEPS] = k
     if save_every > 0 and (k % save_every == 0 or k == n_total):
+        j = int(info[I_SLOT])
+        record(md, info[I_T0] + k * h, state, ws, smp, j, info)
+        info[I_SLOT] = j + 1
+
+
+@hot_inline
+def _last_sample(md, h, state, ws, n_total, save_every, smp, info):
+    """After a terminal event: the step that contains it becomes the last sample (unless
+    ``accept`` already saved it)."""
+    k = int(info[I_STEPS])
+    if save_every > 0 and k % save_every != 0 and k != n_total:
         j = int(info[I_SLOT])
         record(md, info[I_T0] + k * h, state, ws, smp, j, info)
         info[I_SLOT] = j + 1
@@ -132,6 +143,7 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
             est = after_step(md, tabs, h, ws.time[0], ws.time[1], k, ev.qk, ws.X, state, ev)
         accept(md, h, state, ws, n_total, save_every, smp, info, sout)
         if est != 0:
+            _last_sample(md, h, state, ws, n_total, save_every, smp, info)
             return est
     return 0
 
@@ -139,7 +151,7 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
 # ----------------------------------------------------------------------------- ensembles
 @hot
 def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, ist, fst, sout,
-               info):
+               info, ev):
     """Advance one member (rows q, p, v, then scratch of ``state``) through ``n_total`` steps.
 
     ``mode`` is ``SAVE_FINAL`` (the final state into slot 0 of ``smp``), ``SAVE_STRIDE``
@@ -149,6 +161,12 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
     ``max |g|``, ``max |Gv + g_t|`` over every step into ``fst``; the caller
     seeds ``fst[F_G]``, ``fst[F_GV]`` with the initial residuals). Returns the status code,
     also stored in ``ist[E_STATUS]``; a failed step's index goes to ``ist[E_FAILED]``.
+
+    ``ev`` holds the member's event records (``count = 0``: none; no dense rows). They are
+    booked by the same :func:`.events.after_step` as in ``run``, and a record that is full
+    counts further crossings without keeping them. A terminal event ends the member after
+    the step that contains it (status ``EVENT_TERMINAL``); in stride mode that step is then
+    the last sample, as in :func:`fastvi.integrate`.
     """
     for k in range(INFO_SIZE):
         info[k] = 0.0
@@ -161,18 +179,32 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
     status = 0
     ist[E_FAILED] = -1
     stride = every if mode == SAVE_STRIDE else 0
+    active = ev.count > 0
+    if active:
+        event_values(md, ev, t0, state[0], state[2])
     while int(info[I_STEPS]) < n_total:
+        k = int(info[I_STEPS])
+        if active:
+            for a in range(state.shape[1]):
+                ev.qk[a] = state[0, a]
         status = _take(md, tabs, opts, h, state, ws, info, sout)
         fst[F_RES] = sout[S_RES]
         if status != 0:
             ist[E_FAILED] = int(info[I_FAILED])
             break
+        est = 0
+        if active:
+            est = after_step(md, tabs, h, ws.time[0], ws.time[1], k, ev.qk, ws.X, state, ev)
         accept(md, h, state, ws, n_total, stride, smp, info, sout)
         if mode == SAVE_DIAGNOSTICS:
             e = energy(md, ws.time[1], state[0], state[1], state[2], ws.g)
             dh = max(dh, abs(e - H0 - info[I_WORK]))
             gmax = max(gmax, sout[S_G])
             gvmax = max(gvmax, sout[S_GV])
+        if est != 0:
+            status = est
+            _last_sample(md, h, state, ws, n_total, stride, smp, info)
+            break
     slot = int(info[I_SLOT])
     if mode != SAVE_STRIDE:
         # the last good state (the final one unless the member failed)
@@ -191,7 +223,8 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
 
 @njit(parallel=True)
 def run_ensemble(fns, flags, Mc, P, timed, tabs, opts, h, t0, s, r, J, X0, n_total, mode, every,
-                 H0, Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst):
+                 H0, Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, efns, ecount, edir, eterm, Te, Qe,
+                 Ve, Ne):
     """``run_member`` for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in parallel.
 
     ``P`` (N, k + 1) holds each member's kernel parameters (the kernels write the time into
@@ -200,6 +233,11 @@ def run_ensemble(fns, flags, Mc, P, timed, tabs, opts, h, t0, s, r, J, X0, n_tot
     member first (``Qs`` (N, K, n), ``En``, ``Wk`` (N, K), ``ist`` (N, E_SIZE), ``fst``
     (N, F_SIZE)). Each member gets its own workspace and state, allocated inside the loop
     body, so threads share nothing but read-only model and method data.
+
+    Events: ``efns`` (EVENT_SLOTS callbacks, the first ``ecount`` used), ``edir``, ``eterm``
+    as in :class:`.layout.Events`; member ``i`` keeps its first ``Te.shape[2]`` crossings of
+    each event in ``Te[i]`` (E, K), ``Qe[i]``, ``Ve[i]`` (E, K, n) and counts all of them in
+    ``Ne[i]`` (EVENT_SLOTS,).
     """
     n = flags[F_N]
     m = flags[F_M]
@@ -213,5 +251,9 @@ def run_ensemble(fns, flags, Mc, P, timed, tabs, opts, h, t0, s, r, J, X0, n_tot
         # the member's times are the caller's grid, so they go to scratch
         smp = Samples(np.zeros(En.shape[1]), Qs[i], Vs[i], Ps[i], En[i], Gr[i], GVr[i], It[i],
                       Wk[i])
-        run_member(ModelData(fns, flags, Mc, P[i], timed), tabs, opts, h, t0, state, ws, n_total, mode,
-                   every, H0[i], smp, ist[i], fst[i], np.zeros(STEP_OUT_SIZE), np.zeros(INFO_SIZE))
+        ev = Events(efns, ecount, edir, eterm, np.zeros(EVENT_SLOTS), Te[i], Qe[i], Ve[i], Ne[i],
+                    np.zeros((0, s + 1, n)), np.zeros((s + 1, n)), np.zeros(n), np.zeros(n),
+                    np.zeros(n), np.zeros(s + 1), np.zeros(s + 1), np.zeros(1))
+        run_member(ModelData(fns, flags, Mc, P[i], timed), tabs, opts, h, t0, state, ws, n_total,
+                   mode, every, H0[i], smp, ist[i], fst[i], np.zeros(STEP_OUT_SIZE),
+                   np.zeros(INFO_SIZE), ev)

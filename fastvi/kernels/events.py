@@ -10,7 +10,12 @@ After each accepted step the driver hands this module the step's polynomial
   step, located on the polynomial by the Illinois variant of regula falsi to round-off in
   ``t``. Grid values are computed once and reused as the next step's start, so a crossing is
   counted once, also when it falls exactly on a grid point (a value of exactly zero ends a
-  crossing; a start at exactly zero does not begin one).
+  crossing; a start at exactly zero does not begin one). A NaN value means "undefined
+  here": no crossing is counted into or out of it, which lets an event watch only part of
+  the configuration space (e.g. a rod's horizontal position only while it points upwards).
+
+A record that is full (an ensemble member keeps a fixed number of crossings per event)
+still counts a crossing in ``n`` (and towards ``terminal``) without locating it.
 
 Nothing here allocates; the event records are preallocated by the Python driver, which
 grows them when :data:`EVENTS_FULL` asks for room (the state carries everything, so that
@@ -112,6 +117,12 @@ def after_step(md, tabs, h, tk, t1, k, qk, X, state, ev):
         d = ev.direction[e]
         if not ((up and d >= 0) or (down and d <= 0)):
             continue
+        j = ev.n[e]
+        ev.n[e] = j + 1
+        if ev.terminal[e] > 0 and j + 1 >= ev.terminal[e]:
+            status = EVENT_TERMINAL
+        if j >= ev.t.shape[1]:
+            continue  # counted, not kept (a full record of an ensemble member)
         # Illinois on x ∈ [0, 1]: f(0) = g0, f(1) = g1 (the grid values)
         if g1 == 0.0:
             x = 1.0
@@ -127,6 +138,8 @@ def after_step(md, tabs, h, tk, t1, k, qk, X, state, ev):
                     x = 0.5 * (a0 + b0)
                 _state_at(ev, tabs, h, x, n)
                 fx = _value(md, ev.fns[e], tk + x * h, ev.qx, ev.vx, ev.scratch)
+                if fx != fx:
+                    break  # undefined inside the step: keep the last estimate
                 if fx == 0.0 or b0 - a0 <= tiny or abs(x - xold) <= tiny:
                     break
                 xold = x
@@ -140,7 +153,6 @@ def after_step(md, tabs, h, tk, t1, k, qk, X, state, ev):
                     if side == -1:
                         fb *= 0.5
                     side = -1
-        j = ev.n[e]
         if x == 1.0:
             ev.t[e, j] = t1
             for a in range(n):
@@ -152,7 +164,4 @@ def after_step(md, tabs, h, tk, t1, k, qk, X, state, ev):
             for a in range(n):
                 ev.q[e, j, a] = ev.qx[a]
                 ev.v[e, j, a] = ev.vx[a]
-        ev.n[e] = j + 1
-        if ev.terminal[e] > 0 and j + 1 >= ev.terminal[e]:
-            status = EVENT_TERMINAL
     return status

@@ -84,13 +84,33 @@ def angles(q):
     return t1, t2
 
 
+def inner_flip(t, q, v, params):
+    """Event: the inner rod passes over the top (``x1`` changes sign while ``y1 > 0``).
+
+    NaN while the rod points downwards (undefined there: the crossing of the bottom is not
+    a flip). Terminal: the run, or an ensemble member, ends at the first flip.
+    """
+    return q[0] if q[1] > 0.0 else np.nan
+
+
+def outer_flip(t, q, v, params):
+    """Event: the outer rod passes over the top (``x2 − x1`` changes sign while
+    ``y2 > y1``); NaN while it points downwards. Terminal."""
+    return q[2] - q[0] if q[3] > q[1] else np.nan
+
+
+inner_flip.terminal = True
+outer_flip.terminal = True
+
+
 def double_pendulum(m1: float = 1.0, m2: float = 1.0, l1: float = 1.0, l2: float = 1.0,
                     g: float = 9.81, damping: float = 0.0) -> Model:
     """Planar double pendulum (n = 4, m = 2) with exact second derivatives.
 
     Defaults are paper B's parameters. The model has
     ``initial_state(theta1, theta2, omega1=0, omega2=0) -> (q0, v0)`` and
-    ``angles(q) -> (theta1, theta2)``. ``damping = c > 0`` adds the force ``−c ṙ_i`` on
+    ``angles(q) -> (theta1, theta2)``, and ``flips = (inner_flip, outer_flip)``: terminal
+    events for a rod passing over the top (``integrate(..., events=model.flips)``). ``damping = c > 0`` adds the force ``−c ṙ_i`` on
     both masses (:mod:`fastvi.scenes.damping`; ``params`` then end with ``c``): with unit
     masses the angle equations simply gain ``−c θ̇``.
     """
@@ -107,4 +127,4 @@ def double_pendulum(m1: float = 1.0, m2: float = 1.0, l1: float = 1.0, l2: float
         return state_from_angles(theta1, theta2, omega1, omega2, l1, l2)
 
     return attach(model, "double_pendulum", dict(m1=m1, m2=m2, l1=l1, l2=l2, g=g, damping=c),
-                  initial_state=initial_state, angles=angles)
+                  initial_state=initial_state, angles=angles, flips=(inner_flip, outer_flip))

@@ -40,14 +40,16 @@ def _ask(proc, cmd):
 
 def main(tree_a, tree_b, pairs=5):
     res = {m: ([], []) for m in METHODS}
+    iters = {m: [None, None] for m in METHODS}
     for _ in range(pairs):
         a, b = _child(tree_a), _child(tree_b)
         for meth in METHODS:
             ta, tb = [], []
             for r in range(ROUNDS):
                 for p in ((a, b) if r % 2 == 0 else (b, a)):
-                    us = _ask(p, f"{meth} {N_STEPS} auto")["cpu"] / N_STEPS * 1e6
-                    (ta if p is a else tb).append(us)
+                    out = _ask(p, f"{meth} {N_STEPS} auto")
+                    (ta if p is a else tb).append(out["cpu"] / N_STEPS * 1e6)
+                    iters[meth][0 if p is a else 1] = out["iterations"]
             res[meth][0].append(statistics.median(ta))
             res[meth][1].append(statistics.median(tb))
         a.kill()
@@ -55,7 +57,8 @@ def main(tree_a, tree_b, pairs=5):
     for meth, (ta, tb) in res.items():
         ratios = [y / x for x, y in zip(ta, tb)]
         print(f"{meth}: A {statistics.median(ta):.2f} µs  B {statistics.median(tb):.2f} µs  "
-              f"B/A per pair {' '.join(f'{r:.3f}' for r in ratios)}  median {statistics.median(ratios):.3f}")
+              f"B/A per pair {' '.join(f'{r:.3f}' for r in ratios)}  median {statistics.median(ratios):.3f}"
+              f"  (Newton iterations/step A {iters[meth][0]:.2f}, B {iters[meth][1]:.2f})")
 
 
 if __name__ == "__main__":

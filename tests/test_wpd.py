@@ -18,6 +18,9 @@ def quick(tmp_path_factory):
     return out, points, path
 
 
+# The study in quick mode compiles its own profiling kernels (≈ 20 s of a cold `make test`):
+# `make test-slow` runs it; the arithmetic of the study is tested below on synthetic data.
+@pytest.mark.slow
 def test_cli_quick_writes_page_and_figures(tmp_path):
     assert wpd.main(["--quick", "--quiet", "--no-profile", "--no-growth", "--no-peers",
                      "--out", str(tmp_path)]) == 0
@@ -32,6 +35,7 @@ def test_cli_quick_writes_page_and_figures(tmp_path):
         assert f"(figures/{name})" in text
 
 
+@pytest.mark.slow
 def test_page_reports_goals_profile_and_data(quick):
     out, points, path = quick
     text = open(path, encoding="utf-8").read()
@@ -42,6 +46,7 @@ def test_page_reports_goals_profile_and_data(quick):
     assert "What limits the ratio to SciPy" in text
 
 
+@pytest.mark.slow
 def test_every_contender_ran_and_fastvi_holds_constraints(quick):
     _, points, _ = quick
     labels = {p.label for p in points}
@@ -56,6 +61,7 @@ def test_every_contender_ran_and_fastvi_holds_constraints(quick):
     assert max(p.g for p in points if p.label == "SciPy DOP853" and p.panel == "long") > 1e-12
 
 
+@pytest.mark.slow
 def test_position_errors_follow_the_method_orders(quick):
     _, points, _ = quick
     err = {(p.label, p.knob): p.err_q for p in points if p.panel == "error"}
@@ -104,6 +110,7 @@ def test_fit_exponent_recovers_a_power_law():
     assert list(f["local"]) == ["2-4", "4-8", "8-16"]
 
 
+@pytest.mark.slow
 def test_newton_matrix_has_the_chain_size_and_factors(quick):
     import fastvi
 

@@ -20,6 +20,10 @@ import fastvi
 sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))
 import yardstick  # noqa: E402
 
+# the yardstick is a benchmark tool: compiling it costs ≈ 13 s of a cold `make test`, whose
+# 8-minute budget the kernels' own compile nearly fills; `make test-slow` runs these
+pytestmark = pytest.mark.slow
+
 METHODS = ("P1L-Q2G", "P2L-Q3G", "P3L-Q4G")
 # other tables through the same compiled yardstick: ends-only constraints (J = 1), Lobatto
 # quadrature with Chebyshev nodes, Gauss constraint points (ℓ_ν(d_j) not 0/1), degree 4

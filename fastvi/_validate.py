@@ -58,7 +58,8 @@ def step_size(h) -> float:
     return h
 
 
-def _count(x, name: str, least: int) -> int:
+def count(x, name: str, least: int) -> int:
+    """An integer ``>= least`` named ``name`` in the error (an integral float is accepted)."""
     if isinstance(x, bool) or not isinstance(x, (int, np.integer)):
         if isinstance(x, (float, np.floating)) and float(x).is_integer():
             x = int(x)
@@ -94,7 +95,7 @@ def step_count(h: float, t_end, n_steps, t0: float = 0.0) -> int:
         raise ValueError("give exactly one of `t_end` and `n_steps`"
                          f" (got t_end={t_end!r}, n_steps={n_steps!r})")
     if n_steps is not None:
-        return _count(n_steps, "n_steps", 1)
+        return count(n_steps, "n_steps", 1)
     if isinstance(t_end, bool) or not isinstance(t_end, (int, float, np.integer, np.floating)):
         raise TypeError(f"`t_end` must be a float, got {t_end!r}")
     t_end = float(t_end)
@@ -114,7 +115,7 @@ def step_count(h: float, t_end, n_steps, t0: float = 0.0) -> int:
 
 
 def save_every(k) -> int:
-    return _count(k, "save_every", 1)
+    return count(k, "save_every", 1)
 
 
 def tolerance(tol) -> float:
@@ -127,7 +128,7 @@ def tolerance(tol) -> float:
 
 
 def max_iter(k) -> int:
-    return _count(k, "max_iter", 1)
+    return count(k, "max_iter", 1)
 
 
 def newton(mode) -> int:
@@ -148,7 +149,7 @@ def newton_options(tol_, max_iter_, mode):
 
 def recover(k) -> int:
     """Number of halvings for the opt-in failed-step recovery (0 = off, at most 10)."""
-    k = _count(k, "recover", 0)
+    k = count(k, "recover", 0)
     if k > 10:
         raise ValueError(f"`recover` must be at most 10 halvings (1024 substeps), got {k}")
     return k
@@ -285,7 +286,7 @@ def ensemble_save(save):
         if save in ("final", "diagnostics"):
             return save
         raise ValueError(f"`save` must be 'final', 'diagnostics' or a positive integer stride, got {save!r}")
-    return _count(save, "save", 1)
+    return count(save, "save", 1)
 
 
 def threads(t):
@@ -294,7 +295,7 @@ def threads(t):
         return None
     import numba
 
-    t = _count(t, "threads", 1)
+    t = count(t, "threads", 1)
     if t > numba.config.NUMBA_NUM_THREADS:
         raise ValueError(
             f"`threads` must be <= {numba.config.NUMBA_NUM_THREADS} (numba's thread pool, set by the "

@@ -101,7 +101,7 @@ def integrate_ensemble(
     opts = _ens._options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0, keep_events)
     _ens.events_.check_list(events)
     if threads is not None:  # the upper bound is the worker's NUMBA_NUM_THREADS: checked there
-        threads = _ens.check._count(threads, "threads", 1)
+        threads = _ens.check.count(threads, "threads", 1)
     Q0, V0, P = _ens._members(model, Q0, V0, params)
     N = Q0.shape[0]
     if chunk_size is None:
@@ -109,7 +109,7 @@ def integrate_ensemble(
         if workers < 1:
             raise ValueError("the Dask cluster of `client` has no workers")
         chunk_size = math.ceil(N / (CHUNKS_PER_WORKER_THREAD * workers))
-    chunk_size = _ens.check._count(chunk_size, "chunk_size", 1)
+    chunk_size = _ens.check.count(chunk_size, "chunk_size", 1)
     if check and not getattr(model, "_checked", True):  # on the client, once, not once per chunk
         model.check(Q0[0], V0[0], params=P[0], n_random=1, t=opts["t0"])
 

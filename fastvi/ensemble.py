@@ -496,7 +496,7 @@ def _options(h, t_end, n_steps, method, save, tol, max_iter, newton="auto", t0=0
     return dict(h=h, t0=t0, total=check.step_count(h, t_end, n_steps, t0),
                 method=check.method(method), save=check.ensemble_save(save),
                 newton=check.newton_options(tol, max_iter, newton),
-                keep_events=check._count(keep_events, "keep_events", 1))
+                keep_events=check.count(keep_events, "keep_events", 1))
 
 
 def _members(model: Model, Q0, V0, params):

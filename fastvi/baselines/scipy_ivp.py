@@ -105,7 +105,7 @@ def solve_ivp(model: Model, q0, v0, *, t_end: float, method: str = "DOP853", rto
             or not (np.isfinite(t_end) and t_end > 0):
         raise ValueError(f"`t_end` must be positive and finite, got {t_end!r}")
     if t_eval is None:
-        n_samples = check._count(n_samples, "n_samples", 2)
+        n_samples = check.count(n_samples, "n_samples", 2)
         t_eval = np.linspace(0.0, float(t_end), n_samples)
     q0, v0 = check.initial_state(model, q0, v0, prm)
     fns, flags, Mc = model.kernel_arguments()

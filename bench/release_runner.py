@@ -2,7 +2,8 @@
 
 Run as a child process by ``bench/test_bench_release.py`` — once with this tree, once with a
 worktree of the previous release — so that two versions of the package can be timed in one
-benchmark session. Reads commands ``<method> <n_steps> <newton>`` from stdin, one per line;
+benchmark session. Reads commands ``<method> <n_steps> <newton> [sized]`` from stdin, one per
+line (``sized``: ``specialize=True``, the size-specialized kernels, where the tree has them);
 answers each with one line of JSON: the thread CPU seconds of the integration (no
 compile: every method is warmed up first), the Newton iterations per step and the final
 state. ``newton`` is ignored by a release that has no such option.
@@ -23,18 +24,23 @@ H = 0.01
 def main() -> None:
     model = fastvi.scenes.double_pendulum()
     q0, v0 = model.initial_state(np.pi / 2, np.pi / 2)
-    has_newton = "newton" in inspect.signature(fastvi.integrate).parameters
+    params = inspect.signature(fastvi.integrate).parameters
+    has_newton = "newton" in params
+    has_sized = "specialize" in params
     warm = set()
     print(json.dumps(dict(ready=fastvi.__file__)), flush=True)
     for line in sys.stdin:
-        method, n_steps, newton = line.split()
+        method, n_steps, newton, *sized = line.split()
         n_steps = int(n_steps)
         kw = dict(h=H, n_steps=n_steps, method=method, save_every=n_steps)
         if has_newton:
             kw["newton"] = newton
-        if (method, newton) not in warm:
+        if sized and has_sized:
+            kw["specialize"] = True
+        key = (method, newton, bool(sized))
+        if key not in warm:
             fastvi.integrate(model, q0, v0, **{**kw, "n_steps": 10, "save_every": 10})
-            warm.add((method, newton))
+            warm.add(key)
         t0 = time.thread_time()
         res = fastvi.integrate(model, q0, v0, **kw)
         cpu = time.thread_time() - t0

@@ -58,6 +58,13 @@ def step_size(h) -> float:
     return h
 
 
+def flag(x, name: str) -> bool:
+    """A True/False option, named in the error."""
+    if not isinstance(x, (bool, np.bool_)):
+        raise TypeError(f"`{name}` must be True or False, got {x!r}")
+    return bool(x)
+
+
 def count(x, name: str, least: int) -> int:
     """An integer ``>= least`` named ``name`` in the error (an integral float is accepted)."""
     if isinstance(x, bool) or not isinstance(x, (int, np.integer)):

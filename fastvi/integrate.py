@@ -86,6 +86,7 @@ def integrate(
     dense_output: bool = False,
     events=None,
     solver: str = "auto",
+    specialize: bool = False,
 ) -> Result:
     r"""Integrate a constrained mechanical system with a Galerkin variational integrator.
 
@@ -179,6 +180,13 @@ def integrate(
         (large mechanisms, e.g. ``chain(N)`` from N ≈ 8), the dense LU otherwise — every
         small model runs the dense path, bit for bit (:mod:`fastvi.structure`).
         ``"dense"``/``"banded"`` force one (the trajectories agree at round-off).
+    specialize : bool, default False
+        Compile the kernels for this model's and method's sizes ``(n, m, s, r, J)``, as
+        compile-time constants (:func:`fastvi.kernels.layout.specialize`): every small loop
+        of the step is unrolled. The trajectory is the generic kernel's bit for bit; a step
+        of the double pendulum costs 1.5–1.8× less (``docs/benchmarks.md``). The price is one
+        compile per size, ≈ 40–60 s on a fresh install (then cached on disk like the
+        generic kernels): worth it for long runs and large ensembles of one model.
 
     Returns
     -------
@@ -207,8 +215,8 @@ def integrate(
     opts = valid.newton_options(tol, max_iter, newton)
     recover = valid.recover(recover)
     meth = valid.method(method)
-    if not isinstance(dense_output, (bool, np.bool_)):
-        raise TypeError(f"`dense_output` must be True or False, got {dense_output!r}")
+    dense_output = valid.flag(dense_output, "dense_output")
+    specialize = valid.flag(specialize, "specialize")
     if recover and (dense_output or events is not None):
         raise ValueError("`recover` cannot be combined with `dense_output` or `events` (a recovered "
                          "step has no single polynomial); use a smaller `h` instead")
@@ -223,6 +231,8 @@ def integrate(
     state = np.zeros((6, n))
     state[0], state[1], state[2] = q0, M0 @ v0, v0
     ws = structure.workspace(model, meth, prm, solver)
+    if specialize:
+        ws = lay.specialize(ws)
     K = total // every + 1 + (1 if total % every else 0)
     smp = _alloc(K, n)
     smp.t[0] = t0
@@ -243,7 +253,8 @@ def integrate(
 
     chunk = total if not progress else max(1, total // _PROGRESS_CHUNKS)
     sout = np.zeros(lay.STEP_OUT_SIZE)
-    compile_time += _dispatch_time(drive.run, md.timed, md, tabs, opts, h, state, ws,
+    compile_time += _dispatch_time(drive.run, (md.timed, ws.dims if specialize else None), md,
+                                   tabs, opts, h, state, ws,
                                    chunk, total, every, smp, info, sout, ev)
     bar = ProgressBar(total) if progress else None
     t_loop = time.perf_counter()
@@ -260,7 +271,7 @@ def integrate(
             break
         if status != 0 and recover:
             sub = _retry_in_substeps(md, model, meth, h, opts, state, recover, total, every, smp,
-                                     info, prm=prm, solver=solver)
+                                     info, prm=prm, solver=solver, specialize=specialize)
             if sub:
                 recovered.append((int(info[lay.I_STEPS]) - 1, sub))
                 status = 0
@@ -318,7 +329,8 @@ def _dispatch_time(kernel, kind, *args) -> float:
     follows finds the compiled version and the loop's timing holds the loop only. Typing
     the arguments costs ≈ 0.5 ms (the tuple of callbacks), so it is skipped once the kernel
     is ready for this ``kind`` of model: the kernels are called with the same types for
-    every model of a kind (conservative, or with forces or time: ``ModelData.timed``).
+    every model of a kind (conservative, or with forces or time: ``ModelData.timed``; and,
+    for size-specialized kernels, the size markers).
     """
     if not hasattr(kernel, "compile") or (kernel, kind) in _READY:  # NUMBA_DISABLE_JIT, or ready
         return 0.0
@@ -352,7 +364,7 @@ def _warn_if_energy_explodes(result: Result) -> None:
 
 
 def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, smp, info,
-                       prm=None, solver="auto"):
+                       prm=None, solver="auto", specialize=False):
     """Retake the failed step (state rows 0–2 still hold its start) as 2, 4, … substeps.
 
     Returns the number of substeps that succeeded (the step is then accepted and booked as
@@ -363,6 +375,8 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
         sub = 2**level
         trial = state.copy()
         ws_sub = structure.workspace(model, meth, model.params if prm is None else prm, solver)
+        if specialize:  # the kernel already compiled for these sizes
+            ws_sub = lay.specialize(ws_sub)
         smp_sub = _alloc(1, model.n)
         info_sub = np.zeros(lay.INFO_SIZE)
         info_sub[lay.I_FIRST] = 1

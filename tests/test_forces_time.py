@@ -241,7 +241,14 @@ REFERENCE_CASES = [("double_pendulum", {}, (np.pi / 2, np.pi / 2), "P2L-Q3G", "a
 def test_conservative_trajectories_bit_for_bit_as_before_forces(case):
     """``tests/data/conservative_before_forces.npz`` was written by the commit before forces
     and time (4a78ee7) with the same calls: with ``force=None`` and ``time_dependent=False``
-    nothing may change, to the last bit."""
+    nothing may change beyond round-off.
+
+    It used to demand the last bit. numba compiles for the host CPU, and on an AVX-512 host
+    the chain's trajectory of that very commit (and of every later one) leaves the stored
+    one by 6e-15 at step 248 of 300 (measured: the file was written on another CPU), so a
+    stored bit pattern is a fact about the machine, not the code. Round-off it is: a
+    change of the scheme itself moves these trajectories by its truncation error, orders
+    of magnitude above 1e-13 at h = 0.01."""
     name, kw, args, meth, newton = case
     model = fastvi.scenes.SCENES[name](**kw)
     q0, v0 = model.initial_state(**args) if isinstance(args, dict) else model.initial_state(*args)
@@ -249,7 +256,8 @@ def test_conservative_trajectories_bit_for_bit_as_before_forces(case):
     key = f"{name}-{meth}-{newton}"
     with np.load(DATA / "conservative_before_forces.npz") as ref:
         assert np.array_equal(ref[key + "-q0"], q0)
-        assert np.array_equal(ref[key + "-q"], r.q) and np.array_equal(ref[key + "-p"], r.p)
+        np.testing.assert_allclose(r.q, ref[key + "-q"], rtol=0, atol=1e-13)
+        np.testing.assert_allclose(r.p, ref[key + "-p"], rtol=0, atol=1e-12)
     assert r.work is None
 
 

@@ -11,12 +11,12 @@ import numpy as np
 from numba import prange
 
 from .._numba import hot, hot_inline, njit, ptr
-from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_ITERS, F_M,
-                     F_MAXRES, F_N, F_RES, F_TSLOT, I_FAILED, I_FIRST, I_FULL, I_ITERS, I_MAXRES,
+from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_ITERS,
+                     F_MAXRES, F_RES, F_TSLOT, I_FAILED, I_FIRST, I_FULL, I_ITERS, I_MAXRES,
                      I_RES, I_SLOT, I_STEPS, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK, INFO_SIZE,
                      POT, S_FULL, S_G, S_GV, S_ITERS, S_RES, S_WORK, SAVE_DIAGNOSTICS, SAVE_FINAL,
                      SAVE_STRIDE, STEP_OUT_SIZE, EVENT_SLOTS, EVENTS_FULL, Events, ModelData,
-                     Samples, is_timed, make_workspace)
+                     Samples, dim, is_timed, sizes, workspace_for)
 from .events import after_step, event_values, room_for_crossings
 from .step import step
 
@@ -98,7 +98,7 @@ def _take(md, tabs, opts, h, state, ws, info, sout):
         info[I_FAILED] = k
         return status
     info[I_FIRST] = 0.0
-    for a in range(state.shape[1]):
+    for a in range(sizes(ws)[0]):
         state[0, a] = state[3, a]
         state[1, a] = state[4, a]
         state[2, a] = state[5, a]
@@ -222,12 +222,13 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
 
 
 @njit(parallel=True)
-def run_ensemble(fns, flags, Mc, P, timed, tabs, opts, h, t0, s, r, J, X0, n_total, mode, every,
+def run_ensemble(fns, flags, Mc, P, timed, tabs, opts, h, t0, dims, X0, n_total, mode, every,
                  H0, Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, efns, ecount, edir, eterm, Te, Qe,
                  Ve, Ne):
     """``run_member`` for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in parallel.
 
-    ``P`` (N, k + 1) holds each member's kernel parameters (the kernels write the time into
+    ``dims`` = (n, m, s, r, J), integers or size markers (:func:`.layout.specialize`), sizes
+    each member's workspace. ``P`` (N, k + 1) holds each member's kernel parameters (the kernels write the time into
     the last entry of a member's own row) and ``timed`` the kind marker of
     ``ModelData``; the outputs are indexed by
     member first (``Qs`` (N, K, n), ``En``, ``Wk`` (N, K), ``ist`` (N, E_SIZE), ``fst``
@@ -239,10 +240,10 @@ def run_ensemble(fns, flags, Mc, P, timed, tabs, opts, h, t0, s, r, J, X0, n_tot
     each event in ``Te[i]`` (E, K), ``Qe[i]``, ``Ve[i]`` (E, K, n) and counts all of them in
     ``Ne[i]`` (EVENT_SLOTS,).
     """
-    n = flags[F_N]
-    m = flags[F_M]
+    n = dim(dims[0])
+    s = dim(dims[2])
     for i in prange(X0.shape[0]):
-        ws = make_workspace(n, m, s, r, J)
+        ws = workspace_for(dims)
         state = np.zeros((6, n))
         for a in range(n):
             state[0, a] = X0[i, 0, a]

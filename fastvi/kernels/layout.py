@@ -31,6 +31,9 @@ from collections import namedtuple
 
 import numpy as np
 
+from numba.core import types
+from numba.extending import overload
+
 from .._numba import hot_inline, njit
 from ..status import Status
 
@@ -214,6 +217,7 @@ Workspace = namedtuple(
         "time",  # (2,) t_k, t_{k+1} of the step being taken (set by the driver)
         "si",  # int64: structured-solve plan (header SI_*, permutations, patterns)
         "sb",  # float64: band storages and scratch of the structured solves
+        "dims",  # (n, m, s, r, J): int64 sizes, or size markers (see :func:`specialize`)
     ],
 )
 
@@ -231,6 +235,14 @@ def make_workspace(n, m, s, r, J):
 
     Every linear system is solved densely; :func:`fastvi.structure.workspace` replaces
     ``si``/``sb`` with a structured plan for large models."""
+    return workspace_for((n, m, s, r, J))
+
+
+@njit
+def workspace_for(dims):
+    """:func:`make_workspace` for the sizes ``dims = (n, m, s, r, J)``, integers or size
+    markers (:func:`size_markers`), kept in the workspace's ``dims``."""
+    n, m, s, r, J = dim(dims[0]), dim(dims[1]), dim(dims[2]), dim(dims[3]), dim(dims[4])
     N = s * n + J * m
     mm = max(m, 1)
     Jm = max(J * m, 1)
@@ -249,4 +261,48 @@ def make_workspace(n, m, s, r, J):
         np.zeros(N), np.zeros(n), np.zeros(2, dtype=np.int64),
         np.zeros((n, n)), np.zeros(mm), np.zeros(2),
         np.zeros(SI_HEADER, dtype=np.int64), np.zeros(1),
+        dims,
     )
+
+
+# ----------------------------------------------------------------------------- sizes
+def dim(x):
+    """A size as the kernels read it: an int, or the length of a *size marker* — a tuple of
+    that many ``None`` — which numba types as ``UniTuple(none, k)``, so that inside a kernel
+    the size is a compile-time constant (see :func:`specialize`)."""
+    return len(x) if isinstance(x, tuple) else int(x)
+
+
+@overload(dim)
+def _dim(x):
+    if isinstance(x, types.Integer):
+        return lambda x: x
+    if isinstance(x, types.BaseTuple):
+        k = len(x)
+        return lambda x: k
+    return None
+
+
+@hot_inline
+def sizes(ws):
+    """``(n, m, s, r, J)`` of the workspace ``ws``: run-time integers in the generic kernels,
+    compile-time constants in the size-specialized ones (:func:`specialize`)."""
+    d = ws.dims
+    return dim(d[0]), dim(d[1]), dim(d[2]), dim(d[3]), dim(d[4])
+
+
+def size_markers(dims):
+    """``(n, m, s, r, J)`` as size markers: each size ``k`` a tuple of ``k`` ``None``."""
+    return tuple((None,) * int(k) for k in dims)
+
+
+def specialize(ws):
+    """The workspace ``ws`` with its sizes turned into compile-time constants.
+
+    The kernels then compile once for these sizes ``(n, m, s, r, J)`` (cached on disk like
+    the generic ones), with every loop over coordinates, constraints, control points and
+    quadrature points of known length: LLVM unrolls them and drops the loop set-up, the
+    vector-remainder code and the run-time alias checks that dominate loops of length 2–4
+    (``docs/benchmarks.md``). The arithmetic and its order are unchanged, so the
+    trajectory equals the generic kernel's bit for bit."""
+    return ws._replace(dims=size_markers(ws.dims))

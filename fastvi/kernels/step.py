@@ -33,11 +33,11 @@ from .._numba import hot, hot_inline, ptr
 from .banded import (gt_times, mech_impulses_banded, mech_rows_sparse, newton_banded,
                      project_banded, schur_banded)
 from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
-                     F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_M, F_MASSFN, F_N, F_TIME,
+                     F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_M, F_MASSFN, F_TIME,
                      F_TSLOT, FJQ, FJV, FORCE, GT, KGRAD, MASS, MJAC, NEWTON_FAILED, NEWTON_FULL,
                      NONFINITE, OK, PGRAD, PHESS, POT, KHESS, S_FULL, S_G, S_GV, S_ITERS, S_RES,
                      S_WORK, SI_A, SI_S, SI_SC, SINGULAR, SINGULAR_CONSTRAINTS, SINGULAR_MASS,
-                     SOLVE_BANDED, is_timed, make_workspace)
+                     SOLVE_BANDED, is_timed, make_workspace, sizes)
 from .linalg import lu_factor, lu_solve
 
 __all__ = ["make_workspace", "assemble", "step", "end_momentum", "velocity_residual",
@@ -219,13 +219,9 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
     qi, vi, F, Pm, fa = ws.qi, ws.vi, ws.F, ws.Pm, ws.fa
     Aq, Cq, Hc, Ma = ws.Aq, ws.Cq, ws.Hc, ws.Ma
     gj = ws.g
-    n = flags[F_N]
-    m = flags[F_M]
+    n, m, s, r, J = sizes(ws)
     has_mass = flags[F_MASSFN] != 0
     diag = flags[F_DIAG] != 0
-    s = L.shape[0] - 1
-    r = L.shape[1]
-    J = Lc.shape[1] - 1
     sn = s * n
     N = sn + J * m
     inv_h = 1.0 / h
@@ -400,8 +396,7 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
 def predict(tabs, n, m, h, vk, ws, first):
     """Initial guess: the previous step's polynomial extrapolated onto this step."""
     E, tau = tabs.E, tabs.tau
-    s = E.shape[0] - 1
-    J = tabs.Lc.shape[1] - 1
+    _, _, s, _, J = sizes(ws)
     X = ws.X
     Xp = ws.Xprev
     if first:
@@ -425,9 +420,9 @@ def predict(tabs, n, m, h, vk, ws, first):
 
 
 @hot_inline
-def _qscale(qk):
+def _qscale(qk, n):
     qscale = 1.0
-    for a in range(qk.shape[0]):
+    for a in range(n):
         qscale = max(qscale, abs(qk[a]))
     return qscale
 
@@ -454,14 +449,11 @@ def newton_full(md, tabs, opts, h, qk, pk, ws, out):
     Gives up early when the increments grow twice in a row (divergence).
     """
     X, R, A, piv = ws.X, ws.R, ws.A, ws.piv
-    n = md.flags[F_N]
-    m = md.flags[F_M]
-    s = tabs.L.shape[0] - 1
-    J = tabs.Lc.shape[1] - 1
+    n, m, s, _, J = sizes(ws)
     sn = s * n
     N = sn + J * m
     tol = opts.tol
-    qscale = _qscale(qk)
+    qscale = _qscale(qk, n)
     dprev = np.inf
     grew = 0
     it = 0
@@ -565,13 +557,9 @@ def residual(md, tabs, h, qk, pk, ws):
     b, L, Ld, Lc = tabs.b, tabs.L, tabs.Ld, tabs.Lc
     X, R, D, G = ws.X, ws.R, ws.D, ws.G
     qi, vi, F, Pm, fa = ws.qi, ws.vi, ws.F, ws.Pm, ws.fa
-    n = flags[F_N]
-    m = flags[F_M]
+    n, m, s, r, J = sizes(ws)
     has_mass = flags[F_MASSFN] != 0
     diag = flags[F_DIAG] != 0
-    s = L.shape[0] - 1
-    r = L.shape[1]
-    J = Lc.shape[1] - 1
     sn = s * n
     N = sn + J * m
     inv_h = 1.0 / h
@@ -761,14 +749,11 @@ def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
     last increment and ``out[S_RES]`` the max-norm of the last residual evaluated.
     """
     X, R = ws.X, ws.R
-    n = md.flags[F_N]
-    m = md.flags[F_M]
-    s = tabs.L.shape[0] - 1
-    J = tabs.Lc.shape[1] - 1
+    n, m, s, _, J = sizes(ws)
     sn = s * n
     N = sn + J * m
     tol = opts.tol
-    qscale = _qscale(qk)
+    qscale = _qscale(qk, n)
     dprev = np.inf
     it = 0
     while it < opts.max_iter:
@@ -863,10 +848,7 @@ def step(md, tabs, opts, h, state, ws, first, out):
     qk, pk, vk, q1, p1, v1 = state[0], state[1], state[2], state[3], state[4], state[5]
     X, R, D, G = ws.X, ws.R, ws.D, ws.G
     Lc = tabs.Lc
-    n = flags[F_N]
-    m = flags[F_M]
-    s = tabs.L.shape[0] - 1
-    J = Lc.shape[1] - 1
+    n, m, s, _, J = sizes(ws)
     sn = s * n
     N = sn + J * m
 
@@ -994,7 +976,8 @@ def _step_work(md, tabs, h, qk, q1, ws, n, m, s, J):
     timed = flags[F_TIME] != 0
     inv_h = 1.0 / h
     w = 0.0
-    for i in range(b.shape[0]):
+    r = sizes(ws)[3]
+    for i in range(r):
         ti = ws.time[0] + tabs.c[i] * h
         for a in range(n):
             qi[a] = qk[a]
@@ -1042,8 +1025,7 @@ def end_momentum(md, q1, P, p1, v1, G1, ws):
     """p1 = P − G1ᵀ η with (G M⁻¹ Gᵀ) η = G M⁻¹ P (+ g_t at t_{k+1} for a rheonomic
     constraint), and v1 = M⁻¹ p1: the hidden constraint G v1 + g_t = 0."""
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
-    n = flags[F_N]
-    m = flags[F_M]
+    n, m, _, _, _ = sizes(ws)
     if ws.si[SI_S] == SOLVE_BANDED:  # large sparse models, diagonal mass (banded.py)
         rheonomic = is_timed(md) and flags[F_TIME] != 0
         if rheonomic:

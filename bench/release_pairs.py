@@ -1,6 +1,6 @@
 """Two fastvi trees side by side, over several pairs of fresh processes.
 
-    .venv/bin/python bench/release_pairs.py TREE_A TREE_B [PAIRS]
+    .venv/bin/python bench/release_pairs.py TREE_A TREE_B [PAIRS] [--sized] [--methods=M,M]
 
 Each tree runs in its own child process (``bench/release_runner.py`` with ``PYTHONPATH`` set
 to the tree); the two are asked in ABBA order, 6 rounds of 20 000 double-pendulum steps per
@@ -8,6 +8,8 @@ method, and the per-step medians are compared. A new pair of processes is starte
 times (default 5): the code layout of one process can make identical builds differ by up
 to ±7 %, so the ratio reported is the median over pairs. Both trees must have compiled
 their kernels once before (run any ``fastvi.integrate`` with that ``PYTHONPATH``).
+``--sized`` times the size-specialized kernels (``specialize=True``) of both trees;
+``--methods=M,M`` picks the methods (default ``P2L-Q3G,P3L-Q4G,P1L-Q2G``).
 Used for ``docs/benchmarks.md`` ("Forces and time"); ``bench/test_bench_release.py`` does
 one pair against the release tag inside pytest-benchmark.
 """
@@ -38,16 +40,16 @@ def _ask(proc, cmd):
     return json.loads(proc.stdout.readline())
 
 
-def main(tree_a, tree_b, pairs=5):
-    res = {m: ([], []) for m in METHODS}
-    iters = {m: [None, None] for m in METHODS}
+def main(tree_a, tree_b, pairs=5, sized=False, methods=METHODS):
+    res = {m: ([], []) for m in methods}
+    iters = {m: [None, None] for m in methods}
     for _ in range(pairs):
         a, b = _child(tree_a), _child(tree_b)
-        for meth in METHODS:
+        for meth in methods:
             ta, tb = [], []
             for r in range(ROUNDS):
                 for p in ((a, b) if r % 2 == 0 else (b, a)):
-                    out = _ask(p, f"{meth} {N_STEPS} auto")
+                    out = _ask(p, f"{meth} {N_STEPS} auto{' sized' if sized else ''}")
                     (ta if p is a else tb).append(out["cpu"] / N_STEPS * 1e6)
                     iters[meth][0 if p is a else 1] = out["iterations"]
             res[meth][0].append(statistics.median(ta))
@@ -62,6 +64,12 @@ def main(tree_a, tree_b, pairs=5):
 
 
 if __name__ == "__main__":
-    if len(sys.argv) < 3:
+    flags = [a for a in sys.argv[1:] if a.startswith("--")]
+    args = [a for a in sys.argv[1:] if not a.startswith("--")]
+    if len(args) < 2:
         sys.exit(__doc__)
-    main(sys.argv[1], sys.argv[2], int(sys.argv[3]) if len(sys.argv) > 3 else 5)
+    chosen = METHODS
+    for f in flags:
+        if f.startswith("--methods="):
+            chosen = tuple(f.split("=", 1)[1].split(","))
+    main(args[0], args[1], int(args[2]) if len(args) > 2 else 5, "--sized" in flags, chosen)

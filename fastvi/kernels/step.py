@@ -733,7 +733,7 @@ def _mech_solve(md, tabs, h, ws, n, m, s, J):
     return OK
 
 
-@hot
+@hot_inline
 def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
     """Newton-like iteration with the mechanics matrix (see :func:`_mech_solve`).
 
@@ -1020,7 +1020,7 @@ def _step_work(md, tabs, h, qk, q1, ws, n, m, s, J):
     return w
 
 
-@hot
+@hot_inline
 def end_momentum(md, q1, P, p1, v1, G1, ws):
     """p1 = P − G1ᵀ η with (G M⁻¹ Gᵀ) η = G M⁻¹ P (+ g_t at t_{k+1} for a rheonomic
     constraint), and v1 = M⁻¹ p1: the hidden constraint G v1 + g_t = 0."""

@@ -836,7 +836,7 @@ def _finish_mech(md, tabs, h, qk, ws, q1, n, m, s, J):
 
 
 # ----------------------------------------------------------------------------- one step
-@hot
+@hot_inline
 def step(md, tabs, opts, h, state, ws, first, out):
     """Advance ``state`` rows (q_k, p_k, v_k) by one step into rows 3–5 (q1, p1, v1).
 

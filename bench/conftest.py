@@ -1,7 +1,7 @@
 """Benchmark session hooks: the generic/specialized ratio table of ``test_bench_core.py``.
 
 Benchmarks that want a ratio tag themselves with ``benchmark.extra_info[RATIO_KEY] =
-{"method": ..., "impl": "generic" | "specialized", "block": int}``; every other benchmark
+{"method": ..., "impl": "generic" | "sized" | "specialized", "block": int}``; every other benchmark
 in ``bench/`` is ignored here. The rounds of all blocks of one contender are pooled; the
 table (ratio of the pooled medians, of the pooled minima, and of the medians block by
 block) is printed at the end of the run and stored in the ``--benchmark-json`` file under
@@ -32,20 +32,26 @@ def _rounds(benchmarks):
     return out
 
 
+def _pairs(by_method):
+    for method, by_impl in by_method.items():
+        for impl in ("generic", "sized"):
+            if impl in by_impl and "specialized" in by_impl:
+                yield (method, impl), by_impl[impl], by_impl["specialized"]
+
+
 def ratio_table(benchmarks) -> list[dict]:
-    """Rows ``{method, ratio, ratio_min, block_ratios, rounds}``: generic / specialized of the
-    pooled medians (the figure reported), of the pooled minima (the rounds least disturbed
-    by other load on the machine) and of the medians of each block."""
+    """Rows ``{method, impl, ratio, ratio_min, block_ratios, rounds}``: ``impl`` (the generic
+    kernels, or the size-specialized ones: ``sized``) / the hand-specialized yardstick, of
+    the pooled medians (the figure reported), of the pooled minima (the rounds least
+    disturbed by other load on the machine) and of the medians of each block."""
     rows = []
-    for method, by_impl in _rounds(benchmarks).items():
-        if "generic" not in by_impl or "specialized" not in by_impl:
-            continue
-        gen, spe = by_impl["generic"], by_impl["specialized"]
+    for (method, impl), gen, spe in _pairs(_rounds(benchmarks)):
         g = [t for b in gen.values() for t in b]
         sp = [t for b in spe.values() for t in b]
         blocks = sorted(set(gen) & set(spe))
         rows.append(dict(
             method=method,
+            impl=impl,
             ratio=statistics.median(g) / statistics.median(sp),
             ratio_min=min(g) / min(sp),
             block_ratios=[statistics.median(gen[b]) / statistics.median(spe[b]) for b in blocks],
@@ -68,13 +74,14 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
         return
     tr = terminalreporter
     tr.write_sep("-", "fastvi: generic cfunc kernel / hand-specialized yardstick")
-    tr.write_line(f"{'method':<10} {'medians':>8} {'minima':>8}  {'per block (medians)':<22} "
-                  f"{'rounds':>7}   goal: medians <= {GOAL}")
+    tr.write_line(f"{'method':<10} {'kernels':<8} {'medians':>8} {'minima':>8}  "
+                  f"{'per block (medians)':<22} {'rounds':>7}   goal: medians <= {GOAL}")
     for row in rows:
         verdict = "met" if row["ratio"] <= GOAL else "MISSED"
         blocks = " ".join(f"{r:.2f}" for r in row["block_ratios"])
         rounds = "/".join(str(k) for k in row["rounds"])
-        tr.write_line(f"{row['method']:<10} {row['ratio']:>8.2f} {row['ratio_min']:>8.2f}  "
+        tr.write_line(f"{row['method']:<10} {row['impl']:<8} {row['ratio']:>8.2f} "
+                      f"{row['ratio_min']:>8.2f}  "
                       f"{blocks:<22} {rounds:>7}   {verdict}")
 
 

@@ -5,6 +5,8 @@ h = 0.01, for ``P1L-Q2G``, ``P2L-Q3G``, ``P3L-Q4G``:
 
 * ``generic``: the public ``fastvi.integrate`` with ``newton="full"`` (validation, projection of the initial state,
   the compiled loop with cfunc callbacks, every step saved, the ``Result``);
+* ``sized``: the same public call with ``specialize=True`` (the generic kernels compiled for
+  the model's sizes: still cfunc callbacks and dense generic assembly);
 * ``specialized``: ``bench/yardstick.py``, the same algorithm with the model inlined, driven
   from Python the same way (every step saved).
 
@@ -54,11 +56,11 @@ def scene():
 
 def _runner(impl, method, scene):
     model, q0, v0, qs, vs = scene
-    if impl == "generic":
+    if impl in ("generic", "sized"):
         def run():
             # the yardstick hand-specializes the full Newton: compare the same algorithm
             res = fastvi.integrate(model, q0, v0, h=H, n_steps=N_STEPS, method=method,
-                                   newton="full")
+                                   newton="full", specialize=impl == "sized")
             return res.q[-1], res.energy
     else:
         tabs = fastvi.method(method).kernel_tables
@@ -72,7 +74,8 @@ def _runner(impl, method, scene):
 
 
 def _order(block):
-    return ("generic", "specialized") if block % 2 == 0 else ("specialized", "generic")
+    return ("generic", "sized", "specialized") if block % 2 == 0 else \
+        ("specialized", "sized", "generic")
 
 
 CASES = [(m, b, impl) for m in METHODS for b in range(BLOCKS) for impl in _order(b)]
@@ -96,6 +99,9 @@ def test_double_pendulum_1e4_steps(benchmark, scene, method, block, impl):
                                                   "P3L-Q4G": 1e-6}[method]
     if impl == "generic":
         _finals[method] = np.array(q_end)
+    if impl == "sized" and method in _finals:
+        # the size-specialized kernels change no operation: bit for bit
+        assert np.array_equal(q_end, _finals[method])
     if impl == "specialized" and method in _finals:
         # same algorithm, same floating-point operations: same end state (measured 0.0)
         assert np.max(np.abs(q_end - _finals[method])) <= 1e-12

@@ -7,9 +7,10 @@ measures what the generic model interface costs (opaque callbacks, sizes known o
 time, dense handling of ``M``, ``∇²V``, ``G`` and ``∇²g``) and nothing else:
 
 * same unknowns ``X = (ΔQ^1 … ΔQ^s, η_0 … η_{J−1})`` and residual rows, same predictor
-  (the previous step's polynomial extrapolated with ``E``), same Newton stopping rule and
-  tolerance (increment scaled by ``max(1, |q_k|)``, contraction estimate, round-off plateau),
-  the same divergence exit and straight-line retry when Newton fails, same final residual
+  (the last two steps' polynomial extrapolated with ``E2`` where it agrees with the last
+  step's, extrapolated with ``E``), same Newton stopping rule and tolerance (increment
+  scaled by ``max(1, |q_k|)``, contraction estimate, round-off plateau), the same
+  divergence exit and retries from guesses of lower degree when Newton fails, same final residual
   pass, same LU (:mod:`fastvi.kernels.linalg`) for the Newton matrix and
   for ``G M⁻¹ Gᵀ``, same RATTLE end-momentum projection, same diagnostics per step
   (``max|g(q1)|``, ``max|G v1|``, Newton iterations, energy) saved at every step;
@@ -38,6 +39,7 @@ import numpy as np
 
 from fastvi._numba import hot, njit
 from fastvi.kernels.linalg import lu_factor, lu_solve
+from fastvi.kernels.step import PREDICT_TRUST
 from fastvi.status import Status
 
 # n and m of the double pendulum, read by numba as compile-time constants
@@ -210,17 +212,23 @@ def assemble(prm, tabs, h, qk, pk, X, R, A, D, G, qd, gj, jac):
 
 
 @hot
-def predict(tabs, s, J, h, vk, X, Xp, first):
-    """The generic predictor: straight line on the first step, else extrapolation by ``E``."""
+def predict(tabs, s, J, h, vk, X, Xp, Xpp, Z, hist, order):
+    """The generic predictor (``fastvi.kernels.step.predict``, same operations): of
+    ``order`` 0 the straight line, 1 the last step's polynomial (``E``), 2 the last two
+    steps' (``E2``) where it agrees with the former to ``PREDICT_TRUST``."""
     b, L, Ld, Lc, E, tau = tabs.b, tabs.L, tabs.Ld, tabs.Lc, tabs.E, tabs.tau
     sn = s * NQ
-    if first:
+    if order == 0:
         for nu in range(1, s + 1):
             for a in range(NQ):
                 X[(nu - 1) * NQ + a] = h * tau[nu] * vk[a]
         for k in range(sn, sn + J * NC):
             X[k] = 0.0
         return
+    two = order >= 2 and hist[0] >= 2
+    E2 = tabs.E2
+    gap = 0.0
+    move = 0.0
     for nu in range(1, s + 1):
         for a in range(NQ):
             last = Xp[(s - 1) * NQ + a]
@@ -228,6 +236,21 @@ def predict(tabs, s, J, h, vk, X, Xp, first):
             for mu in range(1, s + 1):
                 acc += (Xp[(mu - 1) * NQ + a] - last) * E[mu, nu]
             X[(nu - 1) * NQ + a] = acc
+            if two:
+                back = Xpp[(s - 1) * NQ + a]
+                acc2 = -back * E2[0, nu]
+                for mu in range(1, s):
+                    acc2 += (Xpp[(mu - 1) * NQ + a] - back) * E2[mu, nu]
+                for mu in range(1, s + 1):
+                    acc2 += Xp[(mu - 1) * NQ + a] * E2[s + mu, nu]
+                acc2 -= last
+                Z[nu - 1, a] = acc2
+                gap = max(gap, abs(acc2 - acc))
+                move = max(move, abs(last))
+    if two and gap <= PREDICT_TRUST * move:
+        for nu in range(s):
+            for a in range(NQ):
+                X[nu * NQ + a] = Z[nu, a]
     for k in range(sn, sn + J * NC):
         X[k] = Xp[k]
 
@@ -236,7 +259,7 @@ def predict(tabs, s, J, h, vk, X, Xp, first):
 def newton(prm, tabs, h, qk, pk, ws, piv, tol, max_iter, out):
     """The generic ``newton``: increment-based stopping, divergence exit, same LU."""
     b, L, Ld, Lc, E, tau = tabs.b, tabs.L, tabs.Ld, tabs.Lc, tabs.E, tabs.tau
-    X, R, Xp, A, D, G, sm, S = ws
+    X, R, Xp, A, D, G, sm, S, Xpp, Z, hist = ws
     qd = sm[0]
     gj = sm[1]
     s = L.shape[0] - 1
@@ -290,7 +313,7 @@ def newton(prm, tabs, h, qk, pk, ws, piv, tol, max_iter, out):
 def step(prm, tabs, h, qk, pk, vk, q1, p1, v1, ws, piv, tol, max_iter, first, out):
     """Advance (q_k, p_k) by one step into (q1, p1, v1); ``out`` as in the generic ``step``."""
     b, L, Ld, Lc, E, tau = tabs.b, tabs.L, tabs.Ld, tabs.Lc, tabs.E, tabs.tau
-    X, R, Xp, A, D, G, sm, S = ws
+    X, R, Xp, A, D, G, sm, S, Xpp, Z, hist = ws
     qd = sm[0]
     gj = sm[1]
     P = sm[2]
@@ -310,14 +333,18 @@ def step(prm, tabs, h, qk, pk, vk, q1, p1, v1, ws, piv, tol, max_iter, first, ou
     G[0, 1, 1] = -(qk[3] - qk[1])
     G[0, 1, 2] = qk[2] - qk[0]
     G[0, 1, 3] = qk[3] - qk[1]
-    predict(tabs, s, J, h, vk, X, Xp, first)
+    order = 0 if first else hist[0]
+    predict(tabs, s, J, h, vk, X, Xp, Xpp, Z, hist, order)
     st = newton(prm, tabs, h, qk, pk, ws, piv, tol, max_iter, out)
-    if st != OK and not first:
-        # the generic kernel's retry from the straight line through q_k with velocity v_k
-        used = out[0]
-        predict(tabs, s, J, h, vk, X, Xp, True)
+    used = 0.0
+    while st != OK and order > 0:
+        # the generic kernel's retries from guesses of lower degree, down to the straight
+        # line through q_k with velocity v_k
+        used += out[0]
+        order -= 1
+        predict(tabs, s, J, h, vk, X, Xp, Xpp, Z, hist, order)
         st = newton(prm, tabs, h, qk, pk, ws, piv, tol, max_iter, out)
-        out[0] += used
+    out[0] += used
     if st != OK:
         return st
 
@@ -385,7 +412,9 @@ def step(prm, tabs, h, qk, pk, vk, q1, p1, v1, ws, piv, tol, max_iter, first, ou
     gv1 = abs(G1[1, 0] * v1[0] + G1[1, 1] * v1[1] + G1[1, 2] * v1[2] + G1[1, 3] * v1[3])
     out[2] = max(gv0, gv1)
     for k in range(N):
+        Xpp[k] = Xp[k]
         Xp[k] = X[k]
+    hist[0] = 1 if first else min(hist[0] + 1, 2)
     return OK
 
 
@@ -474,7 +503,8 @@ def integrate_double_pendulum(q0, v0, *, h, n_steps, tabs, params=(1.0, 1.0, 1.0
     state = np.zeros((6, NQ))
     state[0], state[1], state[2] = q0, mass * v0, v0
     ws = (np.zeros(N), np.zeros(N), np.zeros(N), np.zeros((N, N)), np.zeros((s + 1, NQ)),
-          np.zeros((J + 1, NC, NQ)), np.zeros((5, NQ)), np.zeros((NC, NC)))
+          np.zeros((J + 1, NC, NQ)), np.zeros((5, NQ)), np.zeros((NC, NC)), np.zeros(N),
+          np.zeros((s, NQ)), np.zeros(1, dtype=np.int64))
     piv = np.zeros((2, N), dtype=np.int64)
     K = n_steps + 1
     Qs, Vs, Ps = np.zeros((K, NQ)), np.zeros((K, NQ)), np.zeros((K, NQ))

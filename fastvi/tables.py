@@ -331,9 +331,15 @@ class Method:
         # is small): docs/benchmarks.md
         mech = invertible and s >= 2
         W = self.Lc[1:, 1:].T @ Ainv @ self.Lc[:s, :J]
+        # the predictor from the last two steps: the degree-2s polynomial through their
+        # 2s + 1 control points (local time of the last step: τ_μ − 1, then τ_μ), at 1 + τ_ν
+        nodes = np.concatenate([self.tau[:s] - 1.0, self.tau])
+        E2, _ = lagrange_basis(nodes, 1.0 + self.tau)
+        E2, _ = _consistent(E2, np.zeros_like(E2))
         return Tables(self.b, self.L, self.Ld, self.Lc, self.E, self.tau,
                       np.ascontiguousarray(Ainv), np.ascontiguousarray(W), As, mech,
-                      np.ascontiguousarray(self.c), np.ascontiguousarray(self.d))
+                      np.ascontiguousarray(self.c), np.ascontiguousarray(self.d),
+                      np.ascontiguousarray(E2))
 
 
 def _constraint_points(code: str, k: int | None, tau: np.ndarray) -> tuple[str, np.ndarray]:

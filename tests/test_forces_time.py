@@ -238,7 +238,7 @@ REFERENCE_CASES = [("double_pendulum", {}, (np.pi / 2, np.pi / 2), "P2L-Q3G", "a
 
 
 @pytest.mark.parametrize("case", REFERENCE_CASES, ids=[f"{c[0]}-{c[3]}-{c[4]}" for c in REFERENCE_CASES])
-def test_conservative_trajectories_bit_for_bit_as_before_forces(case):
+def test_conservative_trajectories_as_before_forces(case):
     """``tests/data/conservative_before_forces.npz`` was written by the commit before forces
     and time (4a78ee7) with the same calls: with ``force=None`` and ``time_dependent=False``
     nothing may change beyond round-off.
@@ -246,9 +246,13 @@ def test_conservative_trajectories_bit_for_bit_as_before_forces(case):
     It used to demand the last bit. numba compiles for the host CPU, and on an AVX-512 host
     the chain's trajectory of that very commit (and of every later one) leaves the stored
     one by 6e-15 at step 248 of 300 (measured: the file was written on another CPU), so a
-    stored bit pattern is a fact about the machine, not the code. Round-off it is: a
-    change of the scheme itself moves these trajectories by its truncation error, orders
-    of magnitude above 1e-13 at h = 0.01."""
+    stored bit pattern is a fact about the machine, not the code; and the two-step
+    predictor (issue 11) starts Newton elsewhere, so each step converges to the same
+    solution only within the Newton tolerance (1e-14 relative): after 300 steps of the
+    rod–slider q is 2.6e-13 apart and p 1.9e-11 (a position error δ makes a momentum
+    error ~M δ/h). The tolerances are those, with room; the positions still pin the
+    scheme: a change of the scheme itself moves them by its truncation error, orders of
+    magnitude above 1e-11 at h = 0.01."""
     name, kw, args, meth, newton = case
     model = fastvi.scenes.SCENES[name](**kw)
     q0, v0 = model.initial_state(**args) if isinstance(args, dict) else model.initial_state(*args)
@@ -256,8 +260,8 @@ def test_conservative_trajectories_bit_for_bit_as_before_forces(case):
     key = f"{name}-{meth}-{newton}"
     with np.load(DATA / "conservative_before_forces.npz") as ref:
         assert np.array_equal(ref[key + "-q0"], q0)
-        np.testing.assert_allclose(r.q, ref[key + "-q"], rtol=0, atol=1e-13)
-        np.testing.assert_allclose(r.p, ref[key + "-p"], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(r.q, ref[key + "-q"], rtol=0, atol=1e-11)
+        np.testing.assert_allclose(r.p, ref[key + "-p"], rtol=0, atol=1e-9)
     assert r.work is None
 
 

@@ -128,6 +128,13 @@ SOLVE_DENSE, SOLVE_BANDED = 0, 1
 #: use the pattern of G (a diagonal constant mass is then required)
 SI_HEADER = 22
 
+# ----------------------------------------------------------------------------- workspace flags
+# entries of the int64 ``ws.hold``: steps left on the full Newton after the mechanics
+# iteration failed, whether M̄⁻¹ of a constant mass is prepared, and how many previous
+# steps of this trajectory the predictor may use (0 after a restart, at most 2)
+H_FULL, H_MBAR, H_HIST = range(3)
+H_SIZE = 3
+
 # ----------------------------------------------------------------------------- step output
 # float64 vector filled by step(): Newton iterations, max|g(q1)|, max|G v1|, last residual,
 # and whether the step fell back from the mechanics matrix to the full Newton
@@ -171,7 +178,7 @@ NewtonOptions = namedtuple("NewtonOptions", ["tol", "max_iter", "mode"])
 Events = namedtuple("Events", ["fns", "count", "direction", "terminal", "g", "t", "q", "v", "n",
                                "dense", "Q", "qk", "qx", "vx", "ell", "dell", "scratch"])
 Tables = namedtuple("Tables", ["b", "L", "Ld", "Lc", "E", "tau", "Ainv", "W", "As", "mech",
-                               "c", "d"])
+                               "c", "d", "E2"])
 Tables.__doc__ = """Method tables read by the step kernel (see :class:`fastvi.tables.Method`).
 
 b (r,), L, Ld (s+1, r), Lc (s+1, J+1), E (s+1, s+1), tau (s+1,) as in ``Method``; the
@@ -181,7 +188,9 @@ mechanics Newton matrix: Ainv (s, s) the inverse of ``A[ν, μ−1] = Σ_i b_i �
 (ν = 0…s−1, μ = 1…s), W (J, J) ``W[j−1, j'] = Σ ℓ_μ(d_j) Ainv[μ−1, ν] ℓ_ν(d_j')`` and
 As (s,) ``As[μ−1] = Σ_i b_i ℓ'_s(c_i) ℓ'_μ(c_i)``; mech (bool) whether ``newton="auto"``
 uses the mechanics matrix: not where ``A`` is singular (a quadrature with fewer points than
-``s``) nor for ``s = 1``, where the full Newton measured faster."""
+``s``) nor for ``s = 1``, where the full Newton measured faster; E2 (2s+1, s+1) the
+predictor from the last two steps: the Lagrange basis of their 2s + 1 control points
+(``τ_μ − 1``, μ < s, then ``τ_μ``, in the last step's local time) at ``1 + τ_ν``."""
 
 Workspace = namedtuple(
     "Workspace",
@@ -210,8 +219,9 @@ Workspace = namedtuple(
         "Z",  # (s, n) stage scratch of the mechanics solve
         "U",  # (s, n) stage scratch of the mechanics solve
         "Xprev",  # (N,) the previous step's unknowns (predictor)
+        "Xpp",  # (N,) the unknowns of the step before that (two-step predictor)
         "P",  # (n,) end momentum before the projection
-        "hold",  # (2,) int64: [steps left on the full Newton after a fallback, M̄ factored]
+        "hold",  # (3,) int64, indices H_*: full-Newton steps left, M̄ factored, predictor history
         "Fv",  # (n, n) ∂F/∂v of the non-conservative force
         "gt",  # (m,) ∂g/∂t at the step end (stays zero for an autonomous model)
         "time",  # (2,) t_k, t_{k+1} of the step being taken (set by the driver)
@@ -258,7 +268,7 @@ def workspace_for(dims):
         np.zeros((n, n)), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64), np.zeros(n),
         np.zeros((Jm, Jm)), np.zeros(Jm, dtype=np.int64),
         np.zeros((s, n)), np.zeros((s, n)),
-        np.zeros(N), np.zeros(n), np.zeros(2, dtype=np.int64),
+        np.zeros(N), np.zeros(N), np.zeros(n), np.zeros(H_SIZE, dtype=np.int64),
         np.zeros((n, n)), np.zeros(mm), np.zeros(2),
         np.zeros(SI_HEADER, dtype=np.int64), np.zeros(1),
         dims,

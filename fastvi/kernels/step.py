@@ -34,10 +34,11 @@ from .banded import (gt_times, mech_impulses_banded, mech_rows_sparse, newton_ba
                      project_banded, schur_banded)
 from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
                      F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_M, F_MASSFN, F_TIME,
-                     F_TSLOT, FJQ, FJV, FORCE, GT, KGRAD, MASS, MJAC, NEWTON_FAILED, NEWTON_FULL,
-                     NONFINITE, OK, PGRAD, PHESS, POT, KHESS, S_FULL, S_G, S_GV, S_ITERS, S_RES,
-                     S_WORK, SI_A, SI_S, SI_SC, SINGULAR, SINGULAR_CONSTRAINTS, SINGULAR_MASS,
-                     SOLVE_BANDED, is_timed, make_workspace, sizes)
+                     F_TSLOT, FJQ, FJV, FORCE, GT, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
+                     NEWTON_FAILED, NEWTON_FULL, NONFINITE, OK, PGRAD, PHESS, POT, KHESS, S_FULL,
+                     S_G, S_GV, S_ITERS, S_RES, S_WORK, SI_A, SI_S, SI_SC, SINGULAR,
+                     SINGULAR_CONSTRAINTS, SINGULAR_MASS, SOLVE_BANDED, is_timed, make_workspace,
+                     sizes)
 from .linalg import lu_factor, lu_solve
 
 __all__ = ["make_workspace", "assemble", "step", "end_momentum", "velocity_residual",
@@ -53,6 +54,9 @@ _FD_T = 7.4009597974140505e-04
 MECH_THETA_MAX = 0.25
 #: steps the full Newton stays on after the mechanics matrix failed (then it is tried again)
 FULL_HOLD = 32
+#: the two-step predictor is used while it differs from the one-step one by at most this
+#: fraction of the last step's displacement (its asymptotic range; docs/benchmarks.md)
+PREDICT_TRUST = 1e-2
 
 
 # ----------------------------------------------------------------------------- derivatives
@@ -393,13 +397,16 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
 
 # ----------------------------------------------------------------------------- predictor, full Newton
 @hot_inline
-def predict(tabs, n, m, h, vk, ws, first):
-    """Initial guess: the previous step's polynomial extrapolated onto this step."""
+def predict(tabs, n, m, h, vk, ws, order):
+    """Initial guess of ``order`` 2: the polynomial through the control points of the last
+    two steps (degree 2s, error O(h^(2s+1))) extrapolated onto this step; 1 (or 2 with only
+    one step known): of the last step alone (degree s); 0: the straight line with ``v_k``.
+    The impulses are the last step's (zero for order 0)."""
     E, tau = tabs.E, tabs.tau
     _, _, s, _, J = sizes(ws)
     X = ws.X
     Xp = ws.Xprev
-    if first:
+    if order == 0:
         # straight line with the initial velocity; impulses start at zero
         for nu in range(1, s + 1):
             for a in range(n):
@@ -408,6 +415,10 @@ def predict(tabs, n, m, h, vk, ws, first):
             X[k] = 0.0
         return
     sn = s * n
+    two = order >= 2 and ws.hold[H_HIST] >= 2
+    E2, Xpp, Z = tabs.E2, ws.Xpp, ws.Z
+    gap = 0.0
+    move = 0.0
     for nu in range(1, s + 1):
         for a in range(n):
             last = Xp[(s - 1) * n + a]
@@ -415,6 +426,27 @@ def predict(tabs, n, m, h, vk, ws, first):
             for mu in range(1, s + 1):
                 acc += (Xp[(mu - 1) * n + a] - last) * E[mu, nu]
             X[(nu - 1) * n + a] = acc
+            if two:
+                # nodes τ_μ − 1 (μ < s) of the step before last, relative to q_{k−1}:
+                # ΔQ^μ − ΔQ^s of that step; the result relative to q_k = q_{k−1} + ΔQ^s
+                back = Xpp[(s - 1) * n + a]
+                acc2 = -back * E2[0, nu]  # μ = 0: ΔQ^0 = 0
+                for mu in range(1, s):
+                    acc2 += (Xpp[(mu - 1) * n + a] - back) * E2[mu, nu]
+                for mu in range(1, s + 1):
+                    acc2 += Xp[(mu - 1) * n + a] * E2[s + mu, nu]
+                acc2 -= last
+                Z[nu - 1, a] = acc2
+                gap = max(gap, abs(acc2 - acc))
+                move = max(move, abs(last))
+    # The two guesses differ by about the error of the one-step guess. Far below the last
+    # step's displacement the extrapolation is in its asymptotic range and the degree-2s
+    # guess is the better one; otherwise (long steps, sudden turns) its higher degree
+    # makes it the worse one, and Newton may even find another root from it.
+    if two and gap <= PREDICT_TRUST * move:
+        for nu in range(s):
+            for a in range(n):
+                X[nu * n + a] = Z[nu, a]
     for k in range(sn, sn + J * m):
         X[k] = Xp[k]
 
@@ -500,21 +532,21 @@ def _mass_bar(md, qk, ws, n):
     constant ``M`` once per trajectory). Returns a status code."""
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     if flags[F_DIAG] != 0:
-        if ws.hold[1] == 0:
+        if ws.hold[H_MBAR] == 0:
             for a in range(n):
                 ws.minv[a] = 1.0 / Mc[a, a]
-            ws.hold[1] = 1
+            ws.hold[H_MBAR] = 1
         return OK
     Mb = ws.Mb
     if flags[F_MASSFN] != 0:
         fns[MASS](ptr(qk), ptr(qk), ptr(prm), ptr(Mb))
-    elif ws.hold[1] != 0:
+    elif ws.hold[H_MBAR] != 0:
         return OK
     else:
         for a in range(n):
             for c in range(n):
                 Mb[a, c] = Mc[a, c]
-        ws.hold[1] = 1
+        ws.hold[H_MBAR] = 1
     if lu_factor(Mb, ws.pivn, n) != 0:
         return SINGULAR_MASS
     return OK
@@ -863,9 +895,9 @@ def step(md, tabs, opts, h, state, ws, first, out):
                 for c in range(n):
                     G0[a, c] = G[J, a, c]
     out[S_FULL] = 0.0
-    full = opts.mode == NEWTON_FULL or ws.hold[0] > 0 or not tabs.mech
-    if ws.hold[0] > 0:
-        ws.hold[0] -= 1
+    full = opts.mode == NEWTON_FULL or ws.hold[H_FULL] > 0 or not tabs.mech
+    if ws.hold[H_FULL] > 0:
+        ws.hold[H_FULL] -= 1
     used = 0.0
     gmax = 0.0
     if not full:
@@ -873,7 +905,7 @@ def step(md, tabs, opts, h, state, ws, first, out):
         if st == OK:
             if m > 0:
                 _mech_rows(md, ws, 0, n, m)
-            predict(tabs, n, m, h, vk, ws, first)
+            predict(tabs, n, m, h, vk, ws, 0 if first else ws.hold[H_HIST])
             st = newton_mech(md, tabs, opts, h, qk, pk, ws, out)
         if st == OK:
             gmax = _finish_mech(md, tabs, h, qk, ws, q1, n, m, s, J)
@@ -882,16 +914,19 @@ def step(md, tabs, opts, h, state, ws, first, out):
             # then stays on for a while rather than paying this detour at every step
             used = out[S_ITERS]
             full = True
-            ws.hold[0] = FULL_HOLD
+            ws.hold[H_FULL] = FULL_HOLD
             out[S_FULL] = 1.0
     if full:
-        predict(tabs, n, m, h, vk, ws, first)
+        order = 0 if first else ws.hold[H_HIST]
+        predict(tabs, n, m, h, vk, ws, order)
         st = newton_full(md, tabs, opts, h, qk, pk, ws, out)
-        if st != OK and not first:
-            # The extrapolated polynomial can be far off (stiff oscillations with ωh > 1, a
-            # sudden turn): start again from the straight line through q_k with velocity v_k.
+        while st != OK and order > 0:
+            # An extrapolated polynomial can be far off (stiff oscillations with ωh > 1, a
+            # sudden turn, a long step: the degree-2s one first): start again from a guess
+            # of lower degree, down to the straight line through q_k with velocity v_k.
             used += out[S_ITERS]
-            predict(tabs, n, m, h, vk, ws, True)
+            order -= 1
+            predict(tabs, n, m, h, vk, ws, order)
             st = newton_full(md, tabs, opts, h, qk, pk, ws, out)
         out[S_ITERS] += used
         if st != OK:
@@ -929,10 +964,12 @@ def step(md, tabs, opts, h, state, ws, first, out):
     out[S_WORK] = 0.0
     if is_timed(md):
         out[S_WORK] = _step_work(md, tabs, h, qk, q1, ws, n, m, s, J)
-    # keep this step's unknowns for the next predictor
-    Xp = ws.Xprev
+    # keep this step's unknowns (and the last step's) for the next predictor
+    Xp, Xpp = ws.Xprev, ws.Xpp
     for k in range(N):
+        Xpp[k] = Xp[k]
         Xp[k] = X[k]
+    ws.hold[H_HIST] = 1 if first else min(ws.hold[H_HIST] + 1, 2)
     return OK
 
 

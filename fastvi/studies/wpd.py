@@ -1066,10 +1066,6 @@ STIFF_LONG_RUN = 0.5
 PEER_LEVELS = (1e-2, 1e-4, 1e-6, 1e-8)
 PEER_GOAL = 2.0  # issue 11: fastvi's best within 2× of DOP853 (a) at equal max|ΔH|, T = 1000 s
 STIFF_GOAL = 10.0  # issue 11: ≥ 10× ahead of every compiled peer at k = 1e8
-#: fastvi as a speed-minded user runs it against a compiled peer: the kernels compiled for
-#: the model's sizes (``specialize=True``, bit for bit the generic trajectory; one extra
-#: compile per method, outside the timing)
-PEER_FASTVI = dict(specialize=True)
 #: fastvi's energies are sampled every PEER_SAMPLE_DT seconds (save_every = PEER_SAMPLE_DT/h):
 #: saving every step would cost fastvi more than the peer pays for storing its steps
 PEER_SAMPLE_DT = 0.1
@@ -1085,6 +1081,10 @@ STIFF_H_MAX = 0.01
 
 PEERS_FULL = dict(
     repeats=3,
+    #: fastvi as a speed-minded user runs it against a compiled peer: the kernels compiled
+    #: for the model's sizes (bit for bit the default kernels' trajectories; one compile per
+    #: method, outside the timing). The quick check of the section leaves them out.
+    specialize=True,
     T=(1000.0, 10000.0),
     fastvi={
         # (h = 0.1 is beyond P4L-Q5G's stability limit here: its energy error explodes)
@@ -1107,6 +1107,7 @@ PEERS_FULL = dict(
 )
 PEERS_QUICK = dict(
     repeats=1,
+    specialize=False,
     T=(100.0,),
     fastvi={100.0: {"P3L-Q4G": (0.05, 0.025), "P4L-Q5G": (0.05,)}},
     dop={100.0: (1e-8, 1e-10, 1e-12)},
@@ -1147,12 +1148,13 @@ class PeerPoint:
         return self.label.startswith("P")
 
 
-def _fastvi_peer_run(model, q0, v0, method, h, T, params=None, sample_dt=PEER_SAMPLE_DT):
+def _fastvi_peer_run(model, q0, v0, method, h, T, params=None, sample_dt=PEER_SAMPLE_DT,
+                     specialize=False):
     """One public ``fastvi.integrate`` call, energies saved every ``sample_dt`` seconds."""
     every = max(1, int(round(sample_dt / h)))
     c0 = time.process_time()
     res = fastvi.integrate(model, q0, v0, h=h, t_end=T, method=method, save_every=every,
-                           params=params, on_failure="return", **PEER_FASTVI)
+                           params=params, on_failure="return", specialize=specialize)
     cpu = time.process_time() - c0
     ok = bool(res.success) and bool(np.isclose(res.t[-1], T))
     dH = float(np.max(np.abs(res.energy - res.energy[0]))) if len(res.energy) else np.inf
@@ -1187,7 +1189,7 @@ def peer_pendulum_sweep(pcfg, log) -> list[PeerPoint]:
     ya, yb, prm = peers.cartesian_start(THETA0), peers.angles_start(THETA0), peers.DP_PARAMS
     for method in {m for d in pcfg["fastvi"].values() for m in d} | {pcfg["growth"]["fastvi"][0]}:
         fastvi.integrate(model, q0, v0, h=0.01, n_steps=2, method=method,
-                         **PEER_FASTVI)  # compile / load
+                         specialize=pcfg["specialize"])  # compile / load
     specs = []
     for T in pcfg["T"]:
         for method, hs in pcfg["fastvi"][T].items():
@@ -1205,7 +1207,8 @@ def peer_pendulum_sweep(pcfg, log) -> list[PeerPoint]:
             return lambda: _peer_job(peers, "cartesian", ya, prm, T, knob, "DOP853")
         if label == DOP_B:
             return lambda: _peer_job(peers, "angles", yb, prm, T, knob, "DOP853")
-        return lambda: _quiet_fastvi(model, q0, v0, label, knob, T, sample_dt=PEER_SAMPLE_DT)
+        return lambda: _quiet_fastvi(model, q0, v0, label, knob, T, sample_dt=PEER_SAMPLE_DT,
+                                     specialize=pcfg["specialize"])
 
     t0 = time.perf_counter()
     cpus, infos = _interleaved([job(*s) for s in specs], pcfg["repeats"], log, PEER_LONG_RUN)
@@ -1251,7 +1254,8 @@ def peer_stiff_sweep(pcfg, log) -> list[PeerPoint]:
     with quiet():
         for method in s["methods"]:  # compile / load outside the timing
             q0, v0 = model.initial_state(0.0, peers.SLIDER_R0)
-            fastvi.integrate(model, q0, v0, h=1e-4, n_steps=2, method=method, **PEER_FASTVI)
+            fastvi.integrate(model, q0, v0, h=1e-4, n_steps=2, method=method,
+                             specialize=pcfg["specialize"])
     for k in s["ks"]:
         q0, v0 = model.initial_state(0.0, peers.SLIDER_R0 + peers.slider_stretch(k))
         y0, prm = peers.slider_start(k), peers.slider_params(k)
@@ -1261,7 +1265,8 @@ def peer_stiff_sweep(pcfg, log) -> list[PeerPoint]:
         def job(label, knob):
             if label.startswith("CyRK"):
                 return lambda: _peer_job(peers, "slider", y0, prm, T, knob, label.split()[1])
-            return lambda: _quiet_fastvi(model, q0, v0, label, knob, T, prm)
+            return lambda: _quiet_fastvi(model, q0, v0, label, knob, T, prm,
+                                         specialize=pcfg["specialize"])
 
         cpus, infos = _interleaved([job(*sp) for sp in specs], pcfg["repeats"], log, STIFF_LONG_RUN)
         ref = peers.run_peer("slider", y0, prm, T=T, tol=STIFF_REF_TOL)["y_end"]  # untimed
@@ -1278,13 +1283,14 @@ def peer_stiff_sweep(pcfg, log) -> list[PeerPoint]:
     return points
 
 
-def _quiet_fastvi(model, q0, v0, method, h, T, params=None, sample_dt=STIFF_SAMPLE_DT):
+def _quiet_fastvi(model, q0, v0, method, h, T, params=None, sample_dt=STIFF_SAMPLE_DT,
+                  specialize=False):
     with quiet():
         import warnings
 
         with warnings.catch_warnings():  # the energy-growth alarm of an unstable setting
             warnings.simplefilter("ignore", RuntimeWarning)
-            return _fastvi_peer_run(model, q0, v0, method, h, T, params, sample_dt)
+            return _fastvi_peer_run(model, q0, v0, method, h, T, params, sample_dt, specialize)
 
 
 def _front_cost(points, E):

@@ -396,7 +396,6 @@ def integrate_ensemble(
     check: bool = True,
     events=None,
     keep_events: int = 1,
-    specialize: bool = False,
 ) -> EnsembleResult:
     r"""Integrate ``N`` members (initial states and/or parameters) of one model in parallel.
 
@@ -446,10 +445,6 @@ def integrate_ensemble(
         Crossings kept per event and member (the first ones); later crossings are counted
         in ``n_events`` (and towards ``terminal``) but not located. Memory:
         ``8 N E K (2n + 1)`` bytes.
-    specialize : bool, default False
-        Kernels compiled for this model's and method's sizes, as in :func:`fastvi.integrate`
-        (members stay bit for bit equal to ``integrate(..., specialize=True)`` and to the
-        generic kernels).
 
     Returns
     -------
@@ -482,8 +477,7 @@ def integrate_ensemble(
     run_check = check
     if not isinstance(model, Model):
         raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
-    opts = _options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0, keep_events,
-                    specialize)
+    opts = _options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0, keep_events)
     threads = _validate_threads(threads)
     return _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
                      events=events)
@@ -495,15 +489,14 @@ def _validate_threads(threads):
 
 
 def _options(h, t_end, n_steps, method, save, tol, max_iter, newton="auto", t0=0.0,
-             keep_events=1, specialize=False) -> dict:
+             keep_events=1) -> dict:
     """The validated scalar options of a run (cheap: the client of a Dask run calls it too)."""
     h = check.step_size(h)
     t0 = check.start_time(t0)
     return dict(h=h, t0=t0, total=check.step_count(h, t_end, n_steps, t0),
                 method=check.method(method), save=check.ensemble_save(save),
                 newton=check.newton_options(tol, max_iter, newton),
-                keep_events=check.count(keep_events, "keep_events", 1),
-                specialize=check.flag(specialize, "specialize"))
+                keep_events=check.count(keep_events, "keep_events", 1))
 
 
 def _members(model: Model, Q0, V0, params):
@@ -564,16 +557,15 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
                 numba.set_num_threads(threads)
             used = numba.get_num_threads()
             numba.set_parallel_chunksize(max(1, N // (CHUNKS_PER_THREAD * used)))
+            # the sizes as integers: numba's parallel loop cannot take the size markers of
+            # the specialized kernels (tuples of None) into its body, so ensembles run the
+            # generic kernels (integrate(..., specialize=True) does not have this limit)
             dims = (model.n, model.m, meth.s, meth.r, meth.J)
-            sized = opts.get("specialize", False)
-            if sized:
-                dims = lay.size_markers(dims)
             args = (fns, flags, Mc, KP, model.kernel_data().timed, meth.kernel_tables,
                     opts["newton"], h, t0, dims, X0, total, mode, every, H0,
                     Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, ev.fns, ev.count, ev.direction,
                     ev.terminal, Te, Qe, Ve, Ne)
-            compile_time += _dispatch_time(drive.run_ensemble, (args[4], dims if sized else None),
-                                           *args)
+            compile_time += _dispatch_time(drive.run_ensemble, args[4], *args)
             t_loop = time.perf_counter()
             drive.run_ensemble(*args)
             t1 = time.perf_counter()

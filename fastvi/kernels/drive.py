@@ -227,10 +227,11 @@ def run_ensemble(fns, flags, Mc, P, timed, tabs, opts, h, t0, dims, X0, n_total,
                  Ve, Ne):
     """``run_member`` for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in parallel.
 
-    ``dims`` = (n, m, s, r, J), integers or size markers (:func:`.layout.specialize`), sizes
-    each member's workspace. ``P`` (N, k + 1) holds each member's kernel parameters (the kernels write the time into
-    the last entry of a member's own row) and ``timed`` the kind marker of
-    ``ModelData``; the outputs are indexed by
+    ``dims`` = (n, m, s, r, J) (integers: numba's parallel loop cannot take the size markers
+    of :func:`.layout.specialize` into its body) sizes each member's workspace. ``P``
+    (N, k + 1) holds each member's kernel parameters (the kernels write the time into the
+    last entry of a member's own row) and ``timed`` the kind marker of ``ModelData``; the
+    outputs are indexed by
     member first (``Qs`` (N, K, n), ``En``, ``Wk`` (N, K), ``ist`` (N, E_SIZE), ``fst``
     (N, F_SIZE)). Each member gets its own workspace and state, allocated inside the loop
     body, so threads share nothing but read-only model and method data.

@@ -39,7 +39,7 @@ import numpy as np
 
 from fastvi._numba import hot, njit
 from fastvi.kernels.linalg import lu_factor, lu_solve
-from fastvi.kernels.step import PREDICT_TRUST
+from fastvi.kernels.step import extrapolate
 from fastvi.status import Status
 
 # n and m of the double pendulum, read by numba as compile-time constants
@@ -213,7 +213,7 @@ def assemble(prm, tabs, h, qk, pk, X, R, A, D, G, qd, gj, jac):
 
 @hot
 def predict(tabs, s, J, h, vk, X, Xp, Xpp, Z, hist, order):
-    """The generic predictor (``fastvi.kernels.step.predict``, same operations): of
+    """The generic predictor (``fastvi.kernels.step.predict``, its extrapolation shared): of
     ``order`` 0 the straight line, 1 the last step's polynomial (``E``), 2 the last two
     steps' (``E2``) where it agrees with the former to ``PREDICT_TRUST``."""
     b, L, Ld, Lc, E, tau = tabs.b, tabs.L, tabs.Ld, tabs.Lc, tabs.E, tabs.tau
@@ -225,32 +225,7 @@ def predict(tabs, s, J, h, vk, X, Xp, Xpp, Z, hist, order):
         for k in range(sn, sn + J * NC):
             X[k] = 0.0
         return
-    two = order >= 2 and hist[0] >= 2
-    E2 = tabs.E2
-    gap = 0.0
-    move = 0.0
-    for nu in range(1, s + 1):
-        for a in range(NQ):
-            last = Xp[(s - 1) * NQ + a]
-            acc = -last * E[0, nu]
-            for mu in range(1, s + 1):
-                acc += (Xp[(mu - 1) * NQ + a] - last) * E[mu, nu]
-            X[(nu - 1) * NQ + a] = acc
-            if two:
-                back = Xpp[(s - 1) * NQ + a]
-                acc2 = -back * E2[0, nu]
-                for mu in range(1, s):
-                    acc2 += (Xpp[(mu - 1) * NQ + a] - back) * E2[mu, nu]
-                for mu in range(1, s + 1):
-                    acc2 += Xp[(mu - 1) * NQ + a] * E2[s + mu, nu]
-                acc2 -= last
-                Z[nu - 1, a] = acc2
-                gap = max(gap, abs(acc2 - acc))
-                move = max(move, abs(last))
-    if two and gap <= PREDICT_TRUST * move:
-        for nu in range(s):
-            for a in range(NQ):
-                X[nu * NQ + a] = Z[nu, a]
+    extrapolate(E, tabs.E2, Xp, Xpp, X, Z, s, NQ, order >= 2 and hist[0] >= 2)
     for k in range(sn, sn + J * NC):
         X[k] = Xp[k]
 

@@ -253,16 +253,18 @@ def integrate(
 
     chunk = total if not progress else max(1, total // _PROGRESS_CHUNKS)
     sout = np.zeros(lay.STEP_OUT_SIZE)
+    sized = True if specialize else None
     compile_time += _dispatch_time(drive.run, (md.timed, ws.dims if specialize else None), md,
                                    tabs, opts, h, state, ws,
-                                   chunk, total, every, smp, info, sout, ev)
+                                   chunk, total, every, smp, info, sout, ev, sized)
     bar = ProgressBar(total) if progress else None
     t_loop = time.perf_counter()
     status = 0
     recovered = []
     while info[lay.I_STEPS] < total:
         with quiet():
-            status = drive.run(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout, ev)
+            status = drive.run(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout,
+                               ev, sized)
         if status == lay.EVENTS_FULL:
             ev = events_.grow(ev)
             status = 0
@@ -383,7 +385,8 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
         info_sub[lay.I_T0] = info[lay.I_T0] + info[lay.I_STEPS] * h
         with quiet():
             st = drive.run(md, tabs, opts, h / sub, trial, ws_sub, sub, sub, sub, smp_sub, info_sub,
-                           np.zeros(lay.STEP_OUT_SIZE), events_.prepare(model, meth, None, 0))
+                           np.zeros(lay.STEP_OUT_SIZE), events_.prepare(model, meth, None, 0),
+                           True if specialize else None)
         if st == 0:
             state[:3] = trial[:3]
             info[lay.I_ITERS] += info_sub[lay.I_ITERS]

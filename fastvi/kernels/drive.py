@@ -18,7 +18,7 @@ from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_IT
                      SAVE_STRIDE, STEP_OUT_SIZE, EVENT_SLOTS, EVENTS_FULL, Events, ModelData,
                      Samples, dim, is_timed, sizes, workspace_for)
 from .events import after_step, event_values, room_for_crossings
-from .step import step
+from .step import step, step_inlined
 
 __all__ = ["run", "run_member", "run_ensemble", "energy", "accept", "record", "INFO_SIZE"]
 
@@ -85,13 +85,19 @@ def _last_sample(md, h, state, ws, n_total, save_every, smp, info):
 
 
 @hot_inline
-def _take(md, tabs, opts, h, state, ws, info, sout):
-    """One step from state rows 0–2; on success the new state is copied into them."""
+def _clock(ws, info, h):
+    """Set the times of the next step in ``ws.time``: step k runs from t0 + k h to
+    t0 + (k+1) h, each computed from t0 (no drift). Returns k."""
     k = int(info[I_STEPS])
-    # step k runs from t0 + k h to t0 + (k+1) h, each computed from t0 (no drift)
     ws.time[0] = info[I_T0] + k * h
     ws.time[1] = info[I_T0] + (k + 1) * h
-    status = step(md, tabs, opts, h, state, ws, info[I_FIRST] != 0.0, sout)
+    return k
+
+
+@hot_inline
+def _book(status, k, state, ws, info, sout):
+    """After step ``k`` (status ``status``): counters, and on success the new state copied
+    into state rows 0–2."""
     info[I_ITERS] += sout[S_ITERS]
     info[I_RES] = sout[S_RES]
     if status != 0:
@@ -106,7 +112,8 @@ def _take(md, tabs, opts, h, state, ws, info, sout):
 
 
 @hot
-def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, sout, ev):
+def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, sout, ev,
+        sized=None):
     """Advance ``state`` (rows q, p, v, then scratch) by up to ``n_chunk`` steps, step k
     running from ``info[I_T0] + k h``; ``sout`` is the step's output scratch
     (``STEP_OUT_SIZE``); ``ev`` the :class:`.layout.Events` of the run (no events and no
@@ -124,6 +131,10 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
     sample. Returns a status code; on failure ``info[I_FAILED]`` holds the failed step;
     ``EVENT_TERMINAL`` after the step in which a terminal event fired, ``EVENTS_FULL``
     before a step when an event record has no room left.
+
+    ``sized``: None, or True for a workspace of size markers (``integrate(...,
+    specialize=True)``), whose loop has the step compiled into it
+    (:data:`.step.step_inlined`).
     """
     active = ev.count > 0 or ev.dense.shape[0] > 0
     for _ in range(n_chunk):
@@ -135,7 +146,15 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
                 return EVENTS_FULL
             for a in range(state.shape[1]):
                 ev.qk[a] = state[0, a]
-        status = _take(md, tabs, opts, h, state, ws, info, sout)
+        _clock(ws, info, h)
+        first = info[I_FIRST] != 0.0
+        # decided when numba compiles `run` (an argument that is None is pruned before the
+        # inlining): only the size-specialized loop carries the step's body
+        if sized is None:
+            status = step(md, tabs, opts, h, state, ws, first, sout)
+        else:
+            status = step_inlined(md, tabs, opts, h, state, ws, first, sout)
+        status = _book(status, k, state, ws, info, sout)
         if status != 0:
             return status
         est = 0
@@ -187,7 +206,9 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
         if active:
             for a in range(state.shape[1]):
                 ev.qk[a] = state[0, a]
-        status = _take(md, tabs, opts, h, state, ws, info, sout)
+        _clock(ws, info, h)
+        status = _book(step(md, tabs, opts, h, state, ws, info[I_FIRST] != 0.0, sout), k, state,
+                       ws, info, sout)
         fst[F_RES] = sout[S_RES]
         if status != 0:
             ist[E_FAILED] = int(info[I_FAILED])

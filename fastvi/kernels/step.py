@@ -41,7 +41,7 @@ from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F
                      sizes)
 from .linalg import lu_factor, lu_solve
 
-__all__ = ["make_workspace", "assemble", "step", "end_momentum", "velocity_residual",
+__all__ = ["make_workspace", "assemble", "step", "step_inlined", "end_momentum", "velocity_residual",
            "hidden_residual", "constraint_rate"]
 
 _FD_REL = 6.0554544523933395e-06  # cbrt(machine epsilon): central differences' best step
@@ -397,26 +397,11 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
 
 # ----------------------------------------------------------------------------- predictor, full Newton
 @hot_inline
-def predict(tabs, n, m, h, vk, ws, order):
-    """Initial guess of ``order`` 2: the polynomial through the control points of the last
-    two steps (degree 2s, error O(h^(2s+1))) extrapolated onto this step; 1 (or 2 with only
-    one step known): of the last step alone (degree s); 0: the straight line with ``v_k``.
-    The impulses are the last step's (zero for order 0)."""
-    E, tau = tabs.E, tabs.tau
-    _, _, s, _, J = sizes(ws)
-    X = ws.X
-    Xp = ws.Xprev
-    if order == 0:
-        # straight line with the initial velocity; impulses start at zero
-        for nu in range(1, s + 1):
-            for a in range(n):
-                X[(nu - 1) * n + a] = h * tau[nu] * vk[a]
-        for k in range(s * n, s * n + J * m):
-            X[k] = 0.0
-        return
-    sn = s * n
-    two = order >= 2 and ws.hold[H_HIST] >= 2
-    E2, Xpp, Z = tabs.E2, ws.Xpp, ws.Z
+def extrapolate(E, E2, Xp, Xpp, X, Z, s, n, two):
+    """``X[:s n]`` ← the last step's polynomial (unknowns ``Xp``) extrapolated by ``E`` onto
+    this step's nodes; with ``two``, the last two steps' (``Xpp`` the one before) by ``E2``
+    instead, where the two guesses agree to ``PREDICT_TRUST`` of the last step's
+    displacement (``Z``: (s, n) scratch). Positions are increments from each step's start."""
     gap = 0.0
     move = 0.0
     for nu in range(1, s + 1):
@@ -447,6 +432,28 @@ def predict(tabs, n, m, h, vk, ws, order):
         for nu in range(s):
             for a in range(n):
                 X[nu * n + a] = Z[nu, a]
+
+
+@hot_inline
+def predict(tabs, n, m, h, vk, ws, order):
+    """Initial guess of ``order`` 2: the polynomial through the control points of the last
+    two steps (degree 2s, error O(h^(2s+1))) extrapolated onto this step; 1 (or 2 with only
+    one step known): of the last step alone (degree s); 0: the straight line with ``v_k``.
+    The impulses are the last step's (zero for order 0)."""
+    E, tau = tabs.E, tabs.tau
+    _, _, s, _, J = sizes(ws)
+    X = ws.X
+    Xp = ws.Xprev
+    if order == 0:
+        # straight line with the initial velocity; impulses start at zero
+        for nu in range(1, s + 1):
+            for a in range(n):
+                X[(nu - 1) * n + a] = h * tau[nu] * vk[a]
+        for k in range(s * n, s * n + J * m):
+            X[k] = 0.0
+        return
+    sn = s * n
+    extrapolate(E, tabs.E2, Xp, ws.Xpp, X, ws.Z, s, n, order >= 2 and ws.hold[H_HIST] >= 2)
     for k in range(sn, sn + J * m):
         X[k] = Xp[k]
 
@@ -868,7 +875,7 @@ def _finish_mech(md, tabs, h, qk, ws, q1, n, m, s, J):
 
 
 # ----------------------------------------------------------------------------- one step
-@hot_inline
+@hot
 def step(md, tabs, opts, h, state, ws, first, out):
     """Advance ``state`` rows (q_k, p_k, v_k) by one step into rows 3–5 (q1, p1, v1).
 
@@ -971,6 +978,14 @@ def step(md, tabs, opts, h, state, ws, first, out):
         Xp[k] = X[k]
     ws.hold[H_HIST] = 1 if first else min(ws.hold[H_HIST] + 1, 2)
     return OK
+
+
+#: the same step compiled into its caller: the time loop of the size-specialized kernels
+#: (``drive.run(..., sized=True)``). A call copies the flattened named tuples (hundreds of
+#: machine words): 0.77× / 0.92× of a sized step without the call (P2L-Q3G / P3L-Q4G), but
+#: inlined into every generic loop it cost ≈ 33 s more compile of the first ``integrate``
+#: and as much again for each other loop (docs/benchmarks.md)
+step_inlined = hot_inline(step.py_func)
 
 
 @hot_inline

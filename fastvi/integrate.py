@@ -183,10 +183,11 @@ def integrate(
     specialize : bool, default False
         Compile the kernels for this model's and method's sizes ``(n, m, s, r, J)``, as
         compile-time constants (:func:`fastvi.kernels.layout.specialize`): every small loop
-        of the step is unrolled. The trajectory is the generic kernel's bit for bit; a step
-        of the double pendulum costs 1.5–1.8× less (``docs/benchmarks.md``). The price is one
-        compile per size, ≈ 40–60 s on a fresh install (then cached on disk like the
-        generic kernels): worth it for long runs and large ensembles of one model.
+        of the step is unrolled, and the step is compiled into the time loop. The
+        trajectory is the generic kernels' bit for bit; a step of the double pendulum costs
+        1.6–2.4× less (``docs/benchmarks.md``). The price is one compile per size, ≈ 85–100 s
+        on a fresh install (then cached on disk like the generic kernels): worth it for
+        long runs of one model. :func:`fastvi.integrate_ensemble` has no such option yet.
 
     Returns
     -------

@@ -28,6 +28,10 @@ def test_markers_and_sizes():
     assert ws.X.shape == (12,)
 
 
+# compiles the time loop for the double pendulum's sizes (≈ 90 s on an empty cache): over
+# the 8-minute budget of `make test` together with the rest; `make test-slow` and `make bench`
+# (which asserts the same equality on every method it times) run it
+@pytest.mark.slow
 def test_specialized_double_pendulum_is_the_generic_trajectory_bit_for_bit():
     dp = fastvi.scenes.double_pendulum()
     q0, v0 = dp.initial_state(np.pi / 2, np.pi / 2)

@@ -1,6 +1,7 @@
 """fastvi against the compiled peer (issue 11, item 5), under pytest-benchmark.
 
-One fastvi run (``P3L-Q4G``, h = 0.025, the public ``fastvi.integrate``, saving every 0.1 s)
+One fastvi run (``P3L-Q4G``, h = 0.025, the public ``fastvi.integrate`` with
+``specialize=True`` as in the study's peer panels, saving every 0.1 s)
 and one run of CyRK's C++ DOP853 on the hand-written Cartesian index-1 right-hand side of
 the same double pendulum (:mod:`fastvi.studies.peers`, variant (a); the whole ``run_peer``
 call: solver, then the energies at every stored step), over T = 100 s from
@@ -37,7 +38,7 @@ _stats: dict[str, dict] = {}
 def problem():
     model = fastvi.scenes.double_pendulum()
     q0, v0 = model.initial_state(*peers.THETA0)
-    kw = dict(h=H, t_end=T, method=METHOD, save_every=int(round(SAVE_DT / H)))
+    kw = dict(h=H, t_end=T, method=METHOD, save_every=int(round(SAVE_DT / H)), specialize=True)
     res = fastvi.integrate(model, q0, v0, **kw)  # compiles (or loads) before any timing
     dH_fastvi = float(np.max(np.abs(res.energy - res.energy[0])))
     peers.warm_up_peers(methods=("DOP853",))

@@ -41,8 +41,8 @@ from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F
                      sizes)
 from .linalg import lu_factor, lu_solve
 
-__all__ = ["make_workspace", "assemble", "step", "step_inlined", "end_momentum", "velocity_residual",
-           "hidden_residual", "constraint_rate"]
+__all__ = ["make_workspace", "assemble", "step", "step_inlined", "end_momentum",
+           "velocity_residual", "hidden_residual", "constraint_rate"]
 
 _FD_REL = 6.0554544523933395e-06  # cbrt(machine epsilon): central differences' best step
 #: eps^(1/5): the best step of the five-point difference in time (error ~ eps^(4/5)); the

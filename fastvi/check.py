@@ -63,7 +63,7 @@ to skip it, at your own risk.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -258,9 +258,11 @@ class ModelCheckError(ValueError):
         self.callback = self.callbacks[0]
         size = [r for r in report.rows if r.status == "wrong" and r.reference.startswith(_SIZE_REFERENCE)]
         if size:  # a size / unset-entry error: the check stopped there
-            super().__init__(
-                f"model {report.model_name!r}: {size[0].note}. (Raised before any kernel ran; "
-                "`check=False` would skip this check and let the kernels write out of bounds.)")
+            risk = ("the structured solves would take the declared pattern and miss these entries"
+                    if "_pattern`" in size[0].note else
+                    "`check=False` would skip this check and let the kernels write out of bounds")
+            super().__init__(f"model {report.model_name!r}: {size[0].note}. (Raised before any "
+                             f"kernel ran; {risk}.)")
             return
         w = report.worst(self.callback)
         where = "the given state" if w.state == 0 else f"random nearby state {w.state}"
@@ -297,6 +299,9 @@ def _badness(row: CheckRow) -> float:
 _FILL = np.array([0x7FF80BADF00D0001, 0x7FF80BADF00D0002], dtype=np.uint64)
 _GUARD_MARGIN = 64
 _OK, _UNSET, _OUTSIDE = 0, 1, 2
+#: a callback with a declared pattern (``constraint_jacobian_pattern``) wrote a non-zero
+#: outside it (set in Python after the guarded call, which knows nothing of patterns)
+_OFF_PATTERN = 3
 _ENTRY: list = []  # compiled entry point of _guarded_call, once known
 
 _DIMS = dict(mass=("n", "n"), kinetic_grad=("n",), potential=(), potential_grad=("n",),
@@ -366,6 +371,11 @@ class _Callbacks:
         self.report = report
         self.count = 0
         self.sized = set()  # slots whose guarded size check passed
+        # slots with a declared pattern of non-zeros: the kernels hand them an `out` that is
+        # zero outside it, and they need write only the pattern (Model docstring)
+        self.pattern = {}
+        if model.constraint_jacobian_pattern is not None:
+            self.pattern["constraint_jacobian"] = model.constraint_jacobian_pattern.ravel()
         n, m = self.n, self.m
         self.shape = dict(mass=(n, n), kinetic_grad=(n,), potential=(), potential_grad=(n,),
                           constraint=(m,), constraint_jacobian=(m, n), potential_hessian=(n, n),
@@ -404,7 +414,23 @@ class _Callbacks:
             # straight to the compiled entry point
             _ENTRY[:] = [cres.entry_point for cres in _guarded_call.overloads.values()][:1]
         self.count += 1
+        mask = self.pattern.get(slot)
+        if mask is not None and status in (_OK, _UNSET):
+            status = self._apply_pattern(slot, f, u, mask, _FILL[fill])
         return status, f, u
+
+    def _apply_pattern(self, slot: str, f, u, mask, fill):
+        """After a guarded call of a callback with a declared pattern: entries outside it that
+        the callback left alone become the zeros the kernels provide; returns ``_OFF_PATTERN``
+        if it wrote a non-zero outside the pattern, ``_UNSET`` if it left an entry of the
+        pattern unset, else ``_OK``."""
+        size = self.size[slot]
+        out, bits = f[:size], u[:size]
+        off = ~mask
+        out[off & (bits == fill)] = 0.0
+        if np.any(out[off] != 0.0):
+            return _OFF_PATTERN
+        return _UNSET if np.any(bits[mask] == fill) else _OK
 
     def at(self, slot: str, t: float, q: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
         """``self(slot, q, v)`` at time ``t`` (the check's own time is restored after)."""
@@ -427,6 +453,9 @@ class _Callbacks:
             with quiet():
                 _call(self.fn[slot], q, v, self.p, out)
             self.count += 1
+            mask = self.pattern.get(slot)
+            if mask is not None and np.any(out.ravel()[~mask] != 0.0):
+                self.diagnose(slot, q, v)
             return out if self.shape[slot] else out.reshape(())
         status, f, _ = self._run(slot, q, v, 0)
         if status != _OK:
@@ -477,6 +506,16 @@ class _Callbacks:
                     problem = (f"`{slot}` {what}; a callback must write only into `out` "
                                "(copy an input before modifying it)", int(hit[0]))
                     break
+        mask = self.pattern.get(slot)
+        if problem is None and mask is not None:
+            off = np.flatnonzero(~mask & ((a0[:size].view(np.float64) != 0.0)
+                                          | (a1[:size].view(np.float64) != 0.0)))
+            if off.size:
+                idx = [self._index(slot, int(i)) for i in off[:4]]
+                more = f" and {off.size - 4} more" if off.size > 4 else ""
+                problem = (f"`{slot}` wrote non-zeros at {', '.join(map(str, idx))}{more}, outside the "
+                           f"model's `{slot}_pattern` ({int(mask.sum())} entries declared): add the "
+                           "entries to the pattern, or fix the function", int(off[0]))
         if problem is None:
             unset = np.flatnonzero((a0[:size] == _FILL[0]) & (a1[:size] == _FILL[1]))
             if unset.size:
@@ -733,8 +772,8 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
     each_state("potential_grad", lambda k, qk, vk: _compare(
         "potential_grad", k, cb("potential_grad", qk), _fd(lambda x: cb("potential", x), qk), rtol))
     if m:
-        each_state("constraint_jacobian", lambda k, qk, vk: _compare(
-            "constraint_jacobian", k, cb("constraint_jacobian", qk), _fd(lambda x: cb("constraint", x), qk), rtol))
+        each_state("constraint_jacobian", lambda k, qk, vk: _pattern_note(model, _compare(
+            "constraint_jacobian", k, cb("constraint_jacobian", qk), _fd(lambda x: cb("constraint", x), qk), rtol)))
     if has("force_jacobian_q"):
         each_state("force_jacobian_q", lambda k, qk, vk: _compare(
             "force_jacobian_q", k, cb("force_jacobian_q", qk, vk), _fd(lambda x: cb("force", x, vk), qk), rtol))
@@ -778,6 +817,17 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
     elif raise_on_error:
         raise ModelCheckError(report)
     return report
+
+
+def _pattern_note(model: Model, row: CheckRow) -> CheckRow:
+    """Say so when G is wrong at an entry its declared pattern calls zero: the callback left
+    it out because the pattern does (the kernels would never see that derivative)."""
+    mask = model.constraint_jacobian_pattern
+    if row.status != "wrong" or mask is None or len(row.index) != 2 or mask[row.index]:
+        return row
+    note = (f"entry {list(row.index)} is outside the declared `constraint_jacobian_pattern`, but "
+            "finite differences of `constraint` find it non-zero: the pattern misses a non-zero")
+    return replace(row, note=(row.note + "; " if row.note else "") + note)
 
 
 def _t_column(fd):

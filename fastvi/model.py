@@ -391,6 +391,16 @@ class Model:
     constraint_time_derivative : callable, optional
         ``constraint_time_derivative(t, q, params, out)``: ``∂g/∂t`` (m); only with
         ``time_dependent=True``. A central difference in ``t`` of ``constraint`` otherwise.
+    constraint_jacobian_pattern : array_like, optional
+        The entries of ``G`` that may be non-zero, for large sparse mechanisms: an (m, n)
+        boolean array, or a pair ``(rows, cols)`` of index arrays. With a pattern the
+        kernels hand ``constraint_jacobian`` an ``out`` that is zero outside it, so the
+        callback need write **only the entries of the pattern** (an O(m n) ``out[:, :] = 0``
+        per call is what made a 256-link chain's step grow like N^1.4), and the structured
+        solves use it instead of detecting it (:mod:`fastvi.structure`). :meth:`check` (and
+        the automatic check of the first integration) verifies it: a non-zero written
+        outside the pattern, or a derivative ``∂g_a/∂q_b`` that finite differences find
+        non-zero where the pattern says zero, is reported naming the entry.
     name : str, optional
         A label used in summaries and error messages.
 
@@ -427,6 +437,7 @@ class Model:
         force_jacobian_v: Callable | None = None,
         time_dependent: bool = False,
         constraint_time_derivative: Callable | None = None,
+        constraint_jacobian_pattern=None,
         name: str | None = None,
     ):
         self.n = _as_int(n, "n", 1)
@@ -492,6 +503,7 @@ class Model:
             if fn is not None and not callable(fn):
                 raise TypeError(f"`{key}` must be a function or None, got {fn!r}")
         self._functions = {k: v for k, v in funcs.items() if v is not None}
+        self.constraint_jacobian_pattern = _as_pattern(constraint_jacobian_pattern, self.m, self.n)
         self._compiled = None
         self._mass_arg = mass
         self._checked = False  # set by fastvi.check once the derivatives passed (integrate skips it then)
@@ -526,7 +538,8 @@ class Model:
             )
         funcs = {k: v for k, v in self._functions.items() if k != "mass"}
         kwargs = dict(params=self.params, mass=self._mass_arg, name=self.name,
-                      time_dependent=self.time_dependent, **funcs)
+                      time_dependent=self.time_dependent,
+                      constraint_jacobian_pattern=self.constraint_jacobian_pattern, **funcs)
         return (_model_from_kwargs, (self.n, self.m, kwargs))
 
     # ------------------------------------------------------------------ compiled form
@@ -709,6 +722,32 @@ def _scene_from_recipe(scene, kwargs, params):
     model = SCENES[scene](**kwargs)
     model.params = params
     return model
+
+
+def _as_pattern(pattern, m: int, n: int):
+    """``constraint_jacobian_pattern`` as an (m, n) boolean array (None stays None)."""
+    name = "constraint_jacobian_pattern"
+    if pattern is None:
+        return None
+    if m == 0:
+        raise ValueError(f"`{name}` was given but m = 0: a model without constraints has no G")
+    if isinstance(pattern, tuple) and len(pattern) == 2:
+        rows, cols = (np.asarray(x) for x in pattern)
+        if rows.shape != cols.shape or rows.ndim != 1 or not (
+                np.issubdtype(rows.dtype, np.integer) and np.issubdtype(cols.dtype, np.integer)):
+            raise ValueError(f"`{name}` as (rows, cols) needs two 1-D integer arrays of one length, "
+                             f"got shapes {rows.shape} and {cols.shape}")
+        if rows.size and (rows.min() < 0 or rows.max() >= m or cols.min() < 0 or cols.max() >= n):
+            raise ValueError(f"`{name}`: an index is outside G's shape ({m}, {n}) (rows in 0…{m - 1}, "
+                             f"columns in 0…{n - 1})")
+        mask = np.zeros((m, n), dtype=bool)
+        mask[rows, cols] = True
+        return mask
+    mask = np.asarray(pattern)
+    if mask.dtype != bool or mask.shape != (m, n):
+        raise ValueError(f"`{name}` must be an ({m}, {n}) boolean array or a pair (rows, cols) of "
+                         f"index arrays, got {mask.dtype} array of shape {mask.shape}")
+    return np.array(mask)
 
 
 def _check_spd(M: np.ndarray, name: str) -> None:

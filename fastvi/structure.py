@@ -9,7 +9,9 @@ Once per model, method and parameter vector, in NumPy:
    is assembled by the step kernel itself, so the pattern holds exactly what the kernel
    writes, finite-difference Hessians included (a coordinate on which a derivative does not
    depend gives an exact zero difference). A zero that is only accidental at one random
-   state is caught by the other states (probability zero otherwise). From ``G``: the
+   state is caught by the other states (probability zero otherwise). A model may declare
+   the pattern of ``G`` instead (``Model(constraint_jacobian_pattern=)``, verified by
+   :meth:`fastvi.Model.check`); its callback then writes only those entries. From ``G``: the
    patterns of ``G Gᵀ`` (the projection) and of the Schur complement of the mechanics
    iteration.
 2. **The ordering.** SciPy's reverse Cuthill–McKee on each symmetrised pattern, and the
@@ -64,7 +66,8 @@ _PLANS_ATTR = "_structure_plans"
 
 def detect_pattern(model, meth, prm=None, n_states: int = PATTERN_STATES, seed: int = 12):
     """Boolean non-zero patterns ``{"G": (m, n), "newton": (N, N)}``, the union over
-    ``n_states`` random states (see the module docstring)."""
+    ``n_states`` random states (see the module docstring); ``G``'s is the model's
+    ``constraint_jacobian_pattern`` where it declares one."""
     from .kernels.step import assemble
 
     prm = model.params if prm is None else np.ascontiguousarray(prm, dtype=np.float64)
@@ -75,18 +78,19 @@ def detect_pattern(model, meth, prm=None, n_states: int = PATTERN_STATES, seed: 
     ws = lay.make_workspace(n, m, s, meth.r, J)
     PG = np.zeros((m, n), dtype=bool)
     PA = np.zeros((N, N), dtype=bool)
+    declared = model.constraint_jacobian_pattern  # checked by Model.check, taken as it is
     tabs = meth.kernel_tables
     for _ in range(n_states):
         q = rng.standard_normal(n)
         if m:
             G0 = model.constraint_jacobian_value(q, prm)
-            PG |= G0 != 0.0
+            PG |= G0 != 0.0 if declared is None else declared
             ws.G[0, :m] = G0  # G at q_k: the step kernel sets it before Newton
         ws.X[:] = 0.1 * rng.standard_normal(N)
         with quiet():
             assemble(md, tabs, 0.01, q, rng.standard_normal(n), ws, True)
         PA |= ws.A[:N, :N] != 0.0
-        if m:
+        if m and declared is None:
             for j in range(J + 1):
                 PG |= ws.G[j, :m] != 0.0
     return {"G": PG, "newton": PA}

@@ -10,7 +10,7 @@ from fastvi.kernels import layout as lay
 from fastvi.kernels.banded import band_factor, band_ld, band_solve
 from fastvi.kernels.step import assemble
 from fastvi.scenes import chain, double_pendulum
-from fastvi.scenes.chain import _dV, _G, _g, _ddg, _ddV, _V
+from fastvi.scenes.chain import _dV, _G, _g, _ddg, _ddV, _V, pattern
 
 P2 = fastvi.method("P2L-Q3G")
 
@@ -103,7 +103,8 @@ def _coupled_chain(N):
     prm = (*([1.0] * N), *([1.0] * N), 9.81)
     return fastvi.Model(2 * N, N, params=prm, mass=M, potential=_V, potential_grad=_dV,
                         potential_hessian=_ddV, constraint=_g, constraint_jacobian=_G,
-                        constraint_hessian=_ddg, name=f"coupled{N}")
+                        constraint_hessian=_ddg, constraint_jacobian_pattern=pattern(N),
+                        name=f"coupled{N}")
 
 
 def test_non_diagonal_mass_keeps_dense_schur_and_projection():

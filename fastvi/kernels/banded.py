@@ -24,7 +24,7 @@ from .layout import (NONFINITE, OK, SI_S_BAND, SI_S_IPERM, SI_S_KL, SI_S_KU, SI_
 
 __all__ = ["band_factor", "band_solve", "band_pack", "newton_banded", "schur_banded",
            "schur_solve_banded", "mech_impulses_banded", "g_times", "gt_times", "band_ld", "mech_rows_sparse",
-           "project_banded"]
+           "project_banded", "copy_on_pattern", "hidden_residual_sparse"]
 
 
 @hot_inline
@@ -161,6 +161,33 @@ def gt_times(si, Gj, y, out, scale, m):
             for k in range(si[gp + c], si[gp + c + 1]):
                 a = si[gc + k]
                 out[a] += Gj[c, a] * e
+
+
+@hot
+def copy_on_pattern(si, src, dst, m):
+    """``dst[c, a] = src[c, a]`` over the pattern of G (both zero outside it). Not inlined,
+    like the other structured kernels: a small model's step keeps its code."""
+    gp = si[SI_GPTR]
+    gc = si[SI_GCOL]
+    for c in range(m):
+        for k in range(si[gp + c], si[gp + c + 1]):
+            a = si[gc + k]
+            dst[c, a] = src[c, a]
+
+
+@hot
+def hidden_residual_sparse(si, G1, v1, gt, m):
+    """``max_c |(G v + g_t)_c|`` over the pattern of G (:func:`.step.hidden_residual`)."""
+    gp = si[SI_GPTR]
+    gc = si[SI_GCOL]
+    gv = 0.0
+    for c in range(m):
+        acc = gt[c]
+        for k in range(si[gp + c], si[gp + c + 1]):
+            a = si[gc + k]
+            acc += G1[c, a] * v1[a]
+        gv = max(gv, abs(acc))
+    return gv
 
 
 @hot

@@ -30,13 +30,13 @@ here allocates.
 import numpy as np
 
 from .._numba import hot, hot_inline, ptr
-from .banded import (gt_times, mech_impulses_banded, mech_rows_sparse, newton_banded,
-                     project_banded, schur_banded)
+from .banded import (copy_on_pattern, gt_times, hidden_residual_sparse, mech_impulses_banded,
+                     mech_rows_sparse, newton_banded, project_banded, schur_banded)
 from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
                      F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_M, F_MASSFN, F_TIME,
                      F_TSLOT, FJQ, FJV, FORCE, GT, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
                      NEWTON_FAILED, NEWTON_FULL, NONFINITE, OK, PGRAD, PHESS, POT, KHESS, S_FULL,
-                     S_G, S_GV, S_ITERS, S_RES, S_WORK, SI_A, SI_S, SI_SC, SINGULAR,
+                     S_G, S_GV, S_ITERS, S_RES, S_WORK, SI_A, SI_GPTR, SI_S, SI_SC, SINGULAR,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, SOLVE_BANDED, is_timed, make_workspace,
                      sizes)
 from .linalg import lu_factor, lu_solve
@@ -121,7 +121,14 @@ def _fd_momentum_jacobian(fmass, q, v, prm, out, qa, Ma, n):
 
 @hot
 def _fd_constraint_hessian(fjac, q, eta, prm, out, qa, Gp, Gm, n, m):
-    """out = Σ_a η_a ∇²g_a = ∂(Gᵀη)/∂q by central differences of the Jacobian callback."""
+    """out = Σ_a η_a ∇²g_a = ∂(Gᵀη)/∂q by central differences of the Jacobian callback.
+
+    ``Gp``/``Gm`` are zeroed first: they double as scratch elsewhere, and a callback with a
+    declared pattern writes only its non-zeros."""
+    for c in range(m):
+        for a in range(n):
+            Gp[c, a] = 0.0
+            Gm[c, a] = 0.0
     for b in range(n):
         for a in range(n):
             qa[a] = q[a]
@@ -898,9 +905,12 @@ def step(md, tabs, opts, h, state, ws, first, out):
             fns[CJAC](ptr(qk), ptr(qk), ptr(prm), ptr(G0))
         else:
             # the previous step ended with G at q(d_J) = q_k, bit for bit: reuse it
-            for a in range(m):
-                for c in range(n):
-                    G0[a, c] = G[J, a, c]
+            if ws.si[SI_GPTR] != 0:
+                copy_on_pattern(ws.si, G[J], G0, m)  # large models: O(nnz), not O(m n)
+            else:
+                for a in range(m):
+                    for c in range(n):
+                        G0[a, c] = G[J, a, c]
     out[S_FULL] = 0.0
     full = opts.mode == NEWTON_FULL or ws.hold[H_FULL] > 0 or not tabs.mech
     if ws.hold[H_FULL] > 0:
@@ -967,7 +977,10 @@ def step(md, tabs, opts, h, state, ws, first, out):
     if st != OK:
         return st
     out[S_G] = gmax
-    out[S_GV] = hidden_residual(G[J], v1, ws.gt, n, m)
+    if ws.si[SI_GPTR] != 0:
+        out[S_GV] = hidden_residual_sparse(ws.si, G[J], v1, ws.gt, m)
+    else:
+        out[S_GV] = hidden_residual(G[J], v1, ws.gt, n, m)
     out[S_WORK] = 0.0
     if is_timed(md):
         out[S_WORK] = _step_work(md, tabs, h, qk, q1, ws, n, m, s, J)

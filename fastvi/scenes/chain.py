@@ -66,8 +66,8 @@ def _g(q, p, out):
 
 
 def _G(q, p, out):
+    # only the entries of `pattern(N)`: the kernels hand `out` zeroed outside it
     nb = q.shape[0] // 2
-    out[:, :] = 0.0
     px = 0.0
     py = 0.0
     for i in range(nb):
@@ -95,6 +95,17 @@ def _ddg(q, eta, p, out):
             out[2 * i + 2, 2 * i] = e
             out[2 * i + 1, 2 * i + 3] = e
             out[2 * i + 3, 2 * i + 1] = e
+
+
+def pattern(N: int):
+    """``(rows, cols)`` of the non-zeros of the chain's ``G`` (m = N, n = 2N): link i joins
+    body i − 1 (the origin for i = 0) to body i."""
+    rows, cols = [], []
+    for i in range(N):
+        for a in range(max(0, 2 * i - 2), 2 * i + 2):
+            rows.append(i)
+            cols.append(a)
+    return np.array(rows), np.array(cols)
 
 
 def state_from_angles(thetas, omegas=None, lengths=None):
@@ -202,7 +213,8 @@ def chain(N: int, m=1.0, l=1.0, g: float = 9.81, damping: float = 0.0) -> Model:
     model = Model(
         2 * N, N, params=(*ms, *ls, g) + ((c,) if c else ()), mass=np.diag(np.repeat(ms, 2)),
         potential=_V, potential_grad=_dV, potential_hessian=_ddV, constraint=_g,
-        constraint_jacobian=_G, constraint_hessian=_ddg, name=f"chain{N}" + ("-damped" if c else ""),
+        constraint_jacobian=_G, constraint_hessian=_ddg, constraint_jacobian_pattern=pattern(N),
+        name=f"chain{N}" + ("-damped" if c else ""),
         **damping_.options(c),
     )
     lengths = np.array(ls)

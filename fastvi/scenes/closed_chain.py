@@ -57,8 +57,8 @@ def _g(q, p, out):
 
 
 def _G(q, p, out):
+    # only the entries of `pattern(N)`: the kernels hand `out` zeroed outside it
     nb = q.shape[0] // 2
-    out[:, :] = 0.0
     px = 0.0
     py = 0.0
     for i in range(nb + 1):
@@ -74,6 +74,19 @@ def _G(q, p, out):
             out[i, 2 * i - 1] = -dy
         px = x
         py = y
+
+
+def pattern(N: int):
+    """``(rows, cols)`` of the non-zeros of ``G`` (m = N, n = 2N − 2): link i joins body
+    i − 1 (pivot A for i = 0) to body i (pivot D for i = N − 1)."""
+    nb = N - 1
+    rows, cols = [], []
+    for i in range(N):
+        lo = max(0, 2 * i - 2)
+        hi = min(2 * nb, 2 * i + 2)
+        rows += [i] * (hi - lo)
+        cols += range(lo, hi)
+    return np.array(rows), np.array(cols)
 
 
 def _ddg(q, eta, p, out):
@@ -143,7 +156,8 @@ def closed_chain(N: int = 8, m: float = 1.0, l: float = 1.0, d: float | None = N
     n = 2 * (N - 1)
     model = Model(n, N, params=(m, l, d, g), mass=np.full(n, float(m)) * np.eye(n), potential=_V,
                   potential_grad=_dV, potential_hessian=_ddV, constraint=_g,
-                  constraint_jacobian=_G, constraint_hessian=_ddg, name=f"closed_chain{N}")
+                  constraint_jacobian=_G, constraint_hessian=_ddg,
+                  constraint_jacobian_pattern=pattern(N), name=f"closed_chain{N}")
 
     def initial_state():
         return _arc(N, l, d).ravel(), np.zeros(n)

@@ -20,6 +20,7 @@ import numpy as np
 from ..model import Model
 from ._common import attach, check_positive
 from .chain import _G, _V, _dV, _ddg, _ddV, _g
+from .chain import pattern as _chain_pattern
 from .chain import angles as _chain_angles
 from .chain import state_from_angles as _chain_state
 
@@ -74,7 +75,8 @@ def triple_pendulum(m=(1.0, 1.0, 1.0), l=(1.0, 1.0, 1.0), g: float = 9.81) -> Mo
     model = Model(
         6, 3, params=(*m, *l, g), mass=np.diag([m[0], m[0], m[1], m[1], m[2], m[2]]),
         potential=_V, potential_grad=_dV, potential_hessian=_ddV, constraint=_g,
-        constraint_jacobian=_G, constraint_hessian=_ddg, name="triple_pendulum",
+        constraint_jacobian=_G, constraint_hessian=_ddg, constraint_jacobian_pattern=_chain_pattern(3),
+        name="triple_pendulum",
     )
 
     def initial_state(theta1, theta2, theta3, omega1=0.0, omega2=0.0, omega3=0.0):

@@ -10,6 +10,7 @@ from .closed_chain import closed_chain
 from .double_pendulum import double_pendulum
 from .four_bar import four_bar
 from .kapitza import kapitza_pendulum
+from .ladder import ladder
 from .pendulum import pendulum
 from .rotary_rod_slider import rotary_rod_slider
 from .slider_crank import slider_crank
@@ -26,9 +27,11 @@ SCENES = {
     "four_bar": four_bar,
     "chain": chain,
     "closed_chain": closed_chain,
+    "ladder": ladder,
     "kapitza_pendulum": kapitza_pendulum,
     "slider_crank": slider_crank,
 }
 
 __all__ = ["SCENES", "pendulum", "double_pendulum", "rotary_rod_slider", "triple_pendulum",
-           "spherical_pendulum", "four_bar", "chain", "closed_chain", "kapitza_pendulum", "slider_crank"]
+           "spherical_pendulum", "four_bar", "chain", "closed_chain", "ladder", "kapitza_pendulum",
+           "slider_crank"]

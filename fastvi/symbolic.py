@@ -109,12 +109,13 @@ class SymbolicModel(Model):
     """
 
     def __init__(self, source: str, n: int, m: int, *, params=(), mass=None, name: str = "symbolic",
-                 coordinates=(), param_names=()):
+                 coordinates=(), param_names=(), constraint_jacobian_pattern=None):
         namespace = _load(source, name)
         funcs = {slot: namespace[slot] for slot in SLOTS if slot in namespace}
         if "mass" in funcs:
             mass = funcs.pop("mass")
-        super().__init__(n, m, params=params, mass=mass, name=name, **funcs)
+        super().__init__(n, m, params=params, mass=mass, name=name,
+                         constraint_jacobian_pattern=constraint_jacobian_pattern, **funcs)
         self.source = source
         self.coordinates = tuple(coordinates)
         self.param_names = tuple(param_names)
@@ -124,7 +125,8 @@ class SymbolicModel(Model):
         # import: travel as the source text and re-exec it on arrival (no SymPy needed).
         return (_rebuild, (self.source, self.n, self.m, dict(
             params=self.params, mass=self.mass_matrix_constant, name=self.name,
-            coordinates=self.coordinates, param_names=self.param_names)))
+            coordinates=self.coordinates, param_names=self.param_names,
+            constraint_jacobian_pattern=self.constraint_jacobian_pattern)))
 
 
 def _rebuild(source, n, m, kwargs):
@@ -182,15 +184,18 @@ class _Writer:
     def _expr(self, e):
         return self.printer.doprint(e)
 
-    def function(self, name: str, args: str, outputs, shape=None, doc: str = ""):
+    def function(self, name: str, args: str, outputs, shape=None, doc: str = "",
+                 zeroed: bool = False):
         """``outputs``: list of (targets, expr); ``shape`` set means ``out`` is zero-filled
-        first and zero entries are skipped. ``shape=None`` with one output means a return."""
+        first and zero entries are skipped (not filled when ``zeroed``: the kernels hand a
+        zero ``out``, as for a declared pattern). ``shape=None`` with one output means a
+        return."""
         sp = self.sp
         outputs = [(t, sp.sympify(e).xreplace(self.replace)) for t, e in outputs]
         n_all = sum(len(t) for t, _ in outputs)
         if shape is not None:
             outputs = [(t, e) for t, e in outputs if e != 0]
-        zero_fill = shape is not None and sum(len(t) for t, _ in outputs) < n_all
+        zero_fill = shape is not None and not zeroed and sum(len(t) for t, _ in outputs) < n_all
         exprs = [e for _, e in outputs]
         repl, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("x")) if exprs else ([], [])
         lines = [f"def {name}({args}):", f'    """{doc}"""']
@@ -370,7 +375,12 @@ def model_from_lagrangian(q, T, V=0, constraints=(), *, v=None, params=None, nam
     if m:
         Gm = sp.Matrix(gs).jacobian(qs)
         w.function("constraint", "q, p, out", _vector_outputs(gs), (m,), "g(q)")
-        w.function("constraint_jacobian", "q, p, out", _matrix_outputs(Gm, False), (m, n), "G = ∂g/∂q")
+        # the structural non-zeros of G are its declared pattern: the callback writes only
+        # them (O(nnz) instead of O(m n) a call) and the structured solves take it as it is
+        pattern = np.array([[Gm[a, i].xreplace(replace) != 0 for i in range(n)] for a in range(m)],
+                           dtype=bool)
+        w.function("constraint_jacobian", "q, p, out", _matrix_outputs(Gm, False), (m, n),
+                   "G = ∂g/∂q (only the entries of the pattern: out is zero elsewhere)", zeroed=True)
         if exact_hessians:
             H = sp.zeros(n, n)
             for a, ga in enumerate(gs):
@@ -384,7 +394,8 @@ def model_from_lagrangian(q, T, V=0, constraints=(), *, v=None, params=None, nam
               "import math\n")
     source = header + "\n\n" + "\n\n\n".join(w.blocks) + "\n"
     model = SymbolicModel(source, n, m, params=pvals, mass=mass_const, name=name,
-                          coordinates=[s.name for s in qs], param_names=[s.name for s in psyms])
+                          coordinates=[s.name for s in qs], param_names=[s.name for s in psyms],
+                          constraint_jacobian_pattern=pattern if m else None)
     if compile:
         model.kernel_arguments()
     return model

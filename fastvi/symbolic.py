@@ -100,6 +100,9 @@ class SymbolicModel(Model):
     name : str
     coordinates, param_names : tuple of str
         Names of the coordinate and parameter symbols (``q[i]`` and ``p[k]`` in ``source``).
+    constraint_jacobian_pattern : ndarray (m, n) of bool, optional
+        The structural non-zeros of ``G``, which the generated ``constraint_jacobian`` writes
+        alone (see :class:`fastvi.Model`).
 
     Attributes
     ----------

@@ -1,6 +1,7 @@
 """Two fastvi trees side by side, over several pairs of fresh processes.
 
     .venv/bin/python bench/release_pairs.py TREE_A TREE_B [PAIRS] [--sized] [--methods=M,M]
+        [--model=chainN] [--steps=K]
 
 Each tree runs in its own child process (``bench/release_runner.py`` with ``PYTHONPATH`` set
 to the tree); the two are asked in ABBA order, 6 rounds of 20 000 double-pendulum steps per
@@ -9,7 +10,9 @@ times (default 5): the code layout of one process can make identical builds diff
 to ±7 %, so the ratio reported is the median over pairs. Both trees must have compiled
 their kernels once before (run any ``fastvi.integrate`` with that ``PYTHONPATH``).
 ``--sized`` times the size-specialized kernels (``specialize=True``) of both trees;
-``--methods=M,M`` picks the methods (default ``P2L-Q3G,P3L-Q4G,P1L-Q2G``).
+``--methods=M,M`` picks the methods (default ``P2L-Q3G,P3L-Q4G,P1L-Q2G``), ``--model=chainN``
+times ``fastvi.scenes.chain(N)`` (the cost-growth study's start) instead of the double
+pendulum, ``--steps=K`` the steps of a round (default 20 000).
 Used for ``docs/benchmarks.md`` ("Forces and time"); ``bench/test_bench_release.py`` does
 one pair against the release tag inside pytest-benchmark.
 """
@@ -40,7 +43,8 @@ def _ask(proc, cmd):
     return json.loads(proc.stdout.readline())
 
 
-def main(tree_a, tree_b, pairs=5, sized=False, methods=METHODS):
+def main(tree_a, tree_b, pairs=5, sized=False, methods=METHODS, model=None, n_steps=N_STEPS):
+    extra = (" sized" if sized else "") + (f" model={model}" if model else "")
     res = {m: ([], []) for m in methods}
     iters = {m: [None, None] for m in methods}
     for _ in range(pairs):
@@ -49,8 +53,8 @@ def main(tree_a, tree_b, pairs=5, sized=False, methods=METHODS):
             ta, tb = [], []
             for r in range(ROUNDS):
                 for p in ((a, b) if r % 2 == 0 else (b, a)):
-                    out = _ask(p, f"{meth} {N_STEPS} auto{' sized' if sized else ''}")
-                    (ta if p is a else tb).append(out["cpu"] / N_STEPS * 1e6)
+                    out = _ask(p, f"{meth} {n_steps} auto{extra}")
+                    (ta if p is a else tb).append(out["cpu"] / n_steps * 1e6)
                     iters[meth][0 if p is a else 1] = out["iterations"]
             res[meth][0].append(statistics.median(ta))
             res[meth][1].append(statistics.median(tb))
@@ -68,8 +72,13 @@ if __name__ == "__main__":
     args = [a for a in sys.argv[1:] if not a.startswith("--")]
     if len(args) < 2:
         sys.exit(__doc__)
-    chosen = METHODS
+    chosen, model, steps = METHODS, None, N_STEPS
     for f in flags:
         if f.startswith("--methods="):
             chosen = tuple(f.split("=", 1)[1].split(","))
-    main(args[0], args[1], int(args[2]) if len(args) > 2 else 5, "--sized" in flags, chosen)
+        elif f.startswith("--model="):
+            model = f.split("=", 1)[1]
+        elif f.startswith("--steps="):
+            steps = int(f.split("=", 1)[1])
+    main(args[0], args[1], int(args[2]) if len(args) > 2 else 5, "--sized" in flags, chosen,
+         model, steps)

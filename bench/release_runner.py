@@ -2,8 +2,10 @@
 
 Run as a child process by ``bench/test_bench_release.py`` — once with this tree, once with a
 worktree of the previous release — so that two versions of the package can be timed in one
-benchmark session. Reads commands ``<method> <n_steps> <newton> [sized]`` from stdin, one per
-line (``sized``: ``specialize=True``, the size-specialized kernels, where the tree has them);
+benchmark session. Reads commands ``<method> <n_steps> <newton> [sized] [model=chainN]`` from
+stdin, one per line (``sized``: ``specialize=True``, the size-specialized kernels, where the
+tree has them; ``model=chainN``: ``fastvi.scenes.chain(N)`` from the cost-growth study's start
+instead of the double pendulum);
 answers each with one line of JSON: the thread CPU seconds of the integration (no
 compile: every method is warmed up first), the Newton iterations per step and the final
 state. ``newton`` is ignored by a release that has no such option.
@@ -21,23 +23,38 @@ import fastvi
 H = 0.01
 
 
-def main() -> None:
+def _scene(name):
+    if name.startswith("chain"):
+        from fastvi.studies.wpd import chain_angles
+
+        N = int(name[5:])
+        model = fastvi.scenes.chain(N)
+        return (model, *model.initial_state(chain_angles(N)))
     model = fastvi.scenes.double_pendulum()
-    q0, v0 = model.initial_state(np.pi / 2, np.pi / 2)
+    return (model, *model.initial_state(np.pi / 2, np.pi / 2))
+
+
+def main() -> None:
+    scenes = {}
     params = inspect.signature(fastvi.integrate).parameters
     has_newton = "newton" in params
     has_sized = "specialize" in params
     warm = set()
     print(json.dumps(dict(ready=fastvi.__file__)), flush=True)
     for line in sys.stdin:
-        method, n_steps, newton, *sized = line.split()
+        method, n_steps, newton, *rest = line.split()
+        name = next((t[6:] for t in rest if t.startswith("model=")), "double_pendulum")
+        sized = "sized" in rest
+        if name not in scenes:
+            scenes[name] = _scene(name)
+        model, q0, v0 = scenes[name]
         n_steps = int(n_steps)
         kw = dict(h=H, n_steps=n_steps, method=method, save_every=n_steps)
         if has_newton:
             kw["newton"] = newton
         if sized and has_sized:
             kw["specialize"] = True
-        key = (method, newton, bool(sized))
+        key = (method, newton, bool(sized), name)
         if key not in warm:
             fastvi.integrate(model, q0, v0, **{**kw, "n_steps": 10, "save_every": 10})
             warm.add(key)

@@ -18,13 +18,13 @@ a plain numba loop needs no function pointer baked into a cached kernel.
 import numpy as np
 
 from .._numba import hot, hot_inline
-from .layout import (NONFINITE, OK, SI_S_BAND, SI_S_IPERM, SI_S_KL, SI_S_KU, SI_S_PERM,
+from .layout import (NONFINITE, OK, S_GV, SI_S_BAND, SI_S_IPERM, SI_S_KL, SI_S_KU, SI_S_PERM,
                      SINGULAR_CONSTRAINTS, SI_A_BAND, SI_A_KL, SI_A_KU, SI_A_PERM, SI_GCOL, SI_GPTR, SI_RHS,
                      SI_SC_BAND, SI_SC_IPERM, SI_SC_KL, SI_SC_KU, SI_SC_PERM, SI_SCOL, SI_SPTR)
 
 __all__ = ["band_factor", "band_solve", "band_pack", "newton_banded", "schur_banded",
            "schur_solve_banded", "mech_impulses_banded", "g_times", "gt_times", "band_ld", "mech_rows_sparse",
-           "project_banded", "copy_on_pattern", "hidden_residual_sparse"]
+           "project_banded"]
 
 
 @hot_inline
@@ -164,33 +164,6 @@ def gt_times(si, Gj, y, out, scale, m):
 
 
 @hot
-def copy_on_pattern(si, src, dst, m):
-    """``dst[c, a] = src[c, a]`` over the pattern of G (both zero outside it). Not inlined,
-    like the other structured kernels: a small model's step keeps its code."""
-    gp = si[SI_GPTR]
-    gc = si[SI_GCOL]
-    for c in range(m):
-        for k in range(si[gp + c], si[gp + c + 1]):
-            a = si[gc + k]
-            dst[c, a] = src[c, a]
-
-
-@hot
-def hidden_residual_sparse(si, G1, v1, gt, m):
-    """``max_c |(G v + g_t)_c|`` over the pattern of G (:func:`.step.hidden_residual`)."""
-    gp = si[SI_GPTR]
-    gc = si[SI_GCOL]
-    gv = 0.0
-    for c in range(m):
-        acc = gt[c]
-        for k in range(si[gp + c], si[gp + c + 1]):
-            a = si[gc + k]
-            acc += G1[c, a] * v1[a]
-        gv = max(gv, abs(acc))
-    return gv
-
-
-@hot
 def schur_banded(ws, W, h, m, J):
     """Build ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` over the pattern of ``G Gᵀ`` straight into band
     storage (diagonal ``M̄``: ``ws.Y[j']`` holds ``G_{j'} M̄⁻¹`` on the pattern of G) and
@@ -272,11 +245,12 @@ def mech_rows_sparse(ws, j, m):
 
 
 @hot
-def project_banded(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic):
+def project_banded(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic, out):
     """The end projection of :func:`.step.end_momentum` for a diagonal constant mass with
     ``G M⁻¹ Gᵀ`` built over the pattern of ``G Gᵀ`` and factored banded:
     ``p1 = P − G1ᵀ η``, ``(G M⁻¹ Gᵀ) η = G M⁻¹ P (+ g_t in ws.gt if rheonomic)``,
-    ``v1 = M⁻¹ p1``."""
+    ``v1 = M⁻¹ p1``; then, over the pattern of G as well, ``out[S_GV]`` = max|G1 v1 + g_t|
+    and ``ws.G[0]`` = G1 (the next step's start; zero outside the pattern in both)."""
     si, sb = ws.si, ws.sb
     kl = si[SI_S_KL]
     ku = si[SI_S_KU]
@@ -323,6 +297,17 @@ def project_banded(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic):
     for a in range(n):
         if not (np.isfinite(p1[a]) and np.isfinite(v1[a])):
             return NONFINITE
+    gv = 0.0
+    G0 = ws.G[0]
+    for c in range(m):
+        acc = ws.gt[c]
+        for k in range(si[gp + c], si[gp + c + 1]):
+            a = si[gc + k]
+            x = G1[c, a]
+            acc += x * v1[a]
+            G0[c, a] = x
+        gv = max(gv, abs(acc))
+    out[S_GV] = gv
     return OK
 
 

@@ -30,8 +30,8 @@ here allocates.
 import numpy as np
 
 from .._numba import hot, hot_inline, ptr
-from .banded import (copy_on_pattern, gt_times, hidden_residual_sparse, mech_impulses_banded,
-                     mech_rows_sparse, newton_banded, project_banded, schur_banded)
+from .banded import (gt_times, mech_impulses_banded, mech_rows_sparse, newton_banded,
+                     project_banded, schur_banded)
 from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
                      F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_M, F_MASSFN, F_TIME,
                      F_TSLOT, FJQ, FJV, FORCE, GT, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
@@ -904,13 +904,9 @@ def step(md, tabs, opts, h, state, ws, first, out):
             _at(md, ws, h, 0.0)
             fns[CJAC](ptr(qk), ptr(qk), ptr(prm), ptr(G0))
         else:
-            # the previous step ended with G at q(d_J) = q_k, bit for bit: reuse it
-            if ws.si[SI_GPTR] != 0:
-                copy_on_pattern(ws.si, G[J], G0, m)  # large models: O(nnz), not O(m n)
-            else:
-                for a in range(m):
-                    for c in range(n):
-                        G0[a, c] = G[J, a, c]
+            # the previous step ended with G at q(d_J) = q_k, bit for bit, and its
+            # end_momentum left it in G0 (a failed step leaves G0 alone: still G(q_k))
+            pass
     out[S_FULL] = 0.0
     full = opts.mode == NEWTON_FULL or ws.hold[H_FULL] > 0 or not tabs.mech
     if ws.hold[H_FULL] > 0:
@@ -973,14 +969,10 @@ def step(md, tabs, opts, h, state, ws, first, out):
                 for c in range(m):
                     acc += G[j, c, a] * X[sn + j * m + c]
                 P[a] -= cl * acc
-    st = end_momentum(md, q1, P, p1, v1, G[J], ws)
+    st = end_momentum(md, q1, P, p1, v1, G[J], ws, out)
     if st != OK:
         return st
     out[S_G] = gmax
-    if ws.si[SI_GPTR] != 0:
-        out[S_GV] = hidden_residual_sparse(ws.si, G[J], v1, ws.gt, m)
-    else:
-        out[S_GV] = hidden_residual(G[J], v1, ws.gt, n, m)
     out[S_WORK] = 0.0
     if is_timed(md):
         out[S_WORK] = _step_work(md, tabs, h, qk, q1, ws, n, m, s, J)
@@ -1086,16 +1078,22 @@ def _step_work(md, tabs, h, qk, q1, ws, n, m, s, J):
 
 
 @hot_inline
-def end_momentum(md, q1, P, p1, v1, G1, ws):
+def end_momentum(md, q1, P, p1, v1, G1, ws, out):
     """p1 = P − G1ᵀ η with (G M⁻¹ Gᵀ) η = G M⁻¹ P (+ g_t at t_{k+1} for a rheonomic
-    constraint), and v1 = M⁻¹ p1: the hidden constraint G v1 + g_t = 0."""
+    constraint), and v1 = M⁻¹ p1: the hidden constraint G v1 + g_t = 0.
+
+    Also, once the step has succeeded: ``out[S_GV]`` = max|G1 v1 + g_t| and
+    ``ws.G[0]`` = G1, where the next step starts. In the structured path both run over the
+    pattern of G inside :func:`.banded.project_banded` (O(nnz), not O(m n)), so a small
+    model's step has no code for it (a branch and a call for it in the step cost the
+    generic double-pendulum step 9–19 %, measured side by side)."""
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     n, m, _, _, _ = sizes(ws)
     if ws.si[SI_S] == SOLVE_BANDED:  # large sparse models, diagonal mass (banded.py)
         rheonomic = is_timed(md) and flags[F_TIME] != 0
         if rheonomic:
             constraint_rate(md, q1, ws.time[1], ws.gt, ws.g)
-        return project_banded(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic)
+        return project_banded(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic, out)
     Mlu = ws.Ma
     pivn = ws.pivp
     Y = ws.Gp
@@ -1159,4 +1157,9 @@ def end_momentum(md, q1, P, p1, v1, G1, ws):
     for a in range(n):
         if not (np.isfinite(p1[a]) and np.isfinite(v1[a])):
             return NONFINITE
+    out[S_GV] = hidden_residual(G1, v1, ws.gt, n, m)
+    G0 = ws.G[0]
+    for c in range(m):
+        for a in range(n):
+            G0[c, a] = G1[c, a]
     return OK

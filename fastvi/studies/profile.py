@@ -87,8 +87,9 @@ def _loop_mech(md, tabs, h, ws, R0, n, m, s, J, K):
 @njit
 def _loop_end(md, q1, P, p1, v1, G1, ws, K):
     st = 0
+    out = np.zeros(lay.STEP_OUT_SIZE)
     for _ in range(K):
-        st += end_momentum(md, q1, P, p1, v1, G1, ws)
+        st += end_momentum(md, q1, P, p1, v1, G1, ws, out)
     return st
 
 

@@ -147,6 +147,15 @@ def newton(mode) -> int:
     return NEWTON_MODES[mode]
 
 
+def solver(value) -> str:
+    """One of :data:`fastvi.structure.SOLVERS`, named in the error otherwise."""
+    from .structure import SOLVERS
+
+    if not isinstance(value, str) or value not in SOLVERS:
+        raise ValueError(f"`solver` must be one of {', '.join(map(repr, SOLVERS))}, got {value!r}")
+    return value
+
+
 def newton_options(tol_, max_iter_, mode):
     """The validated :class:`~fastvi.kernels.layout.NewtonOptions` of a run."""
     from .kernels.layout import NewtonOptions

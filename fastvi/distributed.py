@@ -55,12 +55,13 @@ def integrate_ensemble(
     chunk_size: int | None = None,
     events=None,
     keep_events: int = 1,
+    solver: str = "auto",
 ) -> EnsembleResult:
     """:func:`fastvi.integrate_ensemble` with the members spread over a Dask cluster.
 
     Parameters
     ----------
-    model, Q0, V0, h, t_end, n_steps, t0, method, params, save, tol, max_iter, newton, check :
+    model, Q0, V0, h, t_end, n_steps, t0, method, params, save, tol, max_iter, newton, check, solver :
         As in :func:`fastvi.integrate_ensemble`.
     events, keep_events :
         As in :func:`fastvi.integrate_ensemble`. The event functions travel with each task
@@ -98,7 +99,8 @@ def integrate_ensemble(
         raise ImportError('fastvi.distributed needs Dask: pip install "fastvi[dask]"') from exc
     if not isinstance(model, Model):
         raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
-    opts = _ens._options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0, keep_events)
+    opts = _ens._options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0, keep_events,
+                         solver)
     _ens.events_.check_list(events)
     if threads is not None:  # the upper bound is the worker's NUMBA_NUM_THREADS: checked there
         threads = _ens.check.count(threads, "threads", 1)

@@ -20,6 +20,7 @@ import numpy as np
 
 from . import _validate as check
 from . import events as events_
+from . import structure
 from .integrate import Result, _dispatch_time, _timed
 from .kernels import drive
 from .kernels import layout as lay
@@ -396,6 +397,7 @@ def integrate_ensemble(
     check: bool = True,
     events=None,
     keep_events: int = 1,
+    solver: str = "auto",
 ) -> EnsembleResult:
     r"""Integrate ``N`` members (initial states and/or parameters) of one model in parallel.
 
@@ -445,6 +447,10 @@ def integrate_ensemble(
         Crossings kept per event and member (the first ones); later crossings are counted
         in ``n_events`` (and towards ``terminal``) but not located. Memory:
         ``8 N E K (2n + 1)`` bytes.
+    solver : {"auto", "dense", "banded"}, default "auto"
+        How each member solves a step's linear systems, as in :func:`fastvi.integrate`: a
+        large mechanism's members solve banded (planned once for the ensemble), a small
+        model's densely.
 
     Returns
     -------
@@ -477,7 +483,7 @@ def integrate_ensemble(
     run_check = check
     if not isinstance(model, Model):
         raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
-    opts = _options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0, keep_events)
+    opts = _options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0, keep_events, solver)
     threads = _validate_threads(threads)
     return _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
                      events=events)
@@ -489,14 +495,15 @@ def _validate_threads(threads):
 
 
 def _options(h, t_end, n_steps, method, save, tol, max_iter, newton="auto", t0=0.0,
-             keep_events=1) -> dict:
+             keep_events=1, solver="auto") -> dict:
     """The validated scalar options of a run (cheap: the client of a Dask run calls it too)."""
     h = check.step_size(h)
     t0 = check.start_time(t0)
     return dict(h=h, t0=t0, total=check.step_count(h, t_end, n_steps, t0),
                 method=check.method(method), save=check.ensemble_save(save),
                 newton=check.newton_options(tol, max_iter, newton),
-                keep_events=check.count(keep_events, "keep_events", 1))
+                keep_events=check.count(keep_events, "keep_events", 1),
+                solver=check.solver(solver))
 
 
 def _members(model: Model, Q0, V0, params):
@@ -549,6 +556,7 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
     Ne = np.zeros((N, lay.EVENT_SLOTS), dtype=np.int64)
 
     fns, flags, Mc = model.kernel_arguments()
+    plan = structure.plan(model, meth, None, opts.get("solver", "auto"))
     with _PARALLEL_LOCK:
         prev_threads = numba.get_num_threads()
         prev_chunk = numba.get_parallel_chunksize()
@@ -562,7 +570,7 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
             # generic kernels (integrate(..., specialize=True) does not have this limit)
             dims = (model.n, model.m, meth.s, meth.r, meth.J)
             args = (fns, flags, Mc, KP, model.kernel_data().timed, meth.kernel_tables,
-                    opts["newton"], h, t0, dims, X0, total, mode, every, H0,
+                    opts["newton"], h, t0, dims, plan.si, plan.sb, X0, total, mode, every, H0,
                     Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, ev.fns, ev.count, ev.direction,
                     ev.terminal, Te, Qe, Ve, Ne)
             compile_time += _dispatch_time(drive.run_ensemble, args[4], *args)

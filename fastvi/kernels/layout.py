@@ -277,6 +277,19 @@ def workspace_for(dims):
     )
 
 
+#: the structured-solve plan's fields come last in a Workspace: si, sb, then dims
+_PLAN_AT = Workspace._fields.index("si")
+assert Workspace._fields[_PLAN_AT:] == ("si", "sb", "dims")
+
+
+@njit
+def with_plan(ws, si, sb):
+    """``ws`` with the structured-solve plan ``si``, ``sb`` of :func:`fastvi.structure.plan`
+    (``sb`` is written by the solves: each trajectory needs its own copy; ``si`` is read
+    only). What :func:`fastvi.structure.workspace` does in Python, for compiled callers."""
+    return Workspace(*ws[:_PLAN_AT], si, sb, ws.dims)
+
+
 # ----------------------------------------------------------------------------- sizes
 def dim(x):
     """A size as the kernels read it: an int, or the length of a *size marker* — a tuple of

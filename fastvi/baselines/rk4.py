@@ -28,6 +28,7 @@ Differential Equations II*, section VII.2 (index reduction, projection methods).
 from __future__ import annotations
 
 import time
+from collections import namedtuple
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -46,7 +47,9 @@ from ..kernels.layout import CJAC as _CJAC
 from ..kernels.layout import CON as _CON
 from ..kernels.layout import F_EX_CHESS as _F_EXACT_CHESS
 from ..kernels.layout import F_EX_MJAC as _F_EXACT_MJAC
+from ..kernels.layout import F_M as _F_M
 from ..kernels.layout import F_MASSFN as _F_MASSFN
+from ..kernels.layout import F_N as _F_N
 from ..kernels.layout import KGRAD as _KGRAD
 from ..kernels.layout import MASS as _MASS
 from ..kernels.layout import MJAC as _MJAC
@@ -102,22 +105,44 @@ class BaselineResult(TrajectoryResult):
         return self.name
 
 
+#: scratch of one RK4 trajectory (:func:`make_workspace`)
+Workspace = namedtuple("Workspace", [
+    "K",  # (n+m, n+m) [M Gᵀ; G 0], factored in place
+    "rhs",  # (n+m,) right-hand side, then (a, λ)
+    "piv",  # (n+m,) its pivots
+    "M",  # (n, n) M(q)
+    "Cq",  # (n, n) ∂(M v)/∂q
+    "Hc",  # (n, n) constraint Hessian, or M at q ± ε v
+    "G", "Gp", "Gm",  # (m, n) G, and G at q ± ε v
+    "dV", "dT", "qa",  # (n,) ∇V, ∂T/∂q, q ± ε v
+    "g", "unit",  # (m,) g, a unit impulse for the Hessian contraction
+    "stages",  # (10, n) RK stages k1…k4 of q and of v, the stage q and v
+    "pot",  # (1,) potential value
+])
+#: the saved samples of :func:`run`: time, q, v, energy, and the maxima of |g|, |G v| over
+#: the steps since the previous sample
+Samples = namedtuple("Samples", ["t", "q", "v", "energy", "g", "gv"])
+#: entries of the observation vector filled by :func:`observe`
+OBS_H, OBS_G, OBS_GV = range(3)
+OBS_SIZE = 3
+#: entries of ``run``'s ``info``: steps done, samples written
+RUN_STEPS, RUN_SAVED = range(2)
+RUN_INFO_SIZE = 2
+
+
 @njit
 def make_workspace(n, m):
     """Scratch for one trajectory: the saddle-point system and stage vectors."""
     N = n + m
     mm = max(m, 1)
-    return (
-        np.zeros((N, N)),  # 0 K = [M Gᵀ; G 0], factored in place
-        np.zeros(N),  # 1 right-hand side, then (a, λ)
-        np.zeros(N, dtype=np.int64),  # 2 pivots
-        np.zeros((n, n)),  # 3 M(q)
-        np.zeros((2, n, n)),  # 4 ∂(Mv)/∂q, constraint Hessian
-        np.zeros((3, mm, n)),  # 5 G, and G at q ± ε v
-        np.zeros((6, n)),  # 6 ∇V, ∂T/∂q, q ± ε v, fd scratch
-        np.zeros((2, mm)),  # 7 g, unit vector for the Hessian contraction
-        np.zeros((10, n)),  # 8 RK stages: k1..k4 for q and v, stage q, stage v
-        np.zeros(1),  # 9 potential value
+    return Workspace(
+        np.zeros((N, N)), np.zeros(N), np.zeros(N, dtype=np.int64),
+        np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n)),
+        np.zeros((mm, n)), np.zeros((mm, n)), np.zeros((mm, n)),
+        np.zeros(n), np.zeros(n), np.zeros(n),
+        np.zeros(mm), np.zeros(mm),
+        np.zeros((10, n)),
+        np.zeros(1),
     )
 
 
@@ -164,15 +189,15 @@ def acceleration(fns, flags, Mc, prm, q, v, a, ws):
     """Solve the index-1 system at ``(q, v)`` for the acceleration ``a`` (n,), in place.
 
     Returns a status code (0, or ``SINGULAR_CONSTRAINTS`` if ``[M Gᵀ; G 0]`` is singular,
-    or ``NONFINITE``). The multipliers ``λ`` are left in ``ws[1][n:]``.
+    or ``NONFINITE``). The multipliers ``λ`` are left in ``ws.rhs[n:]``.
     """
-    n = flags[0]
-    m = flags[1]
-    K, rhs, piv, M = ws[0], ws[1], ws[2], ws[3]
-    Cq, Hc = ws[4][0], ws[4][1]
-    G, Gp, Gm = ws[5][0], ws[5][1], ws[5][2]
-    dV, dT, qa, fa = ws[6][0], ws[6][1], ws[6][2], ws[6][3]
-    unit = ws[7][1]
+    n = flags[_F_N]
+    m = flags[_F_M]
+    K, rhs, piv, M = ws.K, ws.rhs, ws.piv, ws.M
+    Cq, Hc = ws.Cq, ws.Hc
+    G, Gp, Gm = ws.G, ws.Gp, ws.Gm
+    dV, dT, qa = ws.dV, ws.dT, ws.qa
+    unit = ws.unit
     _mass(fns, flags, Mc, prm, q, M)
     fns[_PGRAD](ptr(q), ptr(q), ptr(prm), ptr(dV))
     for i in range(n):
@@ -249,11 +274,11 @@ def _project(fns, flags, Mc, prm, q, v, ws):
     Both corrections solve ``[M Gᵀ; G 0] [δ; μ] = [0; −r]`` (r = g, then G v), which gives
     ``δ = −M⁻¹Gᵀ (G M⁻¹ Gᵀ)⁻¹ r``, the smallest correction in the kinetic-energy norm.
     """
-    n = flags[0]
-    m = flags[1]
-    K, rhs, piv, M = ws[0], ws[1], ws[2], ws[3]
-    G = ws[5][0]
-    gv = ws[7][0]
+    n = flags[_F_N]
+    m = flags[_F_M]
+    K, rhs, piv, M = ws.K, ws.rhs, ws.piv, ws.M
+    G = ws.G
+    gv = ws.g
     qs = 1.0
     for i in range(n):
         qs = max(qs, abs(q[i]))
@@ -299,8 +324,8 @@ def _project(fns, flags, Mc, prm, q, v, ws):
 @hot
 def rk4_step(fns, flags, Mc, prm, h, q, v, ws):
     """One classical RK4 step of ``(q̇, v̇) = (v, a(q, v))``, in place."""
-    n = flags[0]
-    S = ws[8]
+    n = flags[_F_N]
+    S = ws.stages
     kq1, kq2, kq3, kq4, kv1, kv2, kv3, kv4, qs, vs = (S[0], S[1], S[2], S[3], S[4], S[5],
                                                        S[6], S[7], S[8], S[9])
     for i in range(n):
@@ -338,10 +363,10 @@ def rk4_step(fns, flags, Mc, prm, h, q, v, ws):
 
 @hot
 def observe(fns, flags, Mc, prm, q, v, ws, out):
-    """``out[:3] = (H, max|g|, max|G v|)`` at ``(q, v)``."""
-    n = flags[0]
-    m = flags[1]
-    M, G, gv, pot = ws[3], ws[5][0], ws[7][0], ws[9]
+    """``out[OBS_H]``, ``out[OBS_G]``, ``out[OBS_GV]`` = H, max|g|, max|G v| at ``(q, v)``."""
+    n = flags[_F_N]
+    m = flags[_F_M]
+    M, G, gv, pot = ws.M, ws.G, ws.g, ws.pot
     _mass(fns, flags, Mc, prm, q, M)
     fns[_POT](ptr(q), ptr(q), ptr(prm), ptr(pot))
     e = pot[0]
@@ -350,58 +375,58 @@ def observe(fns, flags, Mc, prm, q, v, ws, out):
         for c in range(n):
             acc += M[i, c] * v[c]
         e += 0.5 * v[i] * acc
-    out[0] = e
-    out[1] = 0.0
-    out[2] = 0.0
+    out[OBS_H] = e
+    out[OBS_G] = 0.0
+    out[OBS_GV] = 0.0
     if m > 0:
         fns[_CON](ptr(q), ptr(q), ptr(prm), ptr(gv))
         fns[_CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
         for c in range(m):
-            out[1] = max(out[1], abs(gv[c]))
+            out[OBS_G] = max(out[OBS_G], abs(gv[c]))
             acc = 0.0
             for i in range(n):
                 acc += G[c, i] * v[i]
-            out[2] = max(out[2], abs(acc))
+            out[OBS_GV] = max(out[OBS_GV], abs(acc))
 
 
 @njit
-def run(fns, flags, Mc, prm, h, q, v, n_total, save_every, project, outs, ws, info):
+def run(fns, flags, Mc, prm, h, q, v, n_total, save_every, project, smp, ws, info):
     """Advance ``(q, v)`` by ``n_total`` RK4 steps, saving every ``save_every``-th (and the last).
 
-    ``outs = (t, q, v, energy, max|g|, max|Gv|)``; the residuals are maxima over the steps
-    since the previous sample. ``info`` receives ``[steps done, samples written]``.
-    Returns a status code.
+    ``smp`` (:data:`Samples`) from slot 1 on; the residuals are maxima over the steps since
+    the previous sample. ``info[RUN_STEPS]``, ``info[RUN_SAVED]`` receive the steps done and
+    the samples written. Returns a status code.
     """
-    T, Qs, Vs, En, Gr, GVr = outs
-    n = flags[0]
-    obs = np.zeros(3)
+    T, Qs, Vs, En, Gr, GVr = smp.t, smp.q, smp.v, smp.energy, smp.g, smp.gv
+    n = flags[_F_N]
+    obs = np.zeros(OBS_SIZE)
     win_g = 0.0
     win_gv = 0.0
     j = 1
     for k in range(n_total):
         st = rk4_step(fns, flags, Mc, prm, h, q, v, ws)
-        if st == _OK and project and flags[1] > 0:
+        if st == _OK and project and flags[_F_M] > 0:
             st = _project(fns, flags, Mc, prm, q, v, ws)
         if st != _OK:
-            info[0] = k
-            info[1] = j
+            info[RUN_STEPS] = k
+            info[RUN_SAVED] = j
             return st
         observe(fns, flags, Mc, prm, q, v, ws, obs)
-        win_g = max(win_g, obs[1])
-        win_gv = max(win_gv, obs[2])
+        win_g = max(win_g, obs[OBS_G])
+        win_gv = max(win_gv, obs[OBS_GV])
         if (k + 1) % save_every == 0 or k + 1 == n_total:
             T[j] = (k + 1) * h
             for i in range(n):
                 Qs[j, i] = q[i]
                 Vs[j, i] = v[i]
-            En[j] = obs[0]
+            En[j] = obs[OBS_H]
             Gr[j] = win_g
             GVr[j] = win_gv
             win_g = 0.0
             win_gv = 0.0
             j += 1
-    info[0] = n_total
-    info[1] = j
+    info[RUN_STEPS] = n_total
+    info[RUN_SAVED] = j
     return _OK
 
 
@@ -463,15 +488,15 @@ def rk4(model: Model, q0, v0, *, h: float, t_end: float | None = None, n_steps: 
     En, Gr, GVr = np.zeros(K), np.zeros(K), np.zeros(K)
     ws = make_workspace(n, model.m)
     q, v = q0.copy(), v0.copy()
-    obs = np.zeros(3)
+    obs = np.zeros(OBS_SIZE)
     observe(fns, flags, Mc, prm, q, v, ws, obs)
-    Qs[0], Vs[0], En[0], Gr[0], GVr[0] = q0, v0, obs[0], obs[1], obs[2]
-    info = np.zeros(2)
+    Qs[0], Vs[0], En[0], Gr[0], GVr[0] = q0, v0, obs[OBS_H], obs[OBS_G], obs[OBS_GV]
+    info = np.zeros(RUN_INFO_SIZE)
     t0 = time.perf_counter()
     status = run(fns, flags, Mc, prm, h, q, v, total, every, bool(project),
-                 (T, Qs, Vs, En, Gr, GVr), ws, info)
+                 Samples(T, Qs, Vs, En, Gr, GVr), ws, info)
     wall = time.perf_counter() - t0
-    steps, J = int(info[0]), int(info[1])
+    steps, J = int(info[RUN_STEPS]), int(info[RUN_SAVED])
     status = Status(status)
     res = BaselineResult(
         t=T[:J].copy(), q=Qs[:J].copy(), v=Vs[:J].copy(), energy=En[:J].copy(),

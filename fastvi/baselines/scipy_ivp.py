@@ -20,7 +20,8 @@ from .. import _validate as check
 from .._numba import njit, quiet
 from ..model import Model
 from ..status import Status
-from .rk4 import BaselineResult, acceleration, make_workspace, observe
+from ..kernels.layout import F_N
+from .rk4 import OBS_G, OBS_GV, OBS_H, OBS_SIZE, BaselineResult, acceleration, make_workspace, observe
 
 __all__ = ["solve_ivp"]
 
@@ -29,7 +30,7 @@ _METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 
 @njit
 def _rhs(fns, flags, Mc, prm, y, dy, ws):
-    n = flags[0]
+    n = flags[F_N]
     q = y[:n]
     v = y[n:]
     for i in range(n):
@@ -130,11 +131,11 @@ def solve_ivp(model: Model, q0, v0, *, t_end: float, method: str = "DOP853", rto
     Y = sol.y.T
     K = Y.shape[0]
     En, Gr, GVr = np.zeros(K), np.zeros(K), np.zeros(K)
-    obs = np.zeros(3)
+    obs = np.zeros(OBS_SIZE)
     for j in range(K):
         observe(fns, flags, Mc, prm, np.ascontiguousarray(Y[j, :n]), np.ascontiguousarray(Y[j, n:]),
                 ws, obs)
-        En[j], Gr[j], GVr[j] = obs
+        En[j], Gr[j], GVr[j] = obs[OBS_H], obs[OBS_G], obs[OBS_GV]
     status = Status(failure[0]) if failure else (Status.SUCCESS if sol.success else Status.NONFINITE)
     return BaselineResult(
         t=sol.t.copy(), q=Y[:, :n].copy(), v=Y[:, n:].copy(), energy=En,

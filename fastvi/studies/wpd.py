@@ -74,11 +74,11 @@ import fastvi
 from fastvi import _validate as check
 from fastvi._numba import njit, ptr, quiet
 from fastvi.baselines import rk4 as rk4_baseline
-from fastvi.baselines.rk4 import BaselineResult, acceleration, observe
+from fastvi.baselines.rk4 import OBS_G, OBS_GV, OBS_H, OBS_SIZE, BaselineResult, acceleration, observe
 from fastvi.baselines.rk4 import make_workspace as rk_workspace
 from fastvi.kernels.linalg import lu_factor, lu_solve
 from fastvi.kernels.layout import PGRAD as _PGRAD
-from fastvi.kernels.layout import NEWTON_FULL, STEP_OUT_SIZE, NewtonOptions
+from fastvi.kernels.layout import F_M, F_N, NEWTON_FULL, STEP_OUT_SIZE, NewtonOptions
 from fastvi.kernels.layout import make_workspace as vi_workspace
 from fastvi.kernels.step import assemble
 from fastvi.kernels.step import step as _vi_step
@@ -178,14 +178,14 @@ def _compiled_for(fns):
 
     @nb.njit(nogil=True, error_model="numpy", boundscheck=False)
     def rhs(flags, Mc, prm, y, dy, ws):
-        n = flags[0]
+        n = flags[F_N]
         for i in range(n):
             dy[i] = y[n + i]
         return acceleration(fns, flags, Mc, prm, y[:n], y[n:], dy[n:], ws)
 
     @nb.njit(nogil=True, error_model="numpy", boundscheck=False)
     def observe_all(flags, Mc, prm, Y, out, ws):
-        n = flags[0]
+        n = flags[F_N]
         q = np.empty(n)
         v = np.empty(n)
         for j in range(Y.shape[0]):
@@ -236,12 +236,12 @@ def scipy_run(model, q0, v0, *, t_end: float, method: str, tol: float, t_eval) -
                                         atol=tol, t_eval=t_eval)
         wall, cpu = time.perf_counter() - w0, time.thread_time() - c0
         Y = np.ascontiguousarray(sol.y.T)
-        obs = np.zeros((Y.shape[0], 3))
+        obs = np.zeros((Y.shape[0], OBS_SIZE))
         observe_all(flags, Mc, prm, Y, obs, ws)
     status = Status(failure[0]) if failure else (Status.SUCCESS if sol.success else Status.NONFINITE)
     return BaselineResult(
-        t=sol.t.copy(), q=Y[:, :n].copy(), v=Y[:, n:].copy(), energy=obs[:, 0].copy(),
-        constraint_residual=obs[:, 1].copy(), velocity_residual=obs[:, 2].copy(),
+        t=sol.t.copy(), q=Y[:, :n].copy(), v=Y[:, n:].copy(), energy=obs[:, OBS_H].copy(),
+        constraint_residual=obs[:, OBS_G].copy(), velocity_residual=obs[:, OBS_GV].copy(),
         stats=dict(steps=int(sol.nfev), rhs_evaluations=int(sol.nfev), wall_time=wall,
                    cpu_time=cpu, message=sol.message),
         status=status, name=f"SciPy {method}", h=float("nan"), model_name=model.name,
@@ -535,7 +535,7 @@ def _one_full_step(md, meth, h, q, p, v):
     """One full-Newton step from ``(q, p, v)``: ``(status, workspace)`` (the profile's
     parts are those of the full Newton)."""
     n = q.shape[0]
-    ws = vi_workspace(n, int(md.flags[1]), meth.s, meth.r, meth.J)
+    ws = vi_workspace(n, int(md.flags[F_M]), meth.s, meth.r, meth.J)
     state = np.zeros((6, n))
     state[0], state[1], state[2] = q, p, v
     st = _vi_step(md, meth.kernel_tables, NewtonOptions(1e-14, 30, NEWTON_FULL), h, state, ws,

@@ -15,6 +15,13 @@ written. The guard (``n² + 2n + 64`` entries) is longer than what the usual mis
 transposed ``(n, m)`` write into an ``(m, n)`` output reaches flat index ``n² − 1`` at most). Every
 later evaluation of the check goes through the same guarded buffers.
 
+**Declared patterns.** A model with ``constraint_jacobian_pattern`` is handed an ``out``
+that is zero outside the pattern and writes only the pattern's entries; the guarded call
+then requires every entry *of the pattern* to be set, takes the entries outside it that
+the callback left alone as the zeros the kernels provide, and names any non-zero written
+there. The comparison of ``G`` with finite differences of ``g`` says so when its worst
+entry lies outside the pattern (the pattern misses a non-zero).
+
 **Derivatives.** A variational integrator with a wrong gradient is not unstable, it is
 *silently wrong*: it conserves the energy of a different Lagrangian. :func:`check_model` (also
 :meth:`fastvi.Model.check`) therefore compares every supplied derivative callback with

@@ -25,8 +25,13 @@ Once per model, method and parameter vector, in NumPy:
 Why safe: the full Newton and the mechanics iteration only *solve for an increment* — a
 non-zero outside the detected band would slow their convergence, never change the
 solution, whose residual is evaluated exactly. The projection ``G M⁻¹ Gᵀ η = G M⁻¹ P`` is
-exact arithmetic on the pattern of ``G``; a ``G`` entry outside it would show as a velocity
-residual ``|G v|`` (computed with the dense ``G`` at every step) far above round-off.
+exact arithmetic on the pattern of ``G``. A *detected* pattern cannot miss an entry the
+callback writes at three random states (a structural zero does not depend on the state). A
+*declared* pattern is taken as it is — the callback writes only its entries, and ``|G v|``
+is then evaluated over it too — so it is verified where the model is: by
+:meth:`fastvi.Model.check` and the automatic check of the first integration, which name a
+non-zero written outside it and a derivative finite differences find where it says zero
+(``check=False`` skips that, at the user's risk).
 """
 
 from __future__ import annotations

@@ -59,6 +59,7 @@ the wrappers (:meth:`Model.kernel_params`); the other callbacks never look at it
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import os
 import types as types_module
@@ -69,7 +70,7 @@ import numba as nb
 import numpy as np
 from numba import carray, types
 
-from ._numba import njit, ptr, quiet
+from ._numba import njit, ptr
 from .kernels import layout as lay
 from .kernels.layout import SECOND as _SECOND
 from .kernels.layout import SLOTS
@@ -96,6 +97,13 @@ def _absent(q, v, params, out):  # pragma: no cover - never called: flags skip i
 def _call(fn, q, v, params, out):
     """Evaluate one compiled callback from Python (validation, diagnostics, baselines)."""
     fn(ptr(q), ptr(v), ptr(params), ptr(out))
+
+
+#: the callback signature as a ctypes prototype: Python calls a callback by its address in
+#: ≈ 4 µs, where numba's dispatcher of :func:`_call` re-types the callback argument on every
+#: call (≈ 16 µs; a dozen evaluations in every ``integrate`` call's validation)
+_DIRECT = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
+                           ctypes.c_void_p)
 
 
 # --------------------------------------------------------------------------- callback compile
@@ -623,13 +631,15 @@ class Model:
 
     # ------------------------------------------------------------------ evaluation from Python
     def _eval(self, slot: str, q, v=None, params=None, shape=(), t: float = 0.0):
-        cfs = self._compile()[0]
+        direct = self.__dict__.get("_direct")
+        if direct is None:
+            direct = self._direct = {name: _DIRECT(cf.address)
+                                     for name, cf in zip(SLOTS, self._compile()[0])}
         q = np.ascontiguousarray(q, dtype=np.float64)
         v = q if v is None else np.ascontiguousarray(v, dtype=np.float64)
         p = self.kernel_params(params, t)
         out = np.zeros(shape if shape else (1,))
-        with quiet():
-            _call(cfs[SLOTS.index(slot)], q, v, p, out)
+        direct[slot](q.ctypes.data, v.ctypes.data, p.ctypes.data, out.ctypes.data)
         return out if shape else float(out[0])
 
     def mass_matrix(self, q, params=None) -> np.ndarray:

@@ -36,7 +36,7 @@ from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F
                      F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_M, F_MASSFN, F_TIME,
                      F_TSLOT, FJQ, FJV, FORCE, GT, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
                      NEWTON_FAILED, NEWTON_FULL, NONFINITE, OK, PGRAD, PHESS, POT, KHESS, S_FULL,
-                     S_G, S_GV, S_ITERS, S_RES, S_WORK, SI_A, SI_GPTR, SI_S, SI_SC, SINGULAR,
+                     S_G, S_GV, S_ITERS, S_RES, S_WORK, SI_A, SI_S, SI_SC, SINGULAR,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, SOLVE_BANDED, is_timed, make_workspace,
                      sizes)
 from .linalg import lu_factor, lu_solve

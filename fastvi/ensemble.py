@@ -447,10 +447,10 @@ def integrate_ensemble(
         Crossings kept per event and member (the first ones); later crossings are counted
         in ``n_events`` (and towards ``terminal``) but not located. Memory:
         ``8 N E K (2n + 1)`` bytes.
-    solver : {"auto", "dense", "banded"}, default "auto"
+    solver : {"auto", "dense", "banded", "sparse"}, default "auto"
         How each member solves a step's linear systems, as in :func:`fastvi.integrate`: a
-        large mechanism's members solve banded (planned once for the ensemble), a small
-        model's densely.
+        large mechanism's members solve banded or sparse (planned once for the ensemble), a
+        small model's densely.
 
     Returns
     -------

@@ -173,13 +173,16 @@ def integrate(
         event ends the run after the step containing it, with ``status`` 1
         (``Status.TERMINATED``); that step's end is the last sample.
 
-    solver : {"auto", "dense", "banded"}, default "auto"
+    solver : {"auto", "dense", "banded", "sparse"}, default "auto"
         How the step's linear systems (full Newton matrix, Schur complement of the mechanics
-        iteration, end projection ``G M⁻¹ Gᵀ``) are solved. ``"auto"``: a banded LU after a
-        reverse Cuthill–McKee ordering where the detected sparsity pattern makes it cheaper
-        (large mechanisms, e.g. ``chain(N)`` from N ≈ 8), the dense LU otherwise — every
-        small model runs the dense path, bit for bit (:mod:`fastvi.structure`).
-        ``"dense"``/``"banded"`` force one (the trajectories agree at round-off).
+        iteration, end projection ``G M⁻¹ Gᵀ``) are solved. ``"auto"``: by the flop counts
+        of the detected sparsity pattern, a banded LU after a reverse Cuthill–McKee ordering
+        (large chains, e.g. ``chain(N)`` from N ≈ 8), a sparse LU in a minimum-degree order
+        (trees and loops a band does not fit: the Schur complement and the projection), or
+        the dense LU — every small model runs the dense path, bit for bit
+        (:mod:`fastvi.structure`). ``"dense"``/``"banded"``/``"sparse"`` force one (the
+        trajectories agree at round-off; the full Newton matrix, which needs row
+        interchanges, is banded under ``"sparse"``).
     specialize : bool, default False
         Compile the kernels for this model's and method's sizes ``(n, m, s, r, J)``, as
         compile-time constants (:func:`fastvi.kernels.layout.specialize`): every small loop

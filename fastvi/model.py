@@ -367,9 +367,12 @@ class Model:
         constraint callbacks, and the kernels skip the constraint rows entirely.
     params : array_like, shape (k,)
         Parameter vector handed to every callback (float64).
-    mass : ndarray (n, n) or callable
-        Constant symmetric positive definite mass matrix, or ``mass(q, params, out)``.
-        With a constant matrix no kinetic-energy callbacks are called at all.
+    mass : ndarray (n, n) or (n,), or callable
+        Constant symmetric positive definite mass matrix, its diagonal as a vector (point
+        masses in Cartesian coordinates: ``M = diag(mass)``), or ``mass(q, params, out)``.
+        With a constant matrix no kinetic-energy callbacks are called at all; with a
+        diagonal one the kernels use ``M v`` and ``M⁻¹`` elementwise (and, in large
+        mechanisms, the pattern of ``G`` for the Schur complement and the projection).
     potential, potential_grad : callable
         ``V(q)`` and ``∇V(q)``.
     kinetic_grad : callable, optional
@@ -488,8 +491,11 @@ class Model:
                 )
         else:
             M = np.array(mass, dtype=np.float64)
+            if M.shape == (self.n,):
+                M = np.diag(M)
             if M.shape != (self.n, self.n):
-                raise ValueError(f"`mass` must be an ({self.n}, {self.n}) array or a function, got shape {M.shape}")
+                raise ValueError(f"`mass` must be an ({self.n}, {self.n}) array, its diagonal ({self.n},) "
+                                 f"or a function, got shape {M.shape}")
             _check_spd(M, "mass")
             self.mass_matrix_constant = M
             for key in ("kinetic_grad", "kinetic_hessian", "momentum_jacobian"):

@@ -14,12 +14,18 @@ Once per model, method and parameter vector, in NumPy:
    :meth:`fastvi.Model.check`); its callback then writes only those entries. From ``G``: the
    patterns of ``G Gᵀ`` (the projection) and of the Schur complement of the mechanics
    iteration.
-2. **The ordering.** SciPy's reverse Cuthill–McKee on each symmetrised pattern, and the
-   lower/upper bandwidths of the permuted matrix.
-3. **The choice.** Banded LU (:mod:`fastvi.kernels.banded`) where it is cheaper than the
-   dense LU by the measured crossover (``BAND_MIN_ROWS``, ``BAND_GAIN``), the dense LU
-   otherwise — every small model keeps the dense path, bit for bit, and is not even
-   analysed. The Schur complement and the projection use the pattern
+2. **The orderings.** SciPy's reverse Cuthill–McKee on each symmetrised pattern, and the
+   lower/upper bandwidths of the permuted matrix; for the Schur complement and the
+   projection also a minimum-degree order of the constraints and the symbolic LU in it
+   (:mod:`fastvi.elimination`).
+3. **The choice.** Of the dense LU, the banded LU (:mod:`fastvi.kernels.banded`) and — for
+   the Schur complement and the projection — the sparse LU with static pivots
+   (:mod:`fastvi.kernels.sparse_lu`), the one of fewest flops, the sparse one's weighted by
+   ``SPARSE_COST`` and every structured one only from ``BAND_MIN_ROWS`` rows (the measured
+   crossovers, ``docs/benchmarks.md``): every small model keeps the dense path, bit for
+   bit, and is not even analysed. A chain is banded (its band is as thin as its fill);
+   a tree of bodies or a ladder of loops is sparse (a hub or a rung widens the band, not
+   the fill). The Schur complement and the projection use the pattern
    of ``G`` only with a diagonal constant mass (``M⁻¹`` is otherwise dense).
 
 Why safe: the full Newton and the mechanics iteration only *solve for an increment* — a
@@ -43,6 +49,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from ._numba import quiet
+from .elimination import minimum_degree, symbolic_lu
 from .kernels import layout as lay
 from .kernels.banded import band_ld
 
@@ -58,13 +65,17 @@ BAND_MIN_ROWS = dict(newton=36, schur=16, projection=8)
 #: … and only if the banded factorisation's flop count ``N (kl + 1)(kl + ku + 1)`` is below
 #: the dense one's ``N³/3`` by this factor (a pattern that fills the band stays dense)
 BAND_GAIN = 1.0
+#: the sparse LU's flop count is weighted by this against the banded and dense ones (its
+#: indirect addressing): measured on chain(N) and tree(b, L), docs/benchmarks.md
+SPARSE_COST = 4.0
 #: the ``solver`` choices: automatic, or forced for every system (for tests and benchmarks)
-SOLVERS = ("auto", "dense", "banded")
+SOLVERS = ("auto", "dense", "banded", "sparse")
 
 Plan = namedtuple("Plan", ["si", "sb", "solvers", "bandwidths", "patterns"])
 Plan.__doc__ = """A step's linear-solve plan: the workspace arrays ``si``, ``sb`` and, for
-people, ``solvers`` / ``bandwidths`` ({"newton", "schur", "projection"} → "dense"/"banded",
-(kl, ku)) and the detected ``patterns`` ({"G", "newton"} → boolean arrays)."""
+people, ``solvers`` / ``bandwidths`` ({"newton", "schur", "projection"} →
+"dense"/"banded"/"sparse", (kl, ku) after RCM) and the detected ``patterns`` ({"G",
+"newton"} → boolean arrays)."""
 
 _PLANS_ATTR = "_structure_plans"
 
@@ -115,8 +126,52 @@ def _ordering(P):
 
 def _banded_pays(N, kl, ku, solver, system):
     if solver != "auto":
-        return solver == "banded"
+        return solver in ("banded", "sparse")  # the full Newton matrix needs pivoting
     return N >= BAND_MIN_ROWS[system] and BAND_GAIN * N * (kl + 1) * (kl + ku + 1) < N**3 / 3
+
+
+_KIND_NAMES = {lay.SOLVE_DENSE: "dense", lay.SOLVE_BANDED: "banded", lay.SOLVE_SPARSE: "sparse"}
+_LU_ARRAYS = {lay.LU_DIAG: "diag", lay.LU_LPTR: "lptr", lay.LU_LROW: "lrow", lay.LU_LPOS: "lpos",
+              lay.LU_UPTR: "uptr", lay.LU_UCOL: "ucol", lay.LU_UPOS: "upos",
+              lay.LU_WPTR: "wptr", lay.LU_WPOS: "wpos"}
+
+_System = namedtuple("_System", ["kind", "band", "perm", "length", "destination", "symbolic",
+                                 "costs"])
+
+
+def _system(P, PS, J, solver, system):
+    """Plan one system of the impulses (the projection: ``J = 1``, ``P = PS``; the Schur
+    complement: ``P`` the pattern of its ``J × J`` blocks of ``PS``): banded after RCM,
+    or sparse LU in the minimum-degree order of the constraints with a constraint's ``J``
+    impulses adjacent (static pivots, see :mod:`fastvi.kernels.sparse_lu`), or dense —
+    by flop count, the sparse one weighted by ``SPARSE_COST``. ``destination(r, c)`` maps
+    entries of the original matrix to their place in the factor storage."""
+    N = P.shape[0]
+    perm_b, kl, ku = _ordering(P)
+    order = minimum_degree(PS)
+    perm_s = (np.arange(J)[None, :] * PS.shape[0] + order[:, None]).ravel()
+    sym = symbolic_lu(P, perm_s)
+    costs = dict(dense=N**3 / 3, banded=BAND_GAIN * N * (kl + 1) * (kl + ku + 1),
+                 sparse=SPARSE_COST * sym.flops)
+    if solver == "auto":
+        kind = min(costs, key=costs.get) if N >= BAND_MIN_ROWS[system] else "dense"
+    else:
+        kind = solver
+    if kind == "banded":
+        ip = np.argsort(perm_b)
+        ld, kv = band_ld(kl, ku), kl + ku
+
+        def destination(r, c):
+            i, col = ip[r], ip[c]
+            return ld * col + kv + i - col
+        return _System(lay.SOLVE_BANDED, (kl, ku), perm_b, ld * N, destination, None, costs)
+    if kind == "sparse":
+        ip = np.argsort(perm_s)
+
+        def destination(r, c):
+            return np.array([sym.position(i, j) for i, j in zip(ip[r], ip[c])], dtype=np.int64)
+        return _System(lay.SOLVE_SPARSE, (kl, ku), perm_s, sym.nnz, destination, sym, costs)
+    return _System(lay.SOLVE_DENSE, (kl, ku), perm_b, 0, None, None, costs)
 
 
 def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
@@ -174,40 +229,41 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
         Gi = PG.astype(np.int64)
         PS = (Gi @ Gi.T) > 0
         W = meth.kernel_tables.W
-        PSc = np.zeros((J * m, J * m), dtype=bool)
-        for j in range(1, J + 1):
-            for jp in range(J):
-                if W[j - 1, jp] != 0.0:
-                    PSc[(j - 1) * m:j * m, jp * m:(jp + 1) * m] |= PS
-        rows, cols = np.nonzero(PG)
-        gptr = np.concatenate(([0], np.cumsum(PG.sum(axis=1))))
-        rows_s, cols_s = np.nonzero(PS)
-        sptr = np.concatenate(([0], np.cumsum(PS.sum(axis=1))))
-        p_s, kl_s, ku_s = _ordering(PS)
-        p_sc, kl_sc, ku_sc = _ordering(PSc)
-        bands["projection"] = (kl_s, ku_s)
-        bands["schur"] = (kl_sc, ku_sc)
-        use_s = _banded_pays(m, kl_s, ku_s, solver, "projection")
-        use_sc = meth.kernel_tables.mech and _banded_pays(J * m, kl_sc, ku_sc, solver, "schur")
-        if use_s or use_sc:
-            si[lay.SI_GPTR] = put(gptr)
-            si[lay.SI_GCOL] = put(cols)
-            si[lay.SI_SPTR] = put(sptr)
+        rows_s, cols_s = np.nonzero(PS)  # row by row: the order of SI_SPTR / SI_SCOL
+        proj = _system(PS, PS, 1, solver, "projection")
+        bands["projection"] = proj.band
+        sysm = [(proj, lay.SI_S, lay.SI_S_KL, lay.SI_S_KU, lay.SI_S_PERM, lay.SI_S_BAND,
+                 lay.SI_S_LEN, lay.SI_S_DST, lay.SI_S_LU, [(rows_s, cols_s)])]
+        if meth.kernel_tables.mech:
+            schur = _system(np.kron(W != 0.0, PS), PS, J, solver, "schur")
+            bands["schur"] = schur.band
+            blocks = [((j - 1) * m + rows_s, jp * m + cols_s)
+                      for j in range(1, J + 1) for jp in range(J)]
+            sysm.append((schur, lay.SI_SC, lay.SI_SC_KL, lay.SI_SC_KU, lay.SI_SC_PERM,
+                         lay.SI_SC_BAND, lay.SI_SC_LEN, lay.SI_SC_DST, lay.SI_SC_LU, blocks))
+        if any(x[0].kind != lay.SOLVE_DENSE for x in sysm):
+            si[lay.SI_GPTR] = put(np.concatenate(([0], np.cumsum(PG.sum(axis=1)))))
+            si[lay.SI_GCOL] = put(np.nonzero(PG)[1])
+            si[lay.SI_SPTR] = put(np.concatenate(([0], np.cumsum(PS.sum(axis=1)))))
             si[lay.SI_SCOL] = put(cols_s)
-        if use_s:
-            si[lay.SI_S] = lay.SOLVE_BANDED
-            si[lay.SI_S_KL], si[lay.SI_S_KU] = kl_s, ku_s
-            si[lay.SI_S_PERM] = put(p_s)
-            si[lay.SI_S_IPERM] = put(np.argsort(p_s))
-            si[lay.SI_S_BAND] = band(band_ld(kl_s, ku_s) * m)
-        if use_sc:
-            si[lay.SI_SC] = lay.SOLVE_BANDED
-            si[lay.SI_SC_KL], si[lay.SI_SC_KU] = kl_sc, ku_sc
-            si[lay.SI_SC_PERM] = put(p_sc)
-            si[lay.SI_SC_IPERM] = put(np.argsort(p_sc))
-            si[lay.SI_SC_BAND] = band(band_ld(kl_sc, ku_sc) * J * m)
-    solvers["schur"] = "banded" if si[lay.SI_SC] else "dense"
-    solvers["projection"] = "banded" if si[lay.SI_S] else "dense"
+        for sy, k_kind, k_kl, k_ku, k_perm, k_store, k_len, k_dst, k_lu, blocks in sysm:
+            if sy.kind == lay.SOLVE_DENSE:
+                continue
+            si[k_kind] = sy.kind
+            si[k_kl], si[k_ku] = sy.band
+            si[k_perm] = put(sy.perm)
+            if k_kind == lay.SI_S:
+                si[lay.SI_S_IPERM] = put(np.argsort(sy.perm))
+            si[k_len] = sy.length
+            si[k_store] = band(sy.length)
+            si[k_dst] = put(np.concatenate([sy.destination(r, c) for r, c in blocks]))
+            if sy.kind == lay.SOLVE_SPARSE:
+                hdr = np.zeros(lay.LU_HEADER, dtype=np.int64)
+                si[k_lu] = put(hdr)  # filled in place below: `put` keeps the same array
+                for slot, name in _LU_ARRAYS.items():
+                    hdr[slot] = put(sy.symbolic.arrays[name])
+    solvers["schur"] = _KIND_NAMES[si[lay.SI_SC]]
+    solvers["projection"] = _KIND_NAMES[si[lay.SI_S]]
     si[lay.SI_RHS] = band(max(N, 1))
     result = Plan(np.ascontiguousarray(np.concatenate(ints)),
                   np.ascontiguousarray(np.concatenate(floats)), solvers, bands, pats)
@@ -219,6 +275,6 @@ def workspace(model, meth, prm=None, solver: str = "auto"):
     """:func:`fastvi.kernels.layout.make_workspace` with the plan of :func:`plan` in it."""
     p = plan(model, meth, prm, solver)
     ws = lay.make_workspace(model.n, model.m, meth.s, meth.r, meth.J)
-    if p.solvers and any(v == "banded" for v in p.solvers.values()):
+    if p.solvers and any(v != "dense" for v in p.solvers.values()):
         ws = ws._replace(si=p.si.copy(), sb=p.sb.copy())
     return ws

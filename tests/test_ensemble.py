@@ -213,7 +213,7 @@ def test_projection_of_members_is_reported_in_one_warning(pendulum):
         (dict(threads=numba.config.NUMBA_NUM_THREADS + 1), ValueError, "`threads` must be <="),
         (dict(h=-0.1), ValueError, "`h` must be positive"),
         (dict(method="P2L-Q3X"), ValueError, "P2L-Q3"),
-        (dict(solver="sparse"), ValueError, "`solver` must be one of 'auto', 'dense', 'banded'"),
+        (dict(solver="superlu"), ValueError, "`solver` must be one of 'auto', 'dense', 'banded'"),
         (dict(Q0=[[0.0, -1.0], [0.5, -1.0]]), ValueError, r"member 1 \(`Q0\[1\]`, `V0\[1\]`\)"),
     ],
 )

@@ -129,22 +129,23 @@ def _scene_cases():
 
 @pytest.mark.parametrize("newton", ["auto", "full"])
 @pytest.mark.parametrize("case", list(_scene_cases()), ids=lambda c: c[0])
-def test_dense_and_banded_trajectories_agree(case, newton):
+def test_dense_banded_and_sparse_trajectories_agree(case, newton):
     name, model, args = case
     if args is None:
         q0, v0 = chain(10).initial_state(np.linspace(0.2, 1.0, 10))
     else:
         q0, v0 = model.initial_state(*args)
     run = {}
-    for solver in ("dense", "banded"):
+    for solver in ("dense", "banded", "sparse"):
         run[solver] = fastvi.integrate(model, q0, v0, h=0.01, n_steps=40, newton=newton,
                                        solver=solver)
     scale = max(1.0, np.max(np.abs(run["dense"].q)))
     pscale = max(1.0, np.max(np.abs(run["dense"].p)))
-    # measured ≤ 1.1e-14 (q) and ≤ 1.4e-13 (p, chain12) after 40 steps
-    assert np.max(np.abs(run["dense"].q - run["banded"].q)) < 1e-12 * scale, name
-    assert np.max(np.abs(run["dense"].p - run["banded"].p)) < 1e-11 * pscale, name
-    assert np.max(run["banded"].constraint_residual) < 1e-12 * scale
+    for solver in ("banded", "sparse"):
+        # measured ≤ 1.1e-14 (q) and ≤ 1.4e-13 (p, chain12) after 40 steps
+        assert np.max(np.abs(run["dense"].q - run[solver].q)) < 1e-12 * scale, (name, solver)
+        assert np.max(np.abs(run["dense"].p - run[solver].p)) < 1e-11 * pscale, (name, solver)
+        assert np.max(run[solver].constraint_residual) < 1e-12 * scale
 
 
 def test_auto_path_of_a_small_model_is_the_dense_one_bit_for_bit():
@@ -158,8 +159,8 @@ def test_auto_path_of_a_small_model_is_the_dense_one_bit_for_bit():
 def test_rejects_an_unknown_solver():
     model = double_pendulum()
     q0, v0 = model.initial_state(0.1, 0.2)
-    with pytest.raises(ValueError, match="`solver` must be one of 'auto', 'dense', 'banded'"):
-        fastvi.integrate(model, q0, v0, h=0.01, n_steps=2, solver="sparse")
+    with pytest.raises(ValueError, match="`solver` must be one of 'auto', 'dense', 'banded', 'sparse'"):
+        fastvi.integrate(model, q0, v0, h=0.01, n_steps=2, solver="superlu")
 
 
 def test_closed_chain_is_banded_and_holds_its_constraints():
@@ -187,3 +188,22 @@ def test_chain_256_holds_constraints_and_energy():
     assert np.max(res.constraint_residual) < 1e-12
     assert np.max(res.velocity_residual) < 1e-10
     assert np.max(np.abs(res.energy_error)) < 1e-8 * max(1.0, abs(res.energy[0]))
+
+
+def test_a_diagonal_mass_given_as_a_vector_is_the_matrix():
+    N = 5
+    prm = (*np.linspace(1.0, 2.0, N), *([1.0] * N), 9.81)
+    kw = dict(params=prm, potential=_V, potential_grad=_dV, potential_hessian=_ddV, constraint=_g,
+              constraint_jacobian=_G, constraint_hessian=_ddg, constraint_jacobian_pattern=pattern(N))
+    masses = np.repeat(prm[:N], 2)
+    vec = fastvi.Model(2 * N, N, mass=masses, **kw)
+    mat = fastvi.Model(2 * N, N, mass=np.diag(masses), **kw)
+    assert np.array_equal(vec.mass_matrix(np.zeros(2 * N)), np.diag(masses))
+    q0, v0 = chain(N).initial_state(np.linspace(0.3, 0.9, N))
+    a = fastvi.integrate(vec, q0, v0, h=0.01, n_steps=30)
+    b = fastvi.integrate(mat, q0, v0, h=0.01, n_steps=30)
+    assert np.array_equal(a.q, b.q) and np.array_equal(a.p, b.p)
+    with pytest.raises(ValueError, match=r"`mass` must be an \(10, 10\) array, its diagonal \(10,\)"):
+        fastvi.Model(2 * N, N, mass=np.ones(2 * N + 1), **kw)
+    with pytest.raises(ValueError, match="`mass` must be"):
+        fastvi.Model(2 * N, N, mass=-masses, **kw)

@@ -5,8 +5,12 @@ linear system of a step — the full Newton matrix, the Schur complement of the 
 iteration on the impulses and the end projection ``G M⁻¹ Gᵀ`` — is solved either by the
 dense LU of :mod:`.linalg` or, when :func:`fastvi.structure.plan` chose it for the model and
 method, by a banded LU with partial pivoting after a fill-reducing (reverse Cuthill–McKee)
-ordering computed once in NumPy. The choice and the data sit in two workspace arrays,
-``ws.si`` (int64, header ``SI_*`` of :mod:`.layout`) and ``ws.sb`` (float64).
+ordering computed once in NumPy, or — the Schur complement and the projection, for
+patterns a band does not fit — by the sparse LU of :mod:`.sparse_lu`. The choice and the
+data sit in two workspace arrays, ``ws.si`` (int64, header ``SI_*`` of :mod:`.layout`) and
+``ws.sb`` (float64). The Schur complement and the projection are assembled over the pattern
+of ``G Gᵀ`` straight into their factor storage, at destinations computed at planning time
+(``SI_SC_DST``, ``SI_S_DST``), so banded and sparse storage share one assembly loop.
 
 Band storage is LAPACK's (``dgbtrf``): with ``kv = kl + ku`` and ``ld = 2 kl + ku + 1``,
 entry ``(i, j)`` of the permuted matrix sits at ``ab[kv + i − j + ld j]`` (column-major,
@@ -18,13 +22,15 @@ a plain numba loop needs no function pointer baked into a cached kernel.
 import numpy as np
 
 from .._numba import hot, hot_inline
-from .layout import (NONFINITE, OK, S_GV, SI_S_BAND, SI_S_IPERM, SI_S_KL, SI_S_KU, SI_S_PERM,
-                     SINGULAR_CONSTRAINTS, SI_A_BAND, SI_A_KL, SI_A_KU, SI_A_PERM, SI_GCOL, SI_GPTR, SI_RHS,
-                     SI_SC_BAND, SI_SC_IPERM, SI_SC_KL, SI_SC_KU, SI_SC_PERM, SI_SCOL, SI_SPTR)
+from .layout import (NONFINITE, OK, S_GV, SI_A_BAND, SI_A_KL, SI_A_KU, SI_A_PERM, SI_GCOL, SI_GPTR,
+                     SI_RHS, SI_S, SI_S_BAND, SI_S_DST, SI_S_IPERM, SI_S_KL, SI_S_KU, SI_S_LEN, SI_S_LU, SI_S_PERM,
+                     SI_SC, SI_SC_BAND, SI_SC_DST, SI_SC_KL, SI_SC_KU, SI_SC_LEN, SI_SC_LU,
+                     SI_SC_PERM, SI_SCOL, SI_SPTR, SINGULAR_CONSTRAINTS, SOLVE_BANDED)
+from .sparse_lu import sparse_factor, sparse_solve
 
-__all__ = ["band_factor", "band_solve", "band_pack", "newton_banded", "schur_banded",
-           "schur_solve_banded", "mech_impulses_banded", "g_times", "gt_times", "band_ld", "mech_rows_sparse",
-           "project_banded"]
+__all__ = ["band_factor", "band_solve", "band_pack", "newton_banded", "schur_structured",
+           "schur_solve_structured", "mech_impulses_structured", "g_times", "gt_times", "band_ld",
+           "mech_rows_sparse", "project_structured"]
 
 
 @hot_inline
@@ -164,55 +170,53 @@ def gt_times(si, Gj, y, out, scale, m):
 
 
 @hot
-def schur_banded(ws, W, h, m, J):
-    """Build ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` over the pattern of ``G Gᵀ`` straight into band
-    storage (diagonal ``M̄``: ``ws.Y[j']`` holds ``G_{j'} M̄⁻¹`` on the pattern of G) and
-    factor it. Returns 0, or non-zero when a pivot vanished."""
-    si, sb, G, Y = ws.si, ws.sb, ws.G, ws.Y
+def schur_structured(ws, W, h, m, J):
+    """Build ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` over the pattern of ``G Gᵀ`` straight into its
+    banded or sparse factor storage (diagonal ``M̄``: ``ws.Y[j']`` holds ``G_{j'} M̄⁻¹`` on the
+    pattern of G) and factor it. Returns 0, or non-zero when a pivot vanished."""
+    si, G, Y = ws.si, ws.G, ws.Y
     Jm = J * m
-    kl = si[SI_SC_KL]
-    ku = si[SI_SC_KU]
-    kv = kl + ku
-    ld = band_ld(kl, ku)
-    ip = si[si[SI_SC_IPERM]: si[SI_SC_IPERM] + Jm]
-    ab = sb[si[SI_SC_BAND]: si[SI_SC_BAND] + ld * Jm]
+    st = ws.sb[si[SI_SC_BAND]: si[SI_SC_BAND] + si[SI_SC_LEN]]
     gp = si[SI_GPTR]
     gc = si[SI_GCOL]
     sp = si[SI_SPTR]
     sc = si[SI_SCOL]
-    for k in range(ld * Jm):
-        ab[k] = 0.0
+    nnz = si[sp + m]
+    for k in range(si[SI_SC_LEN]):
+        st[k] = 0.0
     for j in range(1, J + 1):
         for jp in range(J):
             w = h * W[j - 1, jp]
             if w == 0.0:
                 continue
+            dst = si[SI_SC_DST] + ((j - 1) * J + jp) * nnz
             for c in range(m):
-                i = ip[(j - 1) * m + c]
                 for k in range(si[sp + c], si[sp + c + 1]):
                     e = si[sc + k]
                     acc = 0.0
                     for kk in range(si[gp + c], si[gp + c + 1]):
                         a = si[gc + kk]
                         acc += G[j, c, a] * Y[jp, e, a]
-                    col = ip[jp * m + e]
-                    ab[ld * col + kv + i - col] = w * acc
-    return band_factor(ab, ws.pivs, Jm, kl, ku)
+                    st[si[dst + k]] = w * acc
+    if si[SI_SC] == SOLVE_BANDED:
+        return band_factor(st, ws.pivs, Jm, si[SI_SC_KL], si[SI_SC_KU])
+    return sparse_factor(si, st, si[SI_SC_LU], Jm)
 
 
 @hot_inline
-def schur_solve_banded(ws, x, Jm):
+def schur_solve_structured(ws, x, Jm):
     """``x`` (the impulse rows of ``ws.R``) ← ``Sc⁻¹ x`` with the factors of
-    :func:`schur_banded`."""
+    :func:`schur_structured`."""
     si, sb = ws.si, ws.sb
-    kl = si[SI_SC_KL]
-    ku = si[SI_SC_KU]
     perm = si[si[SI_SC_PERM]: si[SI_SC_PERM] + Jm]
-    ab = sb[si[SI_SC_BAND]: si[SI_SC_BAND] + band_ld(kl, ku) * Jm]
+    st = sb[si[SI_SC_BAND]: si[SI_SC_BAND] + si[SI_SC_LEN]]
     t = sb[si[SI_RHS]: si[SI_RHS] + Jm]
     for i in range(Jm):
         t[i] = x[perm[i]]
-    band_solve(ab, ws.pivs, t, Jm, kl, ku)
+    if si[SI_SC] == SOLVE_BANDED:
+        band_solve(st, ws.pivs, t, Jm, si[SI_SC_KL], si[SI_SC_KU])
+    else:
+        sparse_solve(si, st, si[SI_SC_LU], t, Jm)
     for i in range(Jm):
         x[perm[i]] = t[i]
 
@@ -245,47 +249,49 @@ def mech_rows_sparse(ws, j, m):
 
 
 @hot
-def project_banded(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic, out):
+def project_structured(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic, out):
     """The end projection of :func:`.step.end_momentum` for a diagonal constant mass with
-    ``G M⁻¹ Gᵀ`` built over the pattern of ``G Gᵀ`` and factored banded:
+    ``G M⁻¹ Gᵀ`` built over the pattern of ``G Gᵀ`` and factored banded or sparse:
     ``p1 = P − G1ᵀ η``, ``(G M⁻¹ Gᵀ) η = G M⁻¹ P (+ g_t in ws.gt if rheonomic)``,
     ``v1 = M⁻¹ p1``; then, over the pattern of G as well, ``out[S_GV]`` = max|G1 v1 + g_t|
     and ``ws.G[0]`` = G1 (the next step's start; zero outside the pattern in both)."""
     si, sb = ws.si, ws.sb
-    kl = si[SI_S_KL]
-    ku = si[SI_S_KU]
-    kv = kl + ku
-    ld = band_ld(kl, ku)
     ip = si[si[SI_S_IPERM]: si[SI_S_IPERM] + m]
     perm = si[si[SI_S_PERM]: si[SI_S_PERM] + m]
-    ab = sb[si[SI_S_BAND]: si[SI_S_BAND] + ld * m]
+    st = sb[si[SI_S_BAND]: si[SI_S_BAND] + si[SI_S_LEN]]
     t = sb[si[SI_RHS]: si[SI_RHS] + m]
     gp = si[SI_GPTR]
     gc = si[SI_GCOL]
     sp = si[SI_SPTR]
     sc = si[SI_SCOL]
+    dst = si[SI_S_DST]
     for a in range(n):
         v1[a] = P[a] / Mc[a, a]
-    for k in range(ld * m):
-        ab[k] = 0.0
+    for k in range(si[SI_S_LEN]):
+        st[k] = 0.0
     for c in range(m):
-        i = ip[c]
         acc = ws.gt[c] if rheonomic else 0.0
         for k in range(si[gp + c], si[gp + c + 1]):
             a = si[gc + k]
             acc += G1[c, a] * v1[a]
-        t[i] = acc
+        t[ip[c]] = acc
         for k in range(si[sp + c], si[sp + c + 1]):
             e = si[sc + k]
             acc = 0.0
             for kk in range(si[gp + c], si[gp + c + 1]):
                 a = si[gc + kk]
                 acc += G1[c, a] * G1[e, a] / Mc[a, a]
-            col = ip[e]
-            ab[ld * col + kv + i - col] = acc
-    if band_factor(ab, ws.pivm, m, kl, ku) != 0:
-        return SINGULAR_CONSTRAINTS
-    band_solve(ab, ws.pivm, t, m, kl, ku)
+            st[si[dst + k]] = acc
+    if si[SI_S] == SOLVE_BANDED:
+        kl = si[SI_S_KL]
+        ku = si[SI_S_KU]
+        if band_factor(st, ws.pivm, m, kl, ku) != 0:
+            return SINGULAR_CONSTRAINTS
+        band_solve(st, ws.pivm, t, m, kl, ku)
+    else:
+        if sparse_factor(si, st, si[SI_S_LU], m) != 0:
+            return SINGULAR_CONSTRAINTS
+        sparse_solve(si, st, si[SI_S_LU], t, m)
     eta = ws.etaJ
     for i in range(m):
         eta[perm[i]] = t[i]
@@ -312,10 +318,10 @@ def project_banded(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic, out):
 
 
 @hot
-def mech_impulses_banded(ws, Lc, Ainv, h, n, m, s, J):
+def mech_impulses_structured(ws, Lc, Ainv, h, n, m, s, J):
     """The impulse part of :func:`.step._mech_solve` with the pattern of G: from the stage
     increments ``ws.U`` (``h (A⁻¹ ⊗ M̄⁻¹) r_E``), subtract ``C U`` from the constraint rows of
-    ``ws.R``, solve the banded Schur complement for ``δη``, and add
+    ``ws.R``, solve the structured Schur complement for ``δη``, and add
     ``h (A⁻¹ ⊗ M̄⁻¹) B δη`` to ``ws.U``. Not inlined, so that the step of small models
     compiles to the code it had before."""
     R, Z, U, Y, G = ws.R, ws.Z, ws.U, ws.Y, ws.G
@@ -330,7 +336,7 @@ def mech_impulses_banded(ws, Lc, Ainv, h, n, m, s, J):
                 for a in range(n):
                     T[a] += cl * U[mu - 1, a]
         g_sub(ws.si, G[j], T, R, sn + (j - 1) * m, m)
-    schur_solve_banded(ws, R[sn:], J * m)
+    schur_solve_structured(ws, R[sn:], J * m)
     for nu in range(s):
         for a in range(n):
             Z[nu, a] = 0.0

@@ -118,17 +118,32 @@ NEWTON_MODES = {"full": NEWTON_FULL, "auto": NEWTON_AUTO}
 # by :func:`fastvi.structure.plan` and stored in two workspace arrays: ``ws.si`` (int64: the
 # header below, then permutations and sparsity patterns at the offsets the header names) and
 # ``ws.sb`` (float64: band storages and a right-hand-side scratch, at named offsets).
-#: the solvers of a system: dense LU (linalg.py) or banded LU after a fill-reducing ordering
-SOLVE_DENSE, SOLVE_BANDED = 0, 1
+#: the solvers of a system: dense LU (linalg.py), banded LU with partial pivoting after a
+#: fill-reducing ordering (banded.py), or a sparse LU with static pivots and a symbolic
+#: factorisation computed once (sparse_lu.py; the Schur complement and the projection only)
+SOLVE_DENSE, SOLVE_BANDED, SOLVE_SPARSE = 0, 1, 2
 (SI_A, SI_A_KL, SI_A_KU, SI_A_PERM, SI_A_BAND,  # full Newton matrix (s n + J m rows)
- SI_SC, SI_SC_KL, SI_SC_KU, SI_SC_PERM, SI_SC_IPERM, SI_SC_BAND,  # Schur complement (J m)
+ SI_SC, SI_SC_KL, SI_SC_KU, SI_SC_PERM, SI_SC_BAND,  # Schur complement (J m)
  SI_S, SI_S_KL, SI_S_KU, SI_S_PERM, SI_S_IPERM, SI_S_BAND,  # projection G M⁻¹ Gᵀ (m)
  SI_GPTR, SI_GCOL,  # pattern of G, compressed rows: columns of row c at si[GCOL + GPTR[c] …]
  SI_SPTR, SI_SCOL,  # pattern of G Gᵀ (m × m), compressed rows
- SI_RHS) = range(22)  # offset in sb of the right-hand-side scratch
-#: length of the header of ``ws.si``; with ``si[SI_SC]`` or ``si[SI_S]`` banded the kernels
-#: use the pattern of G (a diagonal constant mass is then required)
-SI_HEADER = 22
+ SI_RHS,  # offset in sb of the right-hand-side scratch
+ # Schur complement and projection, banded or sparse: the length of the factor storage in
+ # sb (at SI_SC_BAND / SI_S_BAND), the offset in si of the destination of each entry of the
+ # pattern of G Gᵀ in that storage (Schur: block (j−1, j') at ((j−1) J + j') nnz(G Gᵀ)), and
+ # for a sparse LU the offset in si of its descriptor (LU_* below)
+ SI_SC_LEN, SI_SC_DST, SI_SC_LU,
+ SI_S_LEN, SI_S_DST, SI_S_LU) = range(27)
+#: length of the header of ``ws.si``; with ``si[SI_SC]`` or ``si[SI_S]`` structured the
+#: kernels use the pattern of G (a diagonal constant mass is then required)
+SI_HEADER = 27
+#: descriptor of a sparse LU in ``ws.si`` (sparse_lu.py): offsets in si of its arrays, for
+#: an N-row system in its fill-reducing order — position in the factor storage of each
+#: pivot; of each column's entries below the diagonal (pointers, rows, positions); of each
+#: row's entries right of the diagonal (pointers, columns, positions); and of the targets of
+#: each pivot's rank-one update, |L_k| × |U_k| positions row by row (pointers, positions)
+(LU_DIAG, LU_LPTR, LU_LROW, LU_LPOS, LU_UPTR, LU_UCOL, LU_UPOS, LU_WPTR, LU_WPOS) = range(9)
+LU_HEADER = 9
 
 # ----------------------------------------------------------------------------- workspace flags
 # entries of the int64 ``ws.hold``: steps left on the full Newton after the mechanics

@@ -30,15 +30,15 @@ here allocates.
 import numpy as np
 
 from .._numba import hot, hot_inline, ptr
-from .banded import (gt_times, mech_impulses_banded, mech_rows_sparse, newton_banded,
-                     project_banded, schur_banded)
+from .banded import (gt_times, mech_impulses_structured, mech_rows_sparse, newton_banded,
+                     project_structured, schur_structured)
 from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
                      F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_M, F_MASSFN, F_TIME,
                      F_TSLOT, FJQ, FJV, FORCE, GT, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
                      NEWTON_FAILED, NEWTON_FULL, NONFINITE, OK, PGRAD, PHESS, POT, KHESS, S_FULL,
                      S_G, S_GV, S_ITERS, S_RES, S_WORK, SI_A, SI_S, SI_SC, SINGULAR,
-                     SINGULAR_CONSTRAINTS, SINGULAR_MASS, SOLVE_BANDED, is_timed, make_workspace,
-                     sizes)
+                     SINGULAR_CONSTRAINTS, SINGULAR_MASS, SOLVE_BANDED, SOLVE_DENSE, is_timed,
+                     make_workspace, sizes)
 from .linalg import lu_factor, lu_solve
 
 __all__ = ["make_workspace", "assemble", "step", "step_inlined", "end_momentum",
@@ -579,7 +579,7 @@ def _minv(md, ws, x, n):
 @hot_inline
 def _mech_rows(md, ws, j, n, m):
     """``ws.Y[j]`` = (M̄⁻¹ G_jᵀ)ᵀ from ``ws.G[j]``."""
-    if ws.si[SI_SC] == SOLVE_BANDED:
+    if ws.si[SI_SC] != SOLVE_DENSE:
         mech_rows_sparse(ws, j, m)
         return
     for c in range(m):
@@ -673,7 +673,7 @@ def residual(md, tabs, h, qk, pk, ws):
                 if cl == 0.0:
                     continue
                 r0 = nu * n
-                if ws.si[SI_SC] == SOLVE_BANDED:  # over the pattern of G (banded.py)
+                if ws.si[SI_SC] != SOLVE_DENSE:  # over the pattern of G (banded.py)
                     gt_times(ws.si, Gj, X[col:], R[r0:], -cl, m)
                     continue
                 for c in range(m):
@@ -691,8 +691,8 @@ def _schur(tabs, h, ws, n, m, J):
     """Build and factor the Schur complement ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` on the
     impulses from ``ws.G`` and ``ws.Y``. Returns a status code."""
     G, Y, Sc, W = ws.G, ws.Y, ws.Sc, tabs.W
-    if ws.si[SI_SC] == SOLVE_BANDED:  # large sparse models (banded.py)
-        if schur_banded(ws, W, h, m, J) != 0:
+    if ws.si[SI_SC] != SOLVE_DENSE:  # large sparse models (banded.py)
+        if schur_structured(ws, W, h, m, J) != 0:
             return SINGULAR
         return OK
     for j in range(1, J + 1):
@@ -738,9 +738,9 @@ def _mech_solve(md, tabs, h, ws, n, m, s, J):
             c = h * Ainv[mu, nu]
             for a in range(n):
                 U[mu, a] += c * Z[nu, a]
-    if m > 0 and ws.si[SI_SC] == SOLVE_BANDED:
+    if m > 0 and ws.si[SI_SC] != SOLVE_DENSE:
         # the same with the pattern of G, not inlined: small models' code stays as it was
-        mech_impulses_banded(ws, Lc, Ainv, h, n, m, s, J)
+        mech_impulses_structured(ws, Lc, Ainv, h, n, m, s, J)
     elif m > 0:
         Jm = J * m
         for j in range(1, J + 1):
@@ -1084,16 +1084,16 @@ def end_momentum(md, q1, P, p1, v1, G1, ws, out):
 
     Also, once the step has succeeded: ``out[S_GV]`` = max|G1 v1 + g_t| and
     ``ws.G[0]`` = G1, where the next step starts. In the structured path both run over the
-    pattern of G inside :func:`.banded.project_banded` (O(nnz), not O(m n)), so a small
+    pattern of G inside :func:`.banded.project_structured` (O(nnz), not O(m n)), so a small
     model's step has no code for it (a branch and a call for it in the step cost the
     generic double-pendulum step 9–19 %, measured side by side)."""
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     n, m, _, _, _ = sizes(ws)
-    if ws.si[SI_S] == SOLVE_BANDED:  # large sparse models, diagonal mass (banded.py)
+    if ws.si[SI_S] != SOLVE_DENSE:  # large sparse models, diagonal mass (banded.py)
         rheonomic = is_timed(md) and flags[F_TIME] != 0
         if rheonomic:
             constraint_rate(md, q1, ws.time[1], ws.gt, ws.g)
-        return project_banded(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic, out)
+        return project_structured(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic, out)
     Mlu = ws.Ma
     pivn = ws.pivp
     Y = ws.Gp

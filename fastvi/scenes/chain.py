@@ -211,7 +211,7 @@ def chain(N: int, m=1.0, l=1.0, g: float = 9.81, damping: float = 0.0) -> Model:
     check_positive(g=g)
     c = damping_.check(damping)
     model = Model(
-        2 * N, N, params=(*ms, *ls, g) + ((c,) if c else ()), mass=np.diag(np.repeat(ms, 2)),
+        2 * N, N, params=(*ms, *ls, g) + ((c,) if c else ()), mass=np.repeat(ms, 2),
         potential=_V, potential_grad=_dV, potential_hessian=_ddV, constraint=_g,
         constraint_jacobian=_G, constraint_hessian=_ddg, constraint_jacobian_pattern=pattern(N),
         name=f"chain{N}" + ("-damped" if c else ""),

@@ -15,6 +15,7 @@ from .pendulum import pendulum
 from .rotary_rod_slider import rotary_rod_slider
 from .slider_crank import slider_crank
 from .spherical_pendulum import spherical_pendulum
+from .tree import tree
 from .triple_pendulum import triple_pendulum
 
 #: Scene constructors by name (used by the CLI, the docs and pickling of scene models).
@@ -28,10 +29,11 @@ SCENES = {
     "chain": chain,
     "closed_chain": closed_chain,
     "ladder": ladder,
+    "tree": tree,
     "kapitza_pendulum": kapitza_pendulum,
     "slider_crank": slider_crank,
 }
 
 __all__ = ["SCENES", "pendulum", "double_pendulum", "rotary_rod_slider", "triple_pendulum",
-           "spherical_pendulum", "four_bar", "chain", "closed_chain", "ladder", "kapitza_pendulum",
-           "slider_crank"]
+           "spherical_pendulum", "four_bar", "chain", "closed_chain", "ladder", "tree",
+           "kapitza_pendulum", "slider_crank"]

@@ -12,7 +12,9 @@ The time per step is the integration loop's (``stats["integration_time"]``, medi
 rounds; the set-up — pattern detection, ordering, initial projection — is reported apart).
 The report prints, per N, both paths, their ratio, Newton iterations per step, the local
 log–log slopes and the least-squares exponent over N = 16 … 256 (goal of issue 12: ≤ 1.2,
-and chain(128) ≤ 1 ms a step). Run with ``make bench`` or
+and chain(128) ≤ 1 ms a step). ``test_tree_sparse_against_banded`` times trees (a hub with
+branches, a pattern no narrow band fits) on the banded and the sparse LU side by side and
+prints the ratio. Run with ``make bench`` or
 ``.venv/bin/python -m pytest bench/test_bench_chain.py --benchmark-only``.
 """
 
@@ -106,3 +108,34 @@ def test_chain_cost_per_step(benchmark, N):
     assert plan.solvers["schur"] == "banded" and plan.solvers["projection"] == "banded"
     # constraints at round-off for every N (measured 3e-15 … 5e-14, growing with |q| ~ N)
     assert np.max(res.constraint_residual) < 1e-12
+
+
+TREES = ((8, 8), (16, 8), (16, 16))
+
+
+@pytest.mark.parametrize("shape", TREES, ids=lambda s: f"tree{s[0]}x{s[1]}")
+def test_tree_sparse_against_banded(benchmark, print_uncaptured, shape):
+    """A tree (a hub with branches: no narrow band) steps faster on the sparse LU than on the
+    banded one (``bench/solver_crossover.py`` has the whole crossover table)."""
+    b, L = shape
+    model = fastvi.scenes.tree(b, L)
+    N = 1 + b * L
+    q0, v0 = model.initial_state(0.3 + 0.6 * np.sin(np.arange(N)))
+    steps = max(20, STEP_BUDGET // N)
+    for solver in ("banded", "sparse"):
+        fastvi.integrate(model, q0, v0, h=H, n_steps=2, method=METHOD, solver=solver)
+    benchmark.group = f"tree(b, L), {METHOD}, cost per step"
+    benchmark.pedantic(lambda: fastvi.integrate(model, q0, v0, h=H, n_steps=steps, method=METHOD,
+                                                save_every=steps),
+                       rounds=3, iterations=1, warmup_rounds=0)
+    banded, rb = _loop_time(model, q0, v0, steps, "banded", 3)
+    sparse, rs = _loop_time(model, q0, v0, steps, "sparse", 3)
+    plan = structure.plan(model, fastvi.method(METHOD))
+    benchmark.extra_info.update(bodies=N, banded_seconds_per_step=banded,
+                                sparse_seconds_per_step=sparse, solvers=plan.solvers)
+    print_uncaptured(lambda w: w(f"tree({b},{L}), {N} bodies: banded {1e6 * banded:.1f} µs, "
+                                 f"sparse {1e6 * sparse:.1f} µs a step ({banded / sparse:.2f}x); "
+                                 f"auto: {plan.solvers['schur']}"))
+    assert plan.solvers["schur"] == "sparse" and plan.solvers["projection"] == "sparse"
+    assert np.abs(rb.q[-1] - rs.q[-1]).max() < 1e-10  # the same trajectory (round-off)
+    assert np.max(rs.constraint_residual) < 1e-12

@@ -28,6 +28,12 @@ Once per model, method and parameter vector, in NumPy:
    the fill). The Schur complement and the projection use the pattern
    of ``G`` only with a diagonal constant mass (``M⁻¹`` is otherwise dense).
 
+4. **Grouped differences.** A model without an exact ``constraint_hessian`` gets Curtis–
+   Powell–Reid column groups of ``Σ η_i ∇²g_i`` (pattern ``Gᵀ G``): the full Newton
+   matrix differences the Jacobian callback twice per group, not per coordinate (6 groups
+   for a chain of any length), with the column-by-column result bit for bit
+   (:func:`fastvi.kernels.step._fd_constraint_hessian_grouped`).
+
 Why safe: the full Newton and the mechanics iteration only *solve for an increment* — a
 non-zero outside the detected band would slow their convergence, never change the
 solution, whose residual is evaluated exactly. The projection ``G M⁻¹ Gᵀ η = G M⁻¹ P`` is
@@ -174,6 +180,37 @@ def _system(P, PS, J, solver, system):
     return _System(lay.SOLVE_DENSE, (kl, ku), perm_b, 0, None, None, costs)
 
 
+def _column_groups(PG):
+    """Curtis–Powell–Reid groups of the columns of the constraint Hessian ``Σ η_i ∇²g_i``,
+    whose pattern is that of ``Gᵀ G`` (entry (a, b) only where a constraint involves both):
+    columns that share no row go in one group (greedy distance-2 colouring in coordinate
+    order). Returns ``(cptr, cols, pptr, rows, bcol)`` — the coordinates of each group and
+    the Hessian entries (rows, bcol) each group yields — or None when the groups would not
+    save at least half of the ``n`` column-by-column evaluations."""
+    Gs = sp.csr_matrix(PG.astype(np.int64))
+    H = ((Gs.T @ Gs) > 0).tocsc()
+    n = H.shape[0]
+    C = ((H.T @ H) > 0).tolil()  # columns that share a row of H
+    colour = np.full(n, -1, dtype=np.int64)
+    for b in range(n):
+        used = {colour[c] for c in C.rows[b] if colour[c] >= 0}
+        k = 0
+        while k in used:
+            k += 1
+        colour[b] = k
+    ng = int(colour.max()) + 1 if n else 0
+    if 2 * ng > n:
+        return None
+    cols = np.argsort(colour, kind="stable").astype(np.int64)
+    cptr = np.searchsorted(colour[cols], np.arange(ng + 1)).astype(np.int64)
+    Hc = H.tocoo()
+    order = np.lexsort((Hc.row, Hc.col, colour[Hc.col]))
+    rows = Hc.row[order].astype(np.int64)
+    bcol = Hc.col[order].astype(np.int64)
+    pptr = np.searchsorted(colour[bcol], np.arange(ng + 1)).astype(np.int64)
+    return cptr, cols, pptr, rows, bcol
+
+
 def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
     """The linear-solve plan of ``model`` with method ``meth`` (memoised on the model per
     method, parameters and ``solver``)."""
@@ -224,6 +261,13 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
         si[lay.SI_A_BAND] = band(band_ld(kl, ku) * N)
     solvers["newton"] = "banded" if si[lay.SI_A] else "dense"
     flags = model.kernel_arguments()[1]
+
+    def put_g_pattern():
+        if not si[lay.SI_GPTR]:
+            PG = pats["G"]
+            si[lay.SI_GPTR] = put(np.concatenate(([0], np.cumsum(PG.sum(axis=1)))))
+            si[lay.SI_GCOL] = put(np.nonzero(PG)[1])
+
     if m and flags[lay.F_DIAG]:
         PG = pats["G"]
         Gi = PG.astype(np.int64)
@@ -242,8 +286,7 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
             sysm.append((schur, lay.SI_SC, lay.SI_SC_KL, lay.SI_SC_KU, lay.SI_SC_PERM,
                          lay.SI_SC_BAND, lay.SI_SC_LEN, lay.SI_SC_DST, lay.SI_SC_LU, blocks))
         if any(x[0].kind != lay.SOLVE_DENSE for x in sysm):
-            si[lay.SI_GPTR] = put(np.concatenate(([0], np.cumsum(PG.sum(axis=1)))))
-            si[lay.SI_GCOL] = put(np.nonzero(PG)[1])
+            put_g_pattern()
             si[lay.SI_SPTR] = put(np.concatenate(([0], np.cumsum(PS.sum(axis=1)))))
             si[lay.SI_SCOL] = put(cols_s)
         for sy, k_kind, k_kl, k_ku, k_perm, k_store, k_len, k_dst, k_lu, blocks in sysm:
@@ -262,6 +305,17 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
                 si[k_lu] = put(hdr)  # filled in place below: `put` keeps the same array
                 for slot, name in _LU_ARRAYS.items():
                     hdr[slot] = put(sy.symbolic.arrays[name])
+    if m and not flags[lay.F_EX_CHESS]:
+        groups = _column_groups(pats["G"])
+        if groups is not None:
+            put_g_pattern()
+            cptr, cols, pptr, rows, bcol = groups
+            si[lay.SI_HC_NG] = len(cptr) - 1
+            si[lay.SI_HC_CPTR] = put(cptr)
+            si[lay.SI_HC_COLS] = put(cols)
+            si[lay.SI_HC_PPTR] = put(pptr)
+            si[lay.SI_HC_ROWS] = put(rows)
+            si[lay.SI_HC_BCOL] = put(bcol)
     solvers["schur"] = _KIND_NAMES[si[lay.SI_SC]]
     solvers["projection"] = _KIND_NAMES[si[lay.SI_S]]
     si[lay.SI_RHS] = band(max(N, 1))
@@ -275,6 +329,6 @@ def workspace(model, meth, prm=None, solver: str = "auto"):
     """:func:`fastvi.kernels.layout.make_workspace` with the plan of :func:`plan` in it."""
     p = plan(model, meth, prm, solver)
     ws = lay.make_workspace(model.n, model.m, meth.s, meth.r, meth.J)
-    if p.solvers and any(v != "dense" for v in p.solvers.values()):
+    if np.any(p.si[:lay.SI_HEADER]):  # something structured: a solve or grouped differences
         ws = ws._replace(si=p.si.copy(), sb=p.sb.copy())
     return ws

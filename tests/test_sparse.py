@@ -207,3 +207,47 @@ def test_a_diagonal_mass_given_as_a_vector_is_the_matrix():
         fastvi.Model(2 * N, N, mass=np.ones(2 * N + 1), **kw)
     with pytest.raises(ValueError, match="`mass` must be"):
         fastvi.Model(2 * N, N, mass=-masses, **kw)
+
+
+def _chain_without_constraint_hessian(N):
+    prm = (*([1.0] * N), *([1.0] * N), 9.81)
+    return fastvi.Model(2 * N, N, params=prm, mass=np.ones(2 * N), potential=_V,
+                        potential_grad=_dV, potential_hessian=_ddV, constraint=_g,
+                        constraint_jacobian=_G, constraint_jacobian_pattern=pattern(N),
+                        name=f"nohess{N}")
+
+
+def test_grouped_differences_of_the_constraint_hessian_are_the_column_by_column_ones():
+    N = 24
+    model = _chain_without_constraint_hessian(N)
+    ws = structure.workspace(model, P2)
+    ng = ws.si[lay.SI_HC_NG]
+    assert 0 < ng <= 6  # a chain: 6 groups whatever N (distance-2 colouring of its bodies)
+    plain = ws._replace(si=ws.si.copy(), sb=ws.sb.copy())
+    plain.si[lay.SI_HC_NG] = 0  # one column at a time: n = 48 pairs of Jacobian calls
+    rng = np.random.default_rng(5)
+    md = model.kernel_data()
+    q = rng.standard_normal(2 * N)
+    p = rng.standard_normal(2 * N)
+    X = 0.1 * rng.standard_normal(ws.X.size)
+    exact = structure.workspace(chain(N), P2)
+    for w, mdl in ((ws, md), (plain, md), (exact, chain(N).kernel_data())):
+        w.X[:] = X
+        w.G[0, :N] = model.constraint_jacobian_value(q)
+        assemble(mdl, P2.kernel_tables, 0.01, q, p, w, True)
+    # the same floating-point operations: equal bit for bit
+    assert np.array_equal(ws.A, plain.A)
+    # and the Hessian they difference is the exact one (the chain's), to the differences'
+    # error (measured 7e-15 of max|A|: differences of quadratic constraints)
+    assert np.abs(ws.A - exact.A).max() < 1e-8 * np.abs(exact.A).max()
+    assert np.abs(ws.A - exact.A).max() > 0.0  # differences, not the exact Hessian
+
+
+def test_grouped_differences_give_the_exact_hessians_trajectory():
+    N = 32
+    fd, exact = _chain_without_constraint_hessian(N), chain(N)
+    q0, v0 = exact.initial_state(np.linspace(0.2, 1.0, N))
+    a = fastvi.integrate(fd, q0, v0, h=0.01, n_steps=40, newton="full", check=False)
+    b = fastvi.integrate(exact, q0, v0, h=0.01, n_steps=40, newton="full", check=False)
+    # measured 1e-14: central differences of a quadratic constraint are exact up to round-off
+    assert np.abs(a.q - b.q).max() < 1e-11

@@ -133,10 +133,16 @@ SOLVE_DENSE, SOLVE_BANDED, SOLVE_SPARSE = 0, 1, 2
  # pattern of G Gᵀ in that storage (Schur: block (j−1, j') at ((j−1) J + j') nnz(G Gᵀ)), and
  # for a sparse LU the offset in si of its descriptor (LU_* below)
  SI_SC_LEN, SI_SC_DST, SI_SC_LU,
- SI_S_LEN, SI_S_DST, SI_S_LU) = range(27)
+ SI_S_LEN, SI_S_DST, SI_S_LU,
+ # finite differences of the constraint Hessian by column groups (Curtis–Powell–Reid): the
+ # number of groups (0: one column at a time), the offsets in si of the coordinates of each
+ # group (pointers, coordinates) and of the Hessian entries (a, b) each group yields
+ # (pointers, rows a, columns b)
+ SI_HC_NG, SI_HC_CPTR, SI_HC_COLS, SI_HC_PPTR, SI_HC_ROWS, SI_HC_BCOL) = range(33)
 #: length of the header of ``ws.si``; with ``si[SI_SC]`` or ``si[SI_S]`` structured the
-#: kernels use the pattern of G (a diagonal constant mass is then required)
-SI_HEADER = 27
+#: kernels use the pattern of G (a diagonal constant mass is then required), as with
+#: ``si[SI_HC_NG]`` non-zero
+SI_HEADER = 33
 #: descriptor of a sparse LU in ``ws.si`` (sparse_lu.py): offsets in si of its arrays, for
 #: an N-row system in its fill-reducing order — position in the factor storage of each
 #: pivot; of each column's entries below the diagonal (pointers, rows, positions); of each

@@ -121,13 +121,13 @@ def _count(name, value):
     return int(value)
 
 
-def tree(branches: int, links: int, m=1.0, l=1.0, g: float = 9.81, damping: float = 0.0) -> Model:
+def tree(branches: int = 3, links: int = 3, m=1.0, l=1.0, g: float = 9.81, damping: float = 0.0) -> Model:
     r"""Planar tree: a hub on a link from the origin and ``branches`` chains of ``links``
     bodies hanging from it (``N = 1 + branches·links`` bodies, n = 2N, m = N).
 
     Parameters
     ----------
-    branches, links : int
+    branches, links : int, default 3
         Number of branches at the hub (≥ 1) and of bodies in each (≥ 1).
     m, l : float or sequence of N floats, default 1
         Point masses (kg) and link lengths (m), in body order (hub first, then branch by

@@ -17,8 +17,9 @@ share its coordinates, so ``G M⁻¹ Gᵀ`` holds a dense ``(b + 1)``-clique and
 a band at least ``b`` wide — while eliminating the branches from their tips inward creates
 no fill at all. ``tree(1, L)`` is ``chain(L + 1)``.
 
-``params = (m_0 … m_{N−1}, l_0 … l_{N−1}, π(0) … π(N−1), g)`` with ``π(0) = −1``: one set of
-module-level callbacks serves every tree (they read ``N`` from ``len(q) // 2``).
+``params = (m_0 … m_{N−1}, l_0 … l_{N−1}, g, π(0) … π(N−1))`` with ``π(0) = −1``: one set of
+module-level callbacks serves every tree (they read ``N`` from ``len(q) // 2``), and the
+potential's are the chain's (the same layout up to ``g``).
 """
 
 from __future__ import annotations
@@ -29,39 +30,22 @@ from numba import njit
 from ..model import Model
 from . import damping as damping_
 from ._common import attach, check_positive
-from .chain import _per_link
+from .chain import _ddV, _dV, _per_link, _V
 
 
 @njit(inline="always", cache=True)
-def _parent(p, nb, i):
-    return int(p[2 * nb + i])
-
-
-def _V(q, p):
-    nb = q.shape[0] // 2
-    acc = 0.0
-    for i in range(nb):
-        acc += p[i] * q[2 * i + 1]
-    return p[3 * nb] * acc
-
-
-def _dV(q, p, out):
-    nb = q.shape[0] // 2
-    for i in range(nb):
-        out[2 * i] = 0.0
-        out[2 * i + 1] = p[3 * nb] * p[i]
-
-
-def _ddV(q, p, out):
-    out[:, :] = 0.0
+def _link(q, p, nb, i):
+    """The body link ``i`` hangs from (−1: the pivot) and ``r_i − r_{π(i)}``."""
+    k = int(p[2 * nb + 1 + i])
+    dx = q[2 * i] - (q[2 * k] if k >= 0 else 0.0)
+    dy = q[2 * i + 1] - (q[2 * k + 1] if k >= 0 else 0.0)
+    return k, dx, dy
 
 
 def _g(q, p, out):
     nb = q.shape[0] // 2
     for i in range(nb):
-        k = _parent(p, nb, i)
-        dx = q[2 * i] - (q[2 * k] if k >= 0 else 0.0)
-        dy = q[2 * i + 1] - (q[2 * k + 1] if k >= 0 else 0.0)
+        _, dx, dy = _link(q, p, nb, i)
         li = p[nb + i]
         out[i] = 0.5 * (dx * dx + dy * dy - li * li)
 
@@ -70,9 +54,7 @@ def _G(q, p, out):
     # only the entries of `pattern`: the kernels hand `out` zeroed outside it
     nb = q.shape[0] // 2
     for i in range(nb):
-        k = _parent(p, nb, i)
-        dx = q[2 * i] - (q[2 * k] if k >= 0 else 0.0)
-        dy = q[2 * i + 1] - (q[2 * k + 1] if k >= 0 else 0.0)
+        k, dx, dy = _link(q, p, nb, i)
         out[i, 2 * i] = dx
         out[i, 2 * i + 1] = dy
         if k >= 0:
@@ -84,7 +66,7 @@ def _ddg(q, eta, p, out):
     nb = q.shape[0] // 2
     out[:, :] = 0.0
     for i in range(nb):
-        k = _parent(p, nb, i)
+        k = int(p[2 * nb + 1 + i])
         e = eta[i]
         for d in range(2):
             out[2 * i + d, 2 * i + d] += e
@@ -153,7 +135,7 @@ def tree(branches: int = 3, links: int = 3, m=1.0, l=1.0, g: float = 9.81, dampi
     c = damping_.check(damping)
     par = parents(branches, links)
     model = Model(
-        2 * N, N, params=(*ms, *ls, *par.astype(float), g) + ((c,) if c else ()),
+        2 * N, N, params=(*ms, *ls, g, *par.astype(float)) + ((c,) if c else ()),
         mass=np.repeat(ms, 2), potential=_V, potential_grad=_dV, potential_hessian=_ddV,
         constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
         constraint_jacobian_pattern=pattern(branches, links),

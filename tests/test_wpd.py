@@ -248,3 +248,22 @@ def test_peer_ratio_interpolation_on_synthetic_curves():
     for Elev, best, which, riv, x in rows:
         assert which == "P3L-Q4G"
         assert x == pytest.approx(10 * Elev ** -0.125, rel=1e-9)
+
+
+def test_growth_section_is_spliced_into_an_existing_page(tmp_path):
+    rows = {N: wpd.chain_cost(N) for N in (2, 4)}
+    for N, r in rows.items():
+        assert r["rows"] == 2 * 2 * N + 2 * N  # P2L-Q3G: s n + J m rows
+        assert r["cpu_per_step"] > 0 and r["g"] < 1e-13
+        assert r["solvers"]["schur"] == "dense"  # small chains keep the dense path
+    page = tmp_path / "wpd.md"
+    page.write_text("# Page\n\n## Before\nkept\n\n## Cost growth with the number of bodies\n\nold "
+                    "table\n\n## After\nkept too\n", encoding="utf-8")
+    wpd.splice_growth(str(page), rows, "python -m fastvi wpd --growth-only")
+    text = page.read_text(encoding="utf-8")
+    assert "old table" not in text and "## Before\nkept" in text and "## After\nkept too" in text
+    assert "regenerated alone" in text and "`python -m fastvi wpd --growth-only`" in text
+    assert "| 4 | 24 |" in text and "Fitted exponent of the cost per step over N = 2…4" in text
+    with pytest.raises(ValueError, match="no section"):
+        page.write_text("# nothing\n", encoding="utf-8")
+        wpd.splice_growth(str(page), rows, "x")

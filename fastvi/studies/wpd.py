@@ -136,7 +136,7 @@ FULL = dict(
     #: (method, h) profiled, steps per profiling run, interleaved rounds, budget per timing (s)
     profile=((("P2L-Q3G", 0.01), ("P3L-Q4G", 0.0125), ("P4L-Q5G", 0.025)), 2000, 3, 0.05),
     #: chain(N) sizes of the cost-growth table
-    growth=(2, 4, 8, 16, 32, 64),
+    growth=(2, 4, 8, 16, 32, 64, 128, 256),
 )
 QUICK = dict(
     T_error=1.0,
@@ -623,7 +623,7 @@ def profile_step(model, q0, v0, method: str, h: float, n_steps: int = 2000, roun
 # ----------------------------------------------------------------------------- cost growth
 GROWTH_METHOD = "P2L-Q3G"
 GROWTH_H = 0.01
-GROWTH_STEP_BUDGET = 40_000  # steps(N) ≈ budget / N²: ~0.1–0.5 s per run
+GROWTH_STEP_BUDGET = 20_000  # steps(N) ≈ budget / N: the structured step costs O(N)
 GROWTH_MIN_STEPS = 20
 
 
@@ -633,8 +633,8 @@ def chain_angles(N: int) -> np.ndarray:
 
 
 def growth_steps(N: int) -> int:
-    """Steps timed for ``chain(N)``: fewer for large N, so each run takes ~0.1–0.5 s."""
-    return int(max(GROWTH_MIN_STEPS, min(10_000, GROWTH_STEP_BUDGET // (N * N))))
+    """Steps timed for ``chain(N)``: fewer for large N, so each run takes ~10–50 ms."""
+    return int(max(GROWTH_MIN_STEPS, min(10_000, GROWTH_STEP_BUDGET // N)))
 
 
 def fit_exponent(rows: dict, key: str = "cpu_per_step") -> dict:
@@ -648,69 +648,77 @@ def fit_exponent(rows: dict, key: str = "cpu_per_step") -> dict:
 
 
 def chain_cost(N: int, method: str = GROWTH_METHOD, h: float = GROWTH_H) -> dict:
-    r"""Cost per step of ``method`` on ``fastvi.scenes.chain(N)``, and the share of the LU.
+    r"""Cost per step of ``method`` on ``fastvi.scenes.chain(N)`` and how its systems are solved.
 
-    CPU time of this thread (best of two runs of :func:`growth_steps` steps, the whole
-    ``fastvi.integrate`` call divided by the steps), Newton iterations per step, and one
-    dense LU factorisation of the actual Newton matrix (``6N`` rows for ``P2L-Q3G``; its
-    sparsity matters, see :func:`newton_matrix`). ``lu_share = its × LU / step``.
+    The integration loop's time per step (``stats["integration_time"]``: set-up — pattern,
+    ordering, initial projection — excluded; best of two runs of :func:`growth_steps`
+    steps), Newton iterations per step, the solvers and Schur bandwidth of the plan
+    (:func:`fastvi.structure.plan`) and the constraint residual.
     """
+    from .. import structure
+
     model = fastvi.scenes.chain(N)
     q0, v0 = model.initial_state(chain_angles(N))
     steps = growth_steps(N)
+    meth = fastvi.method(method)
     with quiet():
         fastvi.integrate(model, q0, v0, h=h, n_steps=2, method=method)
-        cpu = []
+        per = []
         for _ in range(2):
-            c0 = time.thread_time()
-            res = fastvi.integrate(model, q0, v0, h=h, n_steps=steps, method=method)
-            cpu.append((time.thread_time() - c0) / steps)
-    A = newton_matrix(model, res.q[-1], res.p[-1], res.v[-1], method, h)
-    lu = lu_factor_cost(A)
+            res = fastvi.integrate(model, q0, v0, h=h, n_steps=steps, method=method,
+                                   save_every=steps)
+            per.append(res.stats["integration_time"] / steps)
+    plan = structure.plan(model, meth)
     its = res.stats["newton_iterations"] / res.stats["steps"]
-    return dict(N=N, rows=A.shape[0], fill=float(np.count_nonzero(A)) / A.size, steps=steps,
-                cpu_per_step=min(cpu), iterations=its, lu=lu, lu_share=its * lu / min(cpu),
-                g=float(np.max(res.constraint_residual)))
+    return dict(N=N, rows=meth.s * model.n + meth.J * model.m, steps=steps,
+                cpu_per_step=min(per), iterations=its, solvers=plan.solvers,
+                band=plan.bandwidths.get("schur"), g=float(np.max(res.constraint_residual)))
 
 
 def growth_lines(rows: dict) -> list[str]:
-    """The cost-growth section: table, fitted exponent, local slopes, where the LU dominates."""
+    """The cost-growth section: table, fitted exponent and local slopes."""
     if len(rows) < 2:
         return []
     f = fit_exponent(rows)
     P = ["## Cost growth with the number of bodies\n",
          f"`fastvi.scenes.chain(N)` (n = 2N, m = N constraints), `{GROWTH_METHOD}`, "
-         f"h = {GROWTH_H:g}, at rest from a smooth arc of angles; CPU time of the thread per step "
-         "of the whole `fastvi.integrate` call (best of two runs; fewer steps for large N), and "
-         "one dense LU of the actual Newton matrix (its fill is the fraction of non-zeros; the "
-         "LU skips zero multipliers, so the fill matters). The same measurement under "
-         "pytest-benchmark: `bench/test_bench_chain.py`.\n",
-         "| N | Newton rows | fill | steps | µs/step | Newton its/step | LU (µs) | LU share of a step | max\\|g\\| |",
-         "|---|---|---|---|---|---|---|---|---|"]
+         f"h = {GROWTH_H:g}, at rest from a smooth arc of angles; time per step of the "
+         "integration loop (`stats[\"integration_time\"]`, best of two runs; fewer steps for "
+         "large N), with the linear solves `solver=\"auto\"` chose for the Schur complement of "
+         "the mechanics iteration and the end projection (`fastvi.structure`: banded after a "
+         "reverse Cuthill–McKee ordering for a chain) and the Schur complement's bandwidth. "
+         "The same measurement under pytest-benchmark, with the dense path beside it: "
+         "`bench/test_bench_chain.py`; the crossover dense / banded / sparse on chains, "
+         "ladders and trees: `docs/benchmarks.md`.\n",
+         "| N | Newton rows | steps | µs/step | Newton its/step | Schur / projection | Schur band (kl, ku) | max\\|g\\| |",
+         "|---|---|---|---|---|---|---|---|"]
     for N in sorted(rows):
         r = rows[N]
-        P.append(f"| {N} | {r['rows']} | {r['fill']:.3f} | {r['steps']} | {1e6 * r['cpu_per_step']:.1f} | "
-                 f"{r['iterations']:.2f} | {1e6 * r['lu']:.1f} | {100 * r['lu_share']:.0f}% | {r['g']:.1e} |")
+        sv = r["solvers"]
+        band = "–" if r["band"] is None or sv["schur"] == "dense" else f"({r['band'][0]}, {r['band'][1]})"
+        P.append(f"| {N} | {r['rows']} | {r['steps']} | {1e6 * r['cpu_per_step']:.1f} | "
+                 f"{r['iterations']:.2f} | {sv['schur']} / {sv['projection']} | {band} | {r['g']:.1e} |")
     Ns = f["sizes"]
-    last = list(f["local"].items())[-1]
     P.append("")
     P.append(f"Fitted exponent of the cost per step over N = {Ns[0]}…{Ns[-1]}: **{f['exponent']:.2f}**; "
              "local slopes " + ", ".join(f"{k}: {v:.2f}" for k, v in f["local"].items()) + ".")
-    over = [N for N in sorted(rows) if rows[N]["lu_share"] > 0.5]
-    if last[1] > 2.0:
-        P.append(f"The slope at the large end ({last[0]}: {last[1]:.2f}) is above 2: the dense LU of "
-                 "the (s·n + J·m)-row Newton matrix, O(N³), takes over from the O(N²) assembly."
-                 + (f" It is more than half of a step from N = {over[0]} ({rows[over[0]]['rows']} "
-                    "rows)." if over else "")
-                 + " Ordered by body, the chain's Newton matrix is block tridiagonal (each body "
-                 "couples only to its neighbours through one link constraint), so a banded or "
-                 "block-tridiagonal solve would cost O(N) per iteration; it would take over from "
-                 f"about N = {over[0] if over else Ns[-1]}, where the LU becomes the largest part "
-                 "of a step.")
-    elif over:
-        P.append(f"The dense LU is more than half of a step from N = {over[0]}.")
     P.append("")
     return P
+
+
+def splice_growth(path: str, rows: dict, command: str) -> None:
+    """Replace the cost-growth section of an existing page ``path`` (``--growth-only``)."""
+    with open(path, encoding="utf-8") as fh:
+        text = fh.read()
+    head, sep, rest = text.partition("## Cost growth with the number of bodies\n")
+    if not sep:
+        raise ValueError(f"{path} has no section '## Cost growth with the number of bodies'")
+    _, sep2, tail = rest.partition("\n## ")
+    lines = growth_lines(rows)
+    stamp = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    lines.insert(1, f"*This section regenerated alone on {stamp}: `{command}`.*\n")
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write(head + "\n".join(lines) + (sep2 + tail if sep2 else ""))
 
 
 # ----------------------------------------------------------------------------- figures
@@ -1707,7 +1715,7 @@ def run_study(cfg, outdir: str, log, command: str, figures_on: bool = True, prof
             growth[N] = chain_cost(N)
             r = growth[N]
             log(f"chain({N}): {r['rows']} rows, {1e6 * r['cpu_per_step']:.1f} µs/step, "
-                f"LU {100 * r['lu_share']:.0f}% of a step")
+                f"Schur {r['solvers']['schur']}")
     peer_text = []
     os.makedirs(outdir, exist_ok=True)
     if peers_on:
@@ -1743,6 +1751,8 @@ def main(argv=None) -> int:
     parser.add_argument("--no-growth", action="store_true", help="skip the chain(N) cost-growth table")
     parser.add_argument("--no-peers", action="store_true",
                         help="skip the compiled-peer panels (CyRK DOP853 / LSODA / Radau)")
+    parser.add_argument("--growth-only", action="store_true",
+                        help="regenerate only the chain(N) cost-growth section of the wpd.md in --out")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     args = parser.parse_args(argv)
 
@@ -1751,6 +1761,16 @@ def main(argv=None) -> int:
             print(msg, file=sys.stderr, flush=True)
 
     command = "python -m fastvi wpd" + (" --quick" if args.quick else "")
+    if args.growth_only:
+        cfg = QUICK if args.quick else FULL
+        rows = {}
+        for N in cfg["growth"]:
+            rows[N] = chain_cost(N)
+            log(f"chain({N}): {1e6 * rows[N]['cpu_per_step']:.1f} µs/step")
+        path = os.path.join(args.out, "wpd.md")
+        splice_growth(path, rows, command + f" --growth-only --out {args.out}")
+        print(f"wrote the cost-growth section of {path}")
+        return 0
     points, path = run_study(QUICK if args.quick else FULL, args.out, log, command,
                              figures_on=not args.no_figures, profile=not args.no_profile,
                              growth_on=not args.no_growth, peers_on=not args.no_peers)

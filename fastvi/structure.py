@@ -211,17 +211,31 @@ def _column_groups(PG):
     return cptr, cols, pptr, rows, bcol
 
 
+def _constraint_pattern(model, prm, n_states: int = PATTERN_STATES, seed: int = 12):
+    """The declared pattern of G, or the union of its non-zeros at ``n_states`` random
+    configurations."""
+    if model.constraint_jacobian_pattern is not None:
+        return model.constraint_jacobian_pattern.copy()
+    rng = np.random.default_rng(seed)
+    PG = np.zeros((model.m, model.n), dtype=bool)
+    for _ in range(n_states):
+        PG |= model.constraint_jacobian_value(rng.standard_normal(model.n), prm) != 0.0
+    return PG
+
+
 def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
     """The linear-solve plan of ``model`` with method ``meth`` (memoised on the model per
-    method, parameters and ``solver``)."""
+    method, parameters and ``solver``). ``meth=None``: the projection ``G M⁻¹ Gᵀ`` alone,
+    for the RK4 baseline (:mod:`fastvi.baselines.rk4`)."""
     if solver not in SOLVERS:
         raise ValueError(f"`solver` must be one of {', '.join(map(repr, SOLVERS))}, got {solver!r}")
     prm = model.params if prm is None else np.ascontiguousarray(prm, dtype=np.float64)
     cache = model.__dict__.setdefault(_PLANS_ATTR, {})
-    key = (meth.name, prm.tobytes(), solver)
+    key = (None if meth is None else meth.name, prm.tobytes(), solver)
     if key in cache:
         return cache[key]
-    n, m, s, J = model.n, model.m, meth.s, meth.J
+    n, m = model.n, model.m
+    s, J = (0, 0) if meth is None else (meth.s, meth.J)
     N = s * n + J * m
     si = np.zeros(lay.SI_HEADER, dtype=np.int64)
     dense = Plan(si, np.zeros(1), dict(newton="dense", schur="dense", projection="dense"),
@@ -231,7 +245,7 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
     if solver == "dense" or (solver == "auto" and small):  # not even analysed
         cache[key] = dense
         return dense
-    pats = detect_pattern(model, meth, prm)
+    pats = dict(G=_constraint_pattern(model, prm)) if meth is None else detect_pattern(model, meth, prm)
     ints = [si]
     off = lay.SI_HEADER
     floats = []
@@ -252,9 +266,9 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
         foff += size
         return o
 
-    perm, kl, ku = _ordering(pats["newton"])
+    perm, kl, ku = _ordering(pats["newton"]) if meth is not None else (None, 0, 0)
     bands["newton"] = (kl, ku)
-    if _banded_pays(N, kl, ku, solver, "newton"):
+    if meth is not None and _banded_pays(N, kl, ku, solver, "newton"):
         si[lay.SI_A] = lay.SOLVE_BANDED
         si[lay.SI_A_KL], si[lay.SI_A_KU] = kl, ku
         si[lay.SI_A_PERM] = put(perm)
@@ -272,14 +286,13 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
         PG = pats["G"]
         Gi = PG.astype(np.int64)
         PS = (Gi @ Gi.T) > 0
-        W = meth.kernel_tables.W
         rows_s, cols_s = np.nonzero(PS)  # row by row: the order of SI_SPTR / SI_SCOL
         proj = _system(PS, PS, 1, solver, "projection")
         bands["projection"] = proj.band
         sysm = [(proj, lay.SI_S, lay.SI_S_KL, lay.SI_S_KU, lay.SI_S_PERM, lay.SI_S_BAND,
                  lay.SI_S_LEN, lay.SI_S_DST, lay.SI_S_LU, [(rows_s, cols_s)])]
-        if meth.kernel_tables.mech:
-            schur = _system(np.kron(W != 0.0, PS), PS, J, solver, "schur")
+        if meth is not None and meth.kernel_tables.mech:
+            schur = _system(np.kron(meth.kernel_tables.W != 0.0, PS), PS, J, solver, "schur")
             bands["schur"] = schur.band
             blocks = [((j - 1) * m + rows_s, jp * m + cols_s)
                       for j in range(1, J + 1) for jp in range(J)]
@@ -305,7 +318,7 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
                 si[k_lu] = put(hdr)  # filled in place below: `put` keeps the same array
                 for slot, name in _LU_ARRAYS.items():
                     hdr[slot] = put(sy.symbolic.arrays[name])
-    if m and not flags[lay.F_EX_CHESS]:
+    if m and meth is not None and not flags[lay.F_EX_CHESS]:
         groups = _column_groups(pats["G"])
         if groups is not None:
             put_g_pattern()
@@ -318,7 +331,7 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
             si[lay.SI_HC_BCOL] = put(bcol)
     solvers["schur"] = _KIND_NAMES[si[lay.SI_SC]]
     solvers["projection"] = _KIND_NAMES[si[lay.SI_S]]
-    si[lay.SI_RHS] = band(max(N, 1))
+    si[lay.SI_RHS] = band(max(N, m, 1))
     result = Plan(np.ascontiguousarray(np.concatenate(ints)),
                   np.ascontiguousarray(np.concatenate(floats)), solvers, bands, pats)
     cache[key] = result

@@ -15,6 +15,10 @@ time, at the size of the local error). With ``project=True`` each step ends with
 orthogonal projection in the metric ``M`` onto ``g(q) = 0`` (simplified Newton) and then
 onto ``G(q) v = 0``, which removes the constraint drift but not the energy drift.
 
+Large models with a diagonal constant mass solve the saddle system through ``G M⁻¹ Gᵀ``
+over the pattern of G, banded or sparse (:func:`workspace`, issue 12): an evaluation costs
+O(nnz(G)) instead of the dense O((n + m)³) LU.
+
 The kernels take the model's cfunc tuple as an argument, like :mod:`fastvi.kernels.step`,
 so they compile once for every model. Second derivatives the model does not supply exactly
 (``∂(M v)/∂q`` and ``∇²g``) are replaced by a central difference along ``v``.
@@ -35,12 +39,14 @@ import numpy as np
 
 from .. import _validate as check
 from .._numba import hot, njit, ptr
+from ..kernels.banded import gmg_factor, gmg_solve, gt_times
+from ..kernels.layout import SI_GCOL, SI_GPTR, SI_HEADER, SI_S, SOLVE_DENSE
 from ..kernels.linalg import lu_factor, lu_solve
 from ..model import SLOTS, Model
 from ..results import TrajectoryResult
 from ..status import MESSAGES, Status
 
-__all__ = ["rk4", "BaselineResult", "acceleration", "make_workspace"]
+__all__ = ["rk4", "BaselineResult", "acceleration", "make_workspace", "workspace"]
 
 from ..kernels.layout import CHESS as _CHESS
 from ..kernels.layout import CJAC as _CJAC
@@ -118,6 +124,8 @@ Workspace = namedtuple("Workspace", [
     "g", "unit",  # (m,) g, a unit impulse for the Hessian contraction
     "stages",  # (10, n) RK stages k1…k4 of q and of v, the stage q and v
     "pot",  # (1,) potential value
+    "lam", "pivm",  # (m,) multipliers and pivots of a structured G M⁻¹ Gᵀ
+    "si", "sb",  # the projection's plan (fastvi.structure.plan(model, None)): dense if zero
 ])
 #: the saved samples of :func:`run`: time, q, v, energy, and the maxima of |g|, |G v| over
 #: the steps since the previous sample
@@ -132,7 +140,8 @@ RUN_INFO_SIZE = 2
 
 @njit
 def make_workspace(n, m):
-    """Scratch for one trajectory: the saddle-point system and stage vectors."""
+    """Scratch for one trajectory: the saddle-point system and stage vectors (the dense
+    path; :func:`workspace` adds a large model's structured plan)."""
     N = n + m
     mm = max(m, 1)
     return Workspace(
@@ -143,7 +152,23 @@ def make_workspace(n, m):
         np.zeros(mm), np.zeros(mm),
         np.zeros((10, n)),
         np.zeros(1),
+        np.zeros(mm), np.zeros(mm, dtype=np.int64),
+        np.zeros(SI_HEADER, dtype=np.int64), np.zeros(1),
     )
+
+
+def workspace(model, prm=None, solver: str = "auto"):
+    """:func:`make_workspace` for ``model``, with the structured plan of its projection
+    ``G M⁻¹ Gᵀ`` (banded or sparse, :func:`fastvi.structure.plan` with ``meth=None``) when
+    the model is large with a diagonal constant mass: an evaluation then costs O(nnz(G)),
+    not O((n + m)³)."""
+    from .. import structure
+
+    ws = make_workspace(model.n, model.m)
+    p = structure.plan(model, None, prm, solver)
+    if p.si[SI_S] != SOLVE_DENSE:
+        ws = ws._replace(si=p.si.copy(), sb=p.sb.copy())
+    return ws
 
 
 @hot
@@ -185,6 +210,106 @@ def _saddle(M, G, n, m, K):
 
 
 @hot
+def _acceleration_structured(fns, flags, Mc, prm, q, v, a, ws):
+    """:func:`acceleration` of a large model with a diagonal constant mass, over the pattern
+    of G: ``(G M⁻¹ Gᵀ) λ = G M⁻¹ f + Ġ v`` factored banded or sparse, ``a = M⁻¹ (f − Gᵀ λ)``,
+    ``f = −∇V``. ``Ġ v`` is a central difference of G along v (two Jacobian calls where the
+    exact Hessian would take m calls with dense (n, n) outputs); for constraints quadratic in
+    q, as the chains', it is exact up to round-off."""
+    n = flags[_F_N]
+    m = flags[_F_M]
+    si, sb = ws.si, ws.sb
+    G, Gp, Gm, dV, qa, lam = ws.G, ws.Gp, ws.Gm, ws.dV, ws.qa, ws.lam
+    fns[_PGRAD](ptr(q), ptr(q), ptr(prm), ptr(dV))
+    fns[_CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
+    eps = _fd_step(q, v)
+    if eps > 0.0:
+        for c in range(n):
+            qa[c] = q[c] + eps * v[c]
+        fns[_CJAC](ptr(qa), ptr(qa), ptr(prm), ptr(Gp))
+        for c in range(n):
+            qa[c] = q[c] - eps * v[c]
+        fns[_CJAC](ptr(qa), ptr(qa), ptr(prm), ptr(Gm))
+    gp = si[SI_GPTR]
+    gc = si[SI_GCOL]
+    for c in range(m):
+        acc = 0.0
+        dgv = 0.0
+        for k in range(si[gp + c], si[gp + c + 1]):
+            i = si[gc + k]
+            acc -= G[c, i] * dV[i] / Mc[i, i]
+            if eps > 0.0:
+                dgv += (Gp[c, i] - Gm[c, i]) * v[i]
+        lam[c] = acc + (dgv * (0.5 / eps) if eps > 0.0 else 0.0)
+    if gmg_factor(si, sb, G, Mc, m, ws.pivm) != 0:
+        return _SINGULAR
+    gmg_solve(si, sb, lam, m, ws.pivm)
+    for i in range(n):
+        a[i] = -dV[i]
+    gt_times(si, G, lam, a, -1.0, m)
+    for i in range(n):
+        a[i] /= Mc[i, i]
+        if not np.isfinite(a[i]):
+            return _NONFINITE
+    for c in range(m):
+        ws.rhs[n + c] = lam[c]
+    return _OK
+
+
+@hot
+def _project_structured(fns, flags, Mc, prm, q, v, ws):
+    """:func:`_project` of a large model with a diagonal constant mass: the same
+    corrections, ``δ = −M⁻¹ Gᵀ (G M⁻¹ Gᵀ)⁻¹ r``, over the pattern of G."""
+    n = flags[_F_N]
+    m = flags[_F_M]
+    si, sb, G, gv, lam = ws.si, ws.sb, ws.G, ws.g, ws.lam
+    gp = si[SI_GPTR]
+    gc = si[SI_GCOL]
+    qs = 1.0
+    for i in range(n):
+        qs = max(qs, abs(q[i]))
+    fns[_CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
+    if gmg_factor(si, sb, G, Mc, m, ws.pivm) != 0:
+        return _SINGULAR
+    for _ in range(PROJECTION_MAX_ITER):
+        fns[_CON](ptr(q), ptr(q), ptr(prm), ptr(gv))
+        gmax = 0.0
+        for c in range(m):
+            gmax = max(gmax, abs(gv[c]))
+            lam[c] = gv[c]
+        if not np.isfinite(gmax):
+            return _NONFINITE
+        if gmax <= PROJECTION_TOL * qs:
+            break
+        gmg_solve(si, sb, lam, m, ws.pivm)
+        _sub_minv_gt(si, G, lam, Mc, q, m)
+    fns[_CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
+    if gmg_factor(si, sb, G, Mc, m, ws.pivm) != 0:
+        return _SINGULAR
+    for c in range(m):
+        acc = 0.0
+        for k in range(si[gp + c], si[gp + c + 1]):
+            i = si[gc + k]
+            acc += G[c, i] * v[i]
+        lam[c] = acc
+    gmg_solve(si, sb, lam, m, ws.pivm)
+    _sub_minv_gt(si, G, lam, Mc, v, m)
+    return _OK
+
+
+@hot
+def _sub_minv_gt(si, G, lam, Mc, x, m):
+    """``x −= M⁻¹ Gᵀ λ`` over the pattern of G (diagonal ``M``)."""
+    gp = si[SI_GPTR]
+    gc = si[SI_GCOL]
+    for c in range(m):
+        e = lam[c]
+        for k in range(si[gp + c], si[gp + c + 1]):
+            i = si[gc + k]
+            x[i] -= G[c, i] * e / Mc[i, i]
+
+
+@hot
 def acceleration(fns, flags, Mc, prm, q, v, a, ws):
     """Solve the index-1 system at ``(q, v)`` for the acceleration ``a`` (n,), in place.
 
@@ -193,6 +318,8 @@ def acceleration(fns, flags, Mc, prm, q, v, a, ws):
     """
     n = flags[_F_N]
     m = flags[_F_M]
+    if m > 0 and ws.si[SI_S] != SOLVE_DENSE:
+        return _acceleration_structured(fns, flags, Mc, prm, q, v, a, ws)
     K, rhs, piv, M = ws.K, ws.rhs, ws.piv, ws.M
     Cq, Hc = ws.Cq, ws.Hc
     G, Gp, Gm = ws.G, ws.Gp, ws.Gm
@@ -276,6 +403,8 @@ def _project(fns, flags, Mc, prm, q, v, ws):
     """
     n = flags[_F_N]
     m = flags[_F_M]
+    if ws.si[SI_S] != SOLVE_DENSE:
+        return _project_structured(fns, flags, Mc, prm, q, v, ws)
     K, rhs, piv, M = ws.K, ws.rhs, ws.piv, ws.M
     G = ws.G
     gv = ws.g
@@ -367,25 +496,36 @@ def observe(fns, flags, Mc, prm, q, v, ws, out):
     n = flags[_F_N]
     m = flags[_F_M]
     M, G, gv, pot = ws.M, ws.G, ws.g, ws.pot
-    _mass(fns, flags, Mc, prm, q, M)
+    structured = m > 0 and ws.si[SI_S] != SOLVE_DENSE  # diagonal constant M, pattern of G
     fns[_POT](ptr(q), ptr(q), ptr(prm), ptr(pot))
     e = pot[0]
-    for i in range(n):
-        acc = 0.0
-        for c in range(n):
-            acc += M[i, c] * v[c]
-        e += 0.5 * v[i] * acc
+    if structured:
+        for i in range(n):
+            e += 0.5 * Mc[i, i] * v[i] * v[i]
+    else:
+        _mass(fns, flags, Mc, prm, q, M)
+        for i in range(n):
+            acc = 0.0
+            for c in range(n):
+                acc += M[i, c] * v[c]
+            e += 0.5 * v[i] * acc
     out[OBS_H] = e
     out[OBS_G] = 0.0
     out[OBS_GV] = 0.0
     if m > 0:
         fns[_CON](ptr(q), ptr(q), ptr(prm), ptr(gv))
         fns[_CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
+        si = ws.si
         for c in range(m):
             out[OBS_G] = max(out[OBS_G], abs(gv[c]))
             acc = 0.0
-            for i in range(n):
-                acc += G[c, i] * v[i]
+            if structured:
+                for k in range(si[si[SI_GPTR] + c], si[si[SI_GPTR] + c + 1]):
+                    i = si[si[SI_GCOL] + k]
+                    acc += G[c, i] * v[i]
+            else:
+                for i in range(n):
+                    acc += G[c, i] * v[i]
             out[OBS_GV] = max(out[OBS_GV], abs(acc))
 
 
@@ -432,7 +572,7 @@ def run(fns, flags, Mc, prm, h, q, v, n_total, save_every, project, smp, ws, inf
 
 def rk4(model: Model, q0, v0, *, h: float, t_end: float | None = None, n_steps: int | None = None,
         project: bool = False, save_every: int = 1, params=None,
-        on_failure: str = "raise") -> BaselineResult:
+        on_failure: str = "raise", solver: str = "auto") -> BaselineResult:
     r"""Integrate ``model`` with classical RK4 on its index-1 formulation.
 
     Parameters
@@ -455,6 +595,11 @@ def rk4(model: Model, q0, v0, *, h: float, t_end: float | None = None, n_steps: 
     on_failure : {"raise", "return"}
         On a singular ``[M Gᵀ; G 0]`` or a non-finite state raise ``RuntimeError``, or
         return the partial result with its ``status`` set.
+    solver : {"auto", "dense", "banded", "sparse"}, default "auto"
+        How ``[M Gᵀ; G 0]`` is solved, as in :func:`fastvi.integrate`: ``"auto"`` solves a
+        large model with a diagonal constant mass through ``G M⁻¹ Gᵀ`` over the pattern of
+        G (banded or sparse LU; ``Ġ v`` then by a central difference along ``v``), a small
+        one densely.
 
     Returns
     -------
@@ -486,7 +631,7 @@ def rk4(model: Model, q0, v0, *, h: float, t_end: float | None = None, n_steps: 
     K = total // every + 1 + (1 if total % every else 0)
     T, Qs, Vs = np.zeros(K), np.zeros((K, n)), np.zeros((K, n))
     En, Gr, GVr = np.zeros(K), np.zeros(K), np.zeros(K)
-    ws = make_workspace(n, model.m)
+    ws = workspace(model, prm, check.solver(solver))
     q, v = q0.copy(), v0.copy()
     obs = np.zeros(OBS_SIZE)
     observe(fns, flags, Mc, prm, q, v, ws, obs)

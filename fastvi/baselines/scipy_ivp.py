@@ -21,7 +21,7 @@ from .._numba import njit, quiet
 from ..model import Model
 from ..status import Status
 from ..kernels.layout import F_N
-from .rk4 import OBS_G, OBS_GV, OBS_H, OBS_SIZE, BaselineResult, acceleration, make_workspace, observe
+from .rk4 import OBS_G, OBS_GV, OBS_H, OBS_SIZE, BaselineResult, acceleration, observe, workspace
 
 __all__ = ["solve_ivp"]
 
@@ -110,7 +110,7 @@ def solve_ivp(model: Model, q0, v0, *, t_end: float, method: str = "DOP853", rto
         t_eval = np.linspace(0.0, float(t_end), n_samples)
     q0, v0 = check.initial_state(model, q0, v0, prm)
     fns, flags, Mc = model.kernel_arguments()
-    ws = make_workspace(n, model.m)
+    ws = workspace(model, prm)  # large models: G M⁻¹ Gᵀ over the pattern of G
     failure = []
     with quiet():
         fast_rhs = _bound_rhs(model)

@@ -30,7 +30,7 @@ from .sparse_lu import sparse_factor, sparse_solve
 
 __all__ = ["band_factor", "band_solve", "band_pack", "newton_banded", "schur_structured",
            "schur_solve_structured", "mech_impulses_structured", "g_times", "gt_times", "band_ld",
-           "mech_rows_sparse", "project_structured"]
+           "mech_rows_sparse", "project_structured", "gmg_factor", "gmg_solve"]
 
 
 @hot_inline
@@ -249,52 +249,71 @@ def mech_rows_sparse(ws, j, m):
 
 
 @hot
-def project_structured(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic, out):
-    """The end projection of :func:`.step.end_momentum` for a diagonal constant mass with
-    ``G M⁻¹ Gᵀ`` built over the pattern of ``G Gᵀ`` and factored banded or sparse:
-    ``p1 = P − G1ᵀ η``, ``(G M⁻¹ Gᵀ) η = G M⁻¹ P (+ g_t in ws.gt if rheonomic)``,
-    ``v1 = M⁻¹ p1``; then, over the pattern of G as well, ``out[S_GV]`` = max|G1 v1 + g_t|
-    and ``ws.G[0]`` = G1 (the next step's start; zero outside the pattern in both)."""
-    si, sb = ws.si, ws.sb
-    ip = si[si[SI_S_IPERM]: si[SI_S_IPERM] + m]
-    perm = si[si[SI_S_PERM]: si[SI_S_PERM] + m]
+def gmg_factor(si, sb, G, Mc, m, piv):
+    """Build ``G M⁻¹ Gᵀ`` (diagonal constant ``M`` in ``Mc``) over the pattern of ``G Gᵀ``
+    into the projection's banded or sparse storage and factor it. Returns 0, or non-zero
+    when a pivot vanished."""
     st = sb[si[SI_S_BAND]: si[SI_S_BAND] + si[SI_S_LEN]]
-    t = sb[si[SI_RHS]: si[SI_RHS] + m]
     gp = si[SI_GPTR]
     gc = si[SI_GCOL]
     sp = si[SI_SPTR]
     sc = si[SI_SCOL]
     dst = si[SI_S_DST]
-    for a in range(n):
-        v1[a] = P[a] / Mc[a, a]
     for k in range(si[SI_S_LEN]):
         st[k] = 0.0
     for c in range(m):
-        acc = ws.gt[c] if rheonomic else 0.0
-        for k in range(si[gp + c], si[gp + c + 1]):
-            a = si[gc + k]
-            acc += G1[c, a] * v1[a]
-        t[ip[c]] = acc
         for k in range(si[sp + c], si[sp + c + 1]):
             e = si[sc + k]
             acc = 0.0
             for kk in range(si[gp + c], si[gp + c + 1]):
                 a = si[gc + kk]
-                acc += G1[c, a] * G1[e, a] / Mc[a, a]
+                acc += G[c, a] * G[e, a] / Mc[a, a]
             st[si[dst + k]] = acc
     if si[SI_S] == SOLVE_BANDED:
-        kl = si[SI_S_KL]
-        ku = si[SI_S_KU]
-        if band_factor(st, ws.pivm, m, kl, ku) != 0:
-            return SINGULAR_CONSTRAINTS
-        band_solve(st, ws.pivm, t, m, kl, ku)
+        return band_factor(st, piv, m, si[SI_S_KL], si[SI_S_KU])
+    return sparse_factor(si, st, si[SI_S_LU], m)
+
+
+@hot
+def gmg_solve(si, sb, x, m, piv):
+    """``x`` (m,) ← ``(G M⁻¹ Gᵀ)⁻¹ x`` with the factors of :func:`gmg_factor`."""
+    ip = si[si[SI_S_IPERM]: si[SI_S_IPERM] + m]
+    perm = si[si[SI_S_PERM]: si[SI_S_PERM] + m]
+    st = sb[si[SI_S_BAND]: si[SI_S_BAND] + si[SI_S_LEN]]
+    t = sb[si[SI_RHS]: si[SI_RHS] + m]
+    for c in range(m):
+        t[ip[c]] = x[c]
+    if si[SI_S] == SOLVE_BANDED:
+        band_solve(st, piv, t, m, si[SI_S_KL], si[SI_S_KU])
     else:
-        if sparse_factor(si, st, si[SI_S_LU], m) != 0:
-            return SINGULAR_CONSTRAINTS
         sparse_solve(si, st, si[SI_S_LU], t, m)
-    eta = ws.etaJ
     for i in range(m):
-        eta[perm[i]] = t[i]
+        x[perm[i]] = t[i]
+
+
+@hot
+def project_structured(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic, out):
+    """The end projection of :func:`.step.end_momentum` for a diagonal constant mass with
+    ``G M⁻¹ Gᵀ`` built over the pattern of ``G Gᵀ`` and factored banded or sparse
+    (:func:`gmg_factor`): ``p1 = P − G1ᵀ η``, ``(G M⁻¹ Gᵀ) η = G M⁻¹ P (+ g_t in ws.gt if
+    rheonomic)``, ``v1 = M⁻¹ p1``; then, over the pattern of G as well, ``out[S_GV]`` =
+    max|G1 v1 + g_t| and ``ws.G[0]`` = G1 (the next step's start; zero outside the pattern
+    in both)."""
+    si, sb = ws.si, ws.sb
+    gp = si[SI_GPTR]
+    gc = si[SI_GCOL]
+    eta = ws.etaJ
+    for a in range(n):
+        v1[a] = P[a] / Mc[a, a]
+    for c in range(m):
+        acc = ws.gt[c] if rheonomic else 0.0
+        for k in range(si[gp + c], si[gp + c + 1]):
+            a = si[gc + k]
+            acc += G1[c, a] * v1[a]
+        eta[c] = acc
+    if gmg_factor(si, sb, G1, Mc, m, ws.pivm) != 0:
+        return SINGULAR_CONSTRAINTS
+    gmg_solve(si, sb, eta, m, ws.pivm)
     for a in range(n):
         p1[a] = P[a]
     gt_times(si, G1, eta, p1, -1.0, m)

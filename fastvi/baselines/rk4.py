@@ -196,6 +196,18 @@ def _fd_step(q, v):
 
 
 @hot
+def _jacobians_along_v(fns, prm, q, v, eps, qa, Gp, Gm):
+    """``Gp``, ``Gm`` = G(q ± ε v): the central difference of ``Ġ v``."""
+    n = q.shape[0]
+    for c in range(n):
+        qa[c] = q[c] + eps * v[c]
+    fns[_CJAC](ptr(qa), ptr(qa), ptr(prm), ptr(Gp))
+    for c in range(n):
+        qa[c] = q[c] - eps * v[c]
+    fns[_CJAC](ptr(qa), ptr(qa), ptr(prm), ptr(Gm))
+
+
+@hot
 def _saddle(M, G, n, m, K):
     """K = [M Gᵀ; G 0]."""
     for a in range(n):
@@ -224,12 +236,7 @@ def _acceleration_structured(fns, flags, Mc, prm, q, v, a, ws):
     fns[_CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
     eps = _fd_step(q, v)
     if eps > 0.0:
-        for c in range(n):
-            qa[c] = q[c] + eps * v[c]
-        fns[_CJAC](ptr(qa), ptr(qa), ptr(prm), ptr(Gp))
-        for c in range(n):
-            qa[c] = q[c] - eps * v[c]
-        fns[_CJAC](ptr(qa), ptr(qa), ptr(prm), ptr(Gm))
+        _jacobians_along_v(fns, prm, q, v, eps, qa, Gp, Gm)
     gp = si[SI_GPTR]
     gc = si[SI_GCOL]
     for c in range(m):
@@ -372,12 +379,7 @@ def acceleration(fns, flags, Mc, prm, q, v, a, ws):
             for c in range(m):
                 rhs[n + c] = 0.0
             if eps > 0.0:
-                for c in range(n):
-                    qa[c] = q[c] + eps * v[c]
-                fns[_CJAC](ptr(qa), ptr(qa), ptr(prm), ptr(Gp))
-                for c in range(n):
-                    qa[c] = q[c] - eps * v[c]
-                fns[_CJAC](ptr(qa), ptr(qa), ptr(prm), ptr(Gm))
+                _jacobians_along_v(fns, prm, q, v, eps, qa, Gp, Gm)
                 for c in range(m):
                     acc = 0.0
                     for i in range(n):

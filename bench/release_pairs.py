@@ -11,8 +11,10 @@ to ±7 %, so the ratio reported is the median over pairs. Both trees must have c
 their kernels once before (run any ``fastvi.integrate`` with that ``PYTHONPATH``).
 ``--sized`` times the size-specialized kernels (``specialize=True``) of both trees;
 ``--methods=M,M`` picks the methods (default ``P2L-Q3G,P3L-Q4G,P1L-Q2G``), ``--model=chainN``
-times ``fastvi.scenes.chain(N)`` (the cost-growth study's start) instead of the double
-pendulum, ``--steps=K`` the steps of a round (default 20 000).
+times ``fastvi.scenes.chain(N)`` (the cost-growth study's start) and ``--model=sliderK`` the
+stiff panel's rod–slider with stiffness K (e.g. ``slider1e8``) instead of the double
+pendulum, ``--steps=K`` the steps of a round (default 20 000; ``--steps=2`` times the fixed
+cost of a public call). The times are of the whole ``fastvi.integrate`` call.
 Used for ``docs/benchmarks.md`` ("Forces and time"); ``bench/test_bench_release.py`` does
 one pair against the release tag inside pytest-benchmark.
 """

@@ -5,7 +5,8 @@ worktree of the previous release — so that two versions of the package can be 
 benchmark session. Reads commands ``<method> <n_steps> <newton> [sized] [model=chainN]`` from
 stdin, one per line (``sized``: ``specialize=True``, the size-specialized kernels, where the
 tree has them; ``model=chainN``: ``fastvi.scenes.chain(N)`` from the cost-growth study's start
-instead of the double pendulum);
+instead of the double pendulum; ``model=sliderK``: the stiff panel's rod–slider with spring
+stiffness K, e.g. ``slider1e8``);
 answers each with one line of JSON: the thread CPU seconds of the integration (no
 compile: every method is warmed up first), the Newton iterations per step and the final
 state. ``newton`` is ignored by a release that has no such option.
@@ -24,6 +25,12 @@ H = 0.01
 
 
 def _scene(name):
+    if name.startswith("slider"):  # the stiff panel's rod–slider, e.g. slider1e8 (k = 1e8)
+        from fastvi.studies import peers
+
+        k = float(name[6:])
+        model = fastvi.scenes.rotary_rod_slider(k=k)
+        return (model, *model.initial_state(0.0, peers.SLIDER_R0 + peers.slider_stretch(k)))
     if name.startswith("chain"):
         from fastvi.studies.wpd import chain_angles
 

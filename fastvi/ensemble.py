@@ -21,7 +21,8 @@ import numpy as np
 from . import _validate as check
 from . import events as events_
 from . import structure
-from .integrate import Result, _dispatch_time, _timed
+from ._launch import Launcher
+from .integrate import Result, _timed
 from .kernels import drive
 from .kernels import layout as lay
 from .model import Model
@@ -38,6 +39,8 @@ CHUNKS_PER_THREAD = 8
 # numba's default (workqueue) threading layer must not be entered from two Python threads at
 # once, and the thread count is per calling thread: one ensemble at a time per process.
 _PARALLEL_LOCK = threading.Lock()
+#: the parallel loop, called through its compiled entry points (no per-call typing)
+_RUN_ENSEMBLE = Launcher(drive.run_ensemble)
 
 _MEMBER_FIELDS = ("q", "v", "p", "energy", "constraint_residual", "velocity_residual",
                   "newton_iterations", "max_energy_error", "max_constraint_residual",
@@ -573,9 +576,10 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
                     opts["newton"], h, t0, dims, plan.si, plan.sb, X0, total, mode, every, H0,
                     Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, ev.fns, ev.count, ev.direction,
                     ev.terminal, Te, Qe, Ve, Ne)
-            compile_time += _dispatch_time(drive.run_ensemble, args[4], *args)
+            run, seconds = _RUN_ENSEMBLE.bind(*args)
+            compile_time += seconds
             t_loop = time.perf_counter()
-            drive.run_ensemble(*args)
+            run(*args)
             t1 = time.perf_counter()
         finally:
             numba.set_parallel_chunksize(prev_chunk)

@@ -14,6 +14,7 @@ from . import _validate as valid
 from . import events as events_
 from . import structure
 from .kernels.events import event_values
+from ._launch import Launcher
 from ._numba import quiet
 from .kernels import drive
 from .kernels import layout as lay
@@ -258,19 +259,21 @@ def integrate(
     chunk = total if not progress else max(1, total // _PROGRESS_CHUNKS)
     sout = np.zeros(lay.STEP_OUT_SIZE)
     sized = True if specialize else None
-    compile_time += _dispatch_time(drive.run, (md.timed, ws.dims if specialize else None), md,
-                                   tabs, opts, h, state, ws,
-                                   chunk, total, every, smp, info, sout, ev, sized)
+    run, seconds = _RUN.bind(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout,
+                             ev, sized)
+    compile_time += seconds
     bar = ProgressBar(total) if progress else None
     t_loop = time.perf_counter()
     status = 0
     recovered = []
     while info[lay.I_STEPS] < total:
         with quiet():
-            status = drive.run(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout,
-                               ev, sized)
+            status = run(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout, ev,
+                         sized)
         if status == lay.EVENTS_FULL:
             ev = events_.grow(ev)
+            run = _RUN.bind(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout, ev,
+                            sized)[0]
             status = 0
             continue
         if status == lay.EVENT_TERMINAL:  # the step containing the event is the last sample
@@ -324,27 +327,8 @@ def _timed(fn) -> float:
     return time.perf_counter() - t
 
 
-#: (kernel, kind) pairs already made ready in this process (see _dispatch_time)
-_READY: set = set()
-
-
-def _dispatch_time(kernel, kind, *args) -> float:
-    """Seconds to make ``kernel`` ready for ``args`` (compile, or load from numba's cache).
-
-    The types are computed as numba's dispatcher computes them for a call, so the call that
-    follows finds the compiled version and the loop's timing holds the loop only. Typing
-    the arguments costs ≈ 0.5 ms (the tuple of callbacks), so it is skipped once the kernel
-    is ready for this ``kind`` of model: the kernels are called with the same types for
-    every model of a kind (conservative, or with forces or time: ``ModelData.timed``; and,
-    for size-specialized kernels, the size markers).
-    """
-    if not hasattr(kernel, "compile") or (kernel, kind) in _READY:  # NUMBA_DISABLE_JIT, or ready
-        return 0.0
-    t = time.perf_counter()
-    with quiet():
-        kernel.compile(tuple(kernel.typeof_pyval(a) for a in args))
-    _READY.add((kernel, kind))
-    return time.perf_counter() - t
+#: the time loop, called through its compiled entry points (no per-call typing: _launch.py)
+_RUN = Launcher(drive.run)
 
 
 def _warn_if_energy_explodes(result: Result) -> None:
@@ -388,9 +372,9 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
         info_sub[lay.I_FIRST] = 1
         info_sub[lay.I_T0] = info[lay.I_T0] + info[lay.I_STEPS] * h
         with quiet():
-            st = drive.run(md, tabs, opts, h / sub, trial, ws_sub, sub, sub, sub, smp_sub, info_sub,
-                           np.zeros(lay.STEP_OUT_SIZE), events_.prepare(model, meth, None, 0),
-                           True if specialize else None)
+            st = _RUN(md, tabs, opts, h / sub, trial, ws_sub, sub, sub, sub, smp_sub, info_sub,
+                      np.zeros(lay.STEP_OUT_SIZE), events_.prepare(model, meth, None, 0),
+                      True if specialize else None)
         if st == 0:
             state[:3] = trial[:3]
             info[lay.I_ITERS] += info_sub[lay.I_ITERS]

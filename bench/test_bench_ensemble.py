@@ -19,6 +19,9 @@ report prints the median final-position error of fastvi and of both SciPy loops 
 DOP853 reference at tolerance 1e-13 on the first ``SCIPY_MEMBERS`` members. Throughput is
 member-steps per second, a SciPy "member-step" being 1/1000 of one member's time span.
 
+``test_specialized_members_interleaved`` times ``specialize=True`` against the generic
+kernels (2 threads, rounds alternated) and asserts equal final states.
+
 The report at the end prints the thread speed-up, median(1 thread) / median(2 threads)
 (goal ≥ 1.7 on a 2-core machine), and every throughput; run with
 ``.venv/bin/python -m pytest bench/test_bench_ensemble.py --benchmark-only`` (or ``make bench``).
@@ -154,6 +157,35 @@ def test_thread_speedup_interleaved(benchmark, members):
     _results["interleaved"] = dict(one=float(np.median(one)), two=two, load=float(np.median(load)))
 
 
+def test_specialized_members_interleaved(benchmark, members):
+    """``specialize=True`` against the generic kernels, 2 threads, alternated round by round
+    (the generic run is the round's ``setup``); the final states must be equal bit for bit."""
+    benchmark.group = "specialized members, interleaved rounds"
+    model, _, Q0, V0 = members
+    generic, finals = [], {}
+
+    def run(specialize):
+        res = fastvi.integrate_ensemble(model, Q0, V0, h=H, n_steps=N_STEPS, method=METHOD,
+                                        threads=2, specialize=specialize)
+        assert res.success.all()
+        finals[specialize] = res.q
+
+    def setup():
+        t0 = time.perf_counter()
+        run(False)
+        generic.append(time.perf_counter() - t0)
+
+    run(True)  # compiled / loaded from the cache outside the timing
+    run(False)
+    benchmark.pedantic(run, args=(True,), setup=setup, rounds=ROUNDS, iterations=1,
+                       warmup_rounds=0)
+    sized = benchmark.stats.stats.median
+    assert np.array_equal(finals[False], finals[True])
+    benchmark.extra_info.update(median_generic=float(np.median(generic)),
+                                speedup=float(np.median(generic)) / sized)
+    _results["specialized"] = dict(generic=float(np.median(generic)), sized=sized)
+
+
 def _print_report(write, members):
     write.sep("fastvi ensembles: 256 members x 1000 steps, double pendulum, P2L-Q3G")
     _write_report(write, members)
@@ -175,6 +207,11 @@ def _write_report(write, members):
               f"{r['two']:.3f} s, speed-up = {ratio:.2f} (goal >= {GOAL}: "
               f"{'met' if ratio >= GOAL else 'MISSED'}; 1-min load average during the rounds "
               f"{r['load']:.1f} on {os.cpu_count()} CPUs)")
+    if "specialized" in _results:
+        r = _results["specialized"]
+        write(f"specialize=True, interleaved rounds (2 threads): median generic = "
+              f"{r['generic']:.3f} s, specialized = {r['sized']:.3f} s, speed-up = "
+              f"{r['generic'] / r['sized']:.2f} (final states equal bit for bit)")
     write(f"{'contender':<20} {'median s':>10} {'member-steps/s':>16} {'median |q - q_ref|':>20}")
     for name in CONTENDERS:
         r = _results.get(name)

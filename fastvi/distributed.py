@@ -56,12 +56,14 @@ def integrate_ensemble(
     events=None,
     keep_events: int = 1,
     solver: str = "auto",
+    specialize: bool = False,
 ) -> EnsembleResult:
     """:func:`fastvi.integrate_ensemble` with the members spread over a Dask cluster.
 
     Parameters
     ----------
-    model, Q0, V0, h, t_end, n_steps, t0, method, params, save, tol, max_iter, newton, check, solver :
+    model, Q0, V0, h, t_end, n_steps, t0, method, params, save, tol, max_iter, newton, check, solver,
+    specialize :
         As in :func:`fastvi.integrate_ensemble`.
     events, keep_events :
         As in :func:`fastvi.integrate_ensemble`. The event functions travel with each task
@@ -100,7 +102,7 @@ def integrate_ensemble(
     if not isinstance(model, Model):
         raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
     opts = _ens._options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0, keep_events,
-                         solver)
+                         solver, specialize)
     _ens.events_.check_list(events)
     if threads is not None:  # the upper bound is the worker's NUMBA_NUM_THREADS: checked there
         threads = _ens.check.count(threads, "threads", 1)

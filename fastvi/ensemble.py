@@ -401,6 +401,7 @@ def integrate_ensemble(
     events=None,
     keep_events: int = 1,
     solver: str = "auto",
+    specialize: bool = False,
 ) -> EnsembleResult:
     r"""Integrate ``N`` members (initial states and/or parameters) of one model in parallel.
 
@@ -454,6 +455,12 @@ def integrate_ensemble(
         How each member solves a step's linear systems, as in :func:`fastvi.integrate`: a
         large mechanism's members solve banded or sparse (planned once for the ensemble), a
         small model's densely.
+    specialize : bool, default False
+        Run every member with the kernels compiled for the model's and method's sizes, as
+        :func:`fastvi.integrate` does with ``specialize=True``: the same trajectories bit
+        for bit, a member's step cheaper on small models (``docs/benchmarks.md``), and one
+        more compile of the parallel loop per set of sizes (minutes on a fresh install, then
+        cached on disk). Sizes above 64 stay run-time integers.
 
     Returns
     -------
@@ -486,7 +493,8 @@ def integrate_ensemble(
     run_check = check
     if not isinstance(model, Model):
         raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
-    opts = _options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0, keep_events, solver)
+    opts = _options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0, keep_events, solver,
+                    specialize)
     threads = _validate_threads(threads)
     return _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
                      events=events)
@@ -498,7 +506,7 @@ def _validate_threads(threads):
 
 
 def _options(h, t_end, n_steps, method, save, tol, max_iter, newton="auto", t0=0.0,
-             keep_events=1, solver="auto") -> dict:
+             keep_events=1, solver="auto", specialize=False) -> dict:
     """The validated scalar options of a run (cheap: the client of a Dask run calls it too)."""
     h = check.step_size(h)
     t0 = check.start_time(t0)
@@ -506,7 +514,7 @@ def _options(h, t_end, n_steps, method, save, tol, max_iter, newton="auto", t0=0
                 method=check.method(method), save=check.ensemble_save(save),
                 newton=check.newton_options(tol, max_iter, newton),
                 keep_events=check.count(keep_events, "keep_events", 1),
-                solver=check.solver(solver))
+                solver=check.solver(solver), specialize=check.flag(specialize, "specialize"))
 
 
 def _members(model: Model, Q0, V0, params):
@@ -568,10 +576,9 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
                 numba.set_num_threads(threads)
             used = numba.get_num_threads()
             numba.set_parallel_chunksize(max(1, N // (CHUNKS_PER_THREAD * used)))
-            # the sizes as integers: numba's parallel loop cannot take the size markers of
-            # the specialized kernels (tuples of None) into its body, so ensembles run the
-            # generic kernels (integrate(..., specialize=True) does not have this limit)
             dims = (model.n, model.m, meth.s, meth.r, meth.J)
+            if opts.get("specialize", False):
+                dims = lay.parallel_markers(dims)
             args = (fns, flags, Mc, KP, model.kernel_data().timed, meth.kernel_tables,
                     opts["newton"], h, t0, dims, plan.si, plan.sb, X0, total, mode, every, H0,
                     Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, ev.fns, ev.count, ev.direction,

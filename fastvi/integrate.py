@@ -191,7 +191,7 @@ def integrate(
         trajectory is the generic kernels' bit for bit; a step of the double pendulum costs
         1.6–2.4× less (``docs/benchmarks.md``). The price is one compile per size, ≈ 85–100 s
         on a fresh install (then cached on disk like the generic kernels): worth it for
-        long runs of one model. :func:`fastvi.integrate_ensemble` has no such option yet.
+        long runs of one model. :func:`fastvi.integrate_ensemble` takes the same option.
 
     Returns
     -------

@@ -28,6 +28,18 @@ def test_markers_and_sizes():
     assert ws.X.shape == (12,)
 
 
+def test_parallel_markers_carry_the_sizes_into_a_compiled_body():
+    """Ensembles pass sizes to their parallel loop as empty arrays of that many dimensions
+    (numba's prange takes no nested tuples); the body turns them back into the size markers
+    of integrate(..., specialize=True). Sizes above 64 stay integers."""
+    dims = (4, 2, 0, 3, 70)
+    pm = lay.parallel_markers(dims)
+    assert [type(x) for x in pm] == [np.ndarray] * 4 + [int]
+    assert [lay.dim(x) for x in pm] == list(dims)
+    assert lay.member_sizes(pm) == lay.size_markers(dims[:4]) + (70,)
+    assert lay.member_sizes(dims) == dims  # the generic kernels' integers pass unchanged
+
+
 # compiles the time loop for the double pendulum's sizes (≈ 90 s on an empty cache): over
 # the 8-minute budget of `make test` together with the rest; `make test-slow` and `make bench`
 # (which asserts the same equality on every method it times) run it

@@ -16,7 +16,8 @@ from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_IT
                      I_RES, I_SLOT, I_STEPS, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK, INFO_SIZE,
                      POT, S_FULL, S_G, S_GV, S_ITERS, S_RES, S_WORK, SAVE_DIAGNOSTICS, SAVE_FINAL,
                      SAVE_STRIDE, STEP_OUT_SIZE, EVENT_SLOTS, EVENTS_FULL, Events, ModelData,
-                     Samples, dim, is_timed, sizes, with_plan, workspace_for)
+                     Samples, dim, is_timed, member_sizes, sizes, with_plan,
+                     workspace_for)
 from .events import after_step, event_values, room_for_crossings
 from .step import step, step_inlined
 
@@ -248,8 +249,9 @@ def run_ensemble(fns, flags, Mc, P, timed, tabs, opts, h, t0, dims, si, sb, X0, 
                  Ve, Ne):
     """``run_member`` for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in parallel.
 
-    ``dims`` = (n, m, s, r, J) (integers: numba's parallel loop cannot take the size markers
-    of :func:`.layout.specialize` into its body) sizes each member's workspace, and ``si``,
+    ``dims`` = (n, m, s, r, J), integers (the generic kernels) or parallel markers
+    (:func:`.layout.parallel_markers`: each member then runs the size-specialized kernels
+    of ``integrate(..., specialize=True)``), sizes each member's workspace, and ``si``,
     ``sb`` are the structured-solve plan of the model and method (:func:`fastvi.structure.plan`;
     each member solves with its own copy of ``sb``). ``P``
     (N, k + 1) holds each member's kernel parameters (the kernels write the time into the
@@ -267,7 +269,7 @@ def run_ensemble(fns, flags, Mc, P, timed, tabs, opts, h, t0, dims, si, sb, X0, 
     n = dim(dims[0])
     s = dim(dims[2])
     for i in prange(X0.shape[0]):
-        ws = with_plan(workspace_for(dims), si, sb.copy())
+        ws = with_plan(workspace_for(member_sizes(dims)), si, sb.copy())
         state = np.zeros((6, n))
         for a in range(n):
             state[0, a] = X0[i, 0, a]

@@ -315,7 +315,10 @@ def with_plan(ws, si, sb):
 def dim(x):
     """A size as the kernels read it: an int, or the length of a *size marker* — a tuple of
     that many ``None`` — which numba types as ``UniTuple(none, k)``, so that inside a kernel
-    the size is a compile-time constant (see :func:`specialize`)."""
+    the size is a compile-time constant (see :func:`specialize`); or the number of
+    dimensions of a *parallel marker* (:func:`parallel_markers`)."""
+    if isinstance(x, np.ndarray):
+        return x.ndim
     return len(x) if isinstance(x, tuple) else int(x)
 
 
@@ -326,7 +329,55 @@ def _dim(x):
     if isinstance(x, types.BaseTuple):
         k = len(x)
         return lambda x: k
+    if isinstance(x, types.Array):
+        k = x.ndim
+        return lambda x: k
     return None
+
+
+#: the largest size a parallel marker carries (NumPy's limit on an array's dimensions)
+PARALLEL_MARKER_MAX = 64
+
+
+def parallel_markers(dims):
+    """``(n, m, s, r, J)`` for the body of a parallel loop of size-specialized kernels.
+
+    numba's ``prange`` passes the variables its body uses as arguments of a generated
+    kernel, which takes arrays and scalars but not nested tuples, so the size markers of
+    :func:`specialize` cannot cross into it. An empty array of ``k`` dimensions can, and its
+    type carries ``k``; the body turns it back into a size marker
+    (:func:`from_parallel_marker`), so that each member runs the very kernels
+    ``integrate(..., specialize=True)`` runs. Sizes above ``PARALLEL_MARKER_MAX`` stay
+    run-time integers."""
+    return tuple(np.empty((0,) * int(k)) if int(k) <= PARALLEL_MARKER_MAX else int(k)
+                 for k in dims)
+
+
+def from_parallel_marker(x):
+    """The size marker (tuple of ``k`` ``None``) of a parallel marker; an int unchanged."""
+    return (None,) * x.ndim if isinstance(x, np.ndarray) else x
+
+
+@overload(from_parallel_marker)
+def _from_parallel_marker(x):
+    if isinstance(x, types.Integer):
+        return lambda x: x
+    if isinstance(x, types.Array):
+        # a tuple literal of x.ndim Nones: numba types it UniTuple(none, k), as size_markers
+        src = f"def impl(x):\n    return ({'None, ' * x.ndim})\n"
+        ns = {}
+        exec(src, ns)  # noqa: S102 - the source is built from an integer only
+        return ns["impl"]
+    return None
+
+
+@njit
+def member_sizes(dims):
+    """Inside a parallel loop's body: ``dims`` with its parallel markers turned back into
+    size markers (:func:`from_parallel_marker`)."""
+    return (from_parallel_marker(dims[0]), from_parallel_marker(dims[1]),
+            from_parallel_marker(dims[2]), from_parallel_marker(dims[3]),
+            from_parallel_marker(dims[4]))
 
 
 @hot_inline

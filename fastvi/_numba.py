@@ -2,6 +2,7 @@
 
 import contextlib
 import hashlib
+import types as types_
 import warnings
 from pathlib import Path
 
@@ -108,6 +109,26 @@ def hot_inline(fn):
     call: factoring the forces at a quadrature point into a plain ``hot`` helper made the
     default step 1.4× slower (6.0 against 4.3 µs, ``docs/benchmarks.md``)."""
     return nb.njit(**_OPTIONS, _nrt=False, inline="always")(fn)
+
+
+def inline_copy(kernel, **calls):
+    """A :func:`hot_inline` copy of the kernel ``kernel`` whose calls to the named kernels
+    go to ``calls`` instead, e.g. ``inline_copy(step, newton_full=newton_full_inlined)``.
+
+    The size-specialized time loop compiles one step with everything inlined (no flattened
+    named tuples copied at a call), while the generic kernels keep their calls (inlining
+    every helper everywhere multiplies the compile time of the first ``integrate``). The
+    copy shares the kernel's code object; only the names it looks up differ.
+    """
+    fn = kernel.py_func
+    scope = dict(fn.__globals__)
+    unknown = set(calls) - set(fn.__code__.co_names)
+    if unknown:
+        raise NameError(f"{fn.__name__} calls no {sorted(unknown)}")
+    scope.update(calls)
+    copy = types_.FunctionType(fn.__code__, scope, fn.__name__, fn.__defaults__, fn.__closure__)
+    copy.__qualname__, copy.__module__, copy.__doc__ = fn.__qualname__, fn.__module__, fn.__doc__
+    return hot_inline(copy)
 
 
 @contextlib.contextmanager

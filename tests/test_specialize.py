@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import fastvi
+from fastvi._numba import hot, inline_copy, njit
 from fastvi.kernels import layout as lay
 
 FIELDS = ("t", "q", "v", "p", "energy", "constraint_residual", "velocity_residual",
@@ -66,3 +67,53 @@ def test_specialize_is_a_flag():
         fastvi.integrate(dp, q0, v0, h=0.01, n_steps=2, specialize="yes")
     with pytest.raises(TypeError, match="`specialize` must be True or False"):
         fastvi.integrate(dp, q0, v0, h=0.01, n_steps=2, specialize=1)
+
+
+# the sized step inlines the full Newton and its assembly (fastvi._numba.inline_copy): the
+# stiff rod–slider takes it on nearly every step (the mechanics iteration fails there and
+# falls back), the fallback's retries from lower-degree guesses included; compiles the
+# slider's sizes (≈ 100 s on an empty cache)
+@pytest.mark.slow
+def test_specialized_stiff_fallback_is_the_generic_trajectory_bit_for_bit():
+    from fastvi.studies import peers
+
+    k = 1e8
+    model = fastvi.scenes.rotary_rod_slider(k=k)
+    q0, v0 = model.initial_state(0.0, peers.SLIDER_R0 + peers.slider_stretch(k))
+    kw = dict(h=0.01, n_steps=1000, method="P2L-Q2G")
+    gen = fastvi.integrate(model, q0, v0, **kw)
+    sized = fastvi.integrate(model, q0, v0, specialize=True, **kw)
+    assert gen.stats["full_newton_steps"] > 10  # the fallback was taken, and taken again
+    assert sized.stats == {**sized.stats, **{k: gen.stats[k] for k in
+                                             ("newton_iterations", "full_newton_steps")}}
+    _same(gen, sized)
+
+
+@hot
+def _inner(x):
+    return x + 1.0
+
+
+@hot
+def _other(x):
+    return 10.0 * x
+
+
+@hot
+def _outer(x):
+    return _inner(x) * 2.0
+
+
+_copy = inline_copy(_outer, _inner=_other)
+
+
+@njit
+def _call_copy(x):
+    return _copy(x)
+
+
+def test_inline_copy_redirects_only_the_named_calls():
+    assert _outer(1.0) == 4.0  # the original keeps its call
+    assert _call_copy(1.0) == 20.0  # the copy, inlined into its caller, calls the replacement
+    with pytest.raises(NameError, match="calls no"):
+        inline_copy(_outer, missing=_other)

@@ -29,7 +29,7 @@ here allocates.
 
 import numpy as np
 
-from .._numba import hot, hot_inline, ptr
+from .._numba import hot, hot_inline, inline_copy, ptr
 from .banded import (gt_times, mech_impulses_structured, mech_rows_sparse, newton_banded,
                      project_structured, schur_structured)
 from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
@@ -553,6 +553,13 @@ def newton_full(md, tabs, opts, h, qk, pk, ws, out):
     remaining error below ``tol``, or at a round-off plateau (``θ ≥ ½`` with ``|δ| ≤ 100
     tol``). A residual test on the momentum rows would leave an error ~tol/h per step.
     Gives up early when the increments grow twice in a row (divergence).
+
+    Converged or not, it ends with the residual at the final unknowns (``ws.R``, ``ws.D``,
+    ``ws.G[1:]``: what the end momentum and the diagnostics need) and its max-norm in
+    ``out[S_RES]``. The loop has one call of :func:`assemble`, with the Newton matrix while
+    iterating and without it for that final residual: the size-specialized step inlines
+    this function with the assembly (:data:`step_inlined`), and every call site would be
+    another copy of the assembly to compile.
     """
     X, R, A, piv = ws.X, ws.R, ws.A, ws.piv
     n, m, s, _, J = sizes(ws)
@@ -563,12 +570,17 @@ def newton_full(md, tabs, opts, h, qk, pk, ws, out):
     dprev = np.inf
     grew = 0
     it = 0
-    while it < opts.max_iter:
-        it += 1
-        out[S_ITERS] = it
-        st = assemble(md, tabs, h, qk, pk, ws, True)
+    final = False  # the next assembly is the residual at the final unknowns
+    status = NEWTON_FAILED
+    while True:
+        if not final:
+            it += 1
+            out[S_ITERS] = it
+        st = assemble(md, tabs, h, qk, pk, ws, not final)
         if st != OK:
             return st
+        if final:
+            break
         if ws.si[SI_A] == SOLVE_BANDED:  # large sparse models (banded.py)
             if newton_banded(ws, N) != 0:
                 return SINGULAR
@@ -579,24 +591,25 @@ def newton_full(md, tabs, opts, h, qk, pk, ws, out):
         dn = _apply_increment(X, R, N, sn, qscale)
         if not np.isfinite(dn):
             return NONFINITE
+        final = it >= opts.max_iter
         if dn <= tol:
-            return OK
-        if it >= 2:
+            status, final = OK, True
+        elif it >= 2:
             theta = dn / dprev
             if theta < 1.0 and theta / (1.0 - theta) * dn <= tol:
-                return OK
-            if theta >= 0.5 and dn <= 100.0 * tol:
-                return OK  # round-off plateau
-            grew = grew + 1 if theta > 1.0 else 0
-            if grew >= 2:
-                break
+                status, final = OK, True
+            elif theta >= 0.5 and dn <= 100.0 * tol:
+                status, final = OK, True  # round-off plateau
+            else:
+                grew = grew + 1 if theta > 1.0 else 0
+                if grew >= 2:
+                    final = True
         dprev = dn
-    assemble(md, tabs, h, qk, pk, ws, False)
     res = 0.0
     for k in range(N):
         res = max(res, abs(R[k]))
     out[S_RES] = res
-    return NEWTON_FAILED
+    return status
 
 
 # ----------------------------------------------------------------------------- mechanics matrix
@@ -991,27 +1004,22 @@ def step(md, tabs, opts, h, state, ws, first, out):
             out[S_FULL] = 1.0
     if full:
         order = 0 if first else ws.hold[H_HIST]
-        predict(tabs, n, m, h, vk, ws, order)
-        st = newton_full(md, tabs, opts, h, qk, pk, ws, out)
-        while st != OK and order > 0:
+        while True:
             # An extrapolated polynomial can be far off (stiff oscillations with ωh > 1, a
             # sudden turn, a long step: the degree-2s one first): start again from a guess
             # of lower degree, down to the straight line through q_k with velocity v_k.
-            used += out[S_ITERS]
-            order -= 1
+            # (One call site of newton_full: the sized step inlines it, assembly and all.)
             predict(tabs, n, m, h, vk, ws, order)
             st = newton_full(md, tabs, opts, h, qk, pk, ws, out)
+            if st == OK or order == 0:
+                break
+            used += out[S_ITERS]
+            order -= 1
         out[S_ITERS] += used
         if st != OK:
             return st
-        # final residual at the converged unknowns: exact D_s for the momentum, and g(q1)
-        st = assemble(md, tabs, h, qk, pk, ws, False)
-        if st != OK:
-            return st
-        res = 0.0
-        for k in range(N):
-            res = max(res, abs(R[k]))
-        out[S_RES] = res
+        # newton_full ended with the residual at the converged unknowns: exact D_s for the
+        # momentum, and g(q1)
         for a in range(n):
             q1[a] = qk[a] + X[(s - 1) * n + a]
         for a in range(m):
@@ -1043,14 +1051,6 @@ def step(md, tabs, opts, h, state, ws, first, out):
         Xp[k] = X[k]
     ws.hold[H_HIST] = 1 if first else min(ws.hold[H_HIST] + 1, 2)
     return OK
-
-
-#: the same step compiled into its caller: the time loop of the size-specialized kernels
-#: (``drive.run(..., sized=True)``). A call copies the flattened named tuples (hundreds of
-#: machine words): 0.77× / 0.92× of a sized step without the call (P2L-Q3G / P3L-Q4G), but
-#: inlined into every generic loop it cost ≈ 33 s more compile of the first ``integrate``
-#: and as much again for each other loop (docs/benchmarks.md)
-step_inlined = hot_inline(step.py_func)
 
 
 @hot_inline
@@ -1223,3 +1223,14 @@ def end_momentum(md, q1, P, p1, v1, G1, ws, out):
         for a in range(n):
             G0[c, a] = G1[c, a]
     return OK
+
+
+#: the same step compiled into its caller: the time loop of the size-specialized kernels
+#: (``drive.run(..., sized=True)``). A call copies the flattened named tuples (hundreds of
+#: machine words): 0.77× / 0.92× of a sized step without the call (P2L-Q3G / P3L-Q4G), but
+#: inlined into every generic loop it cost ≈ 33 s more compile of the first ``integrate``
+#: and as much again for each other loop (docs/benchmarks.md). Its full Newton is inlined
+#: too, with the assembly (the stiff fallback, ``newton="full"`` and ``s = 1``). Defined
+#: last: the copies see the module's names as they are here.
+step_inlined = inline_copy(
+    step, newton_full=inline_copy(newton_full, assemble=hot_inline(assemble.py_func)))

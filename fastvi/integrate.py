@@ -189,7 +189,7 @@ def integrate(
         compile-time constants (:func:`fastvi.kernels.layout.specialize`): every small loop
         of the step is unrolled, and the step is compiled into the time loop. The
         trajectory is the generic kernels' bit for bit; a step of the double pendulum costs
-        1.6–2.4× less (``docs/benchmarks.md``). The price is one compile per size, ≈ 85–100 s
+        2.0–2.9× less (``docs/benchmarks.md``). The price is one compile per size, ≈ 100 s
         on a fresh install (then cached on disk like the generic kernels): worth it for
         long runs of one model. :func:`fastvi.integrate_ensemble` takes the same option.
 

@@ -339,7 +339,28 @@ class Method:
         return Tables(self.b, self.L, self.Ld, self.Lc, self.E, self.tau,
                       np.ascontiguousarray(Ainv), np.ascontiguousarray(W), As, mech,
                       np.ascontiguousarray(self.c), np.ascontiguousarray(self.d),
-                      np.ascontiguousarray(E2))
+                      np.ascontiguousarray(E2), _mass_block(self.b, self.Ld))
+
+
+def _mass_block(b: np.ndarray, Ld: np.ndarray) -> np.ndarray:
+    """``K[ν−1, μ−1] = Σ_i b_i ℓ'_ν(c_i) ℓ'_μ(c_i)`` for ν, μ = 1…s, exactly symmetric.
+
+    For a constant ``M`` the mass part of ``∂S/∂Q^ν`` is ``(1/h) M Σ_μ K[ν−1, μ−1] ΔQ^μ``
+    (ν ≥ 1) and that of ``∂S/∂Q^0`` minus their sum. The discrete Noether theorem needs the
+    quadratic form to be exactly symmetric and its rows to sum exactly to zero: the kernel
+    gets the second by forming row 0 as a sum, this table the first by rounding each exact
+    (rational) entry once and mirroring it. Rounded separately, a few ulps of asymmetry
+    made the spherical pendulum's L_z drift linearly (4.8e-11 over 10⁵ steps, against
+    8.8e-14).
+    """
+    s = Ld.shape[0] - 1
+    bq = [Fraction(x) for x in b]
+    K = np.zeros((s, s))
+    for nu in range(1, s + 1):
+        for mu in range(nu, s + 1):
+            exact = sum(w * Fraction(Ld[nu, i]) * Fraction(Ld[mu, i]) for i, w in enumerate(bq))
+            K[nu - 1, mu - 1] = K[mu - 1, nu - 1] = float(exact)
+    return K
 
 
 def _constraint_points(code: str, k: int | None, tau: np.ndarray) -> tuple[str, np.ndarray]:

@@ -148,7 +148,8 @@ def test_rk4_with_projection_keeps_constraints_at_roundoff(double_pendulum, dp_s
 
 
 def test_variational_energy_error_stays_bounded_while_rk4_grows(double_pendulum, dp_start):
-    """Over 10^4 steps (h = 0.01, T = 100 s) on paper B's chaotic double pendulum."""
+    """Over 10^4 steps (h = 0.01, T = 100 s) on paper B's chaotic double pendulum, and the
+    variational integrator alone over 10^5 steps."""
     q0, v0 = dp_start
     vi = fastvi.integrate(double_pendulum, q0, v0, h=0.01, n_steps=10_000, method="P2L-Q3G")
     rk = rk4(double_pendulum, q0, v0, h=0.01, n_steps=10_000)
@@ -159,11 +160,17 @@ def test_variational_energy_error_stays_bounded_while_rk4_grows(double_pendulum,
     def late_over_early(err):
         return np.abs(err[half:]).max() / np.abs(err[:half]).max()
 
-    # bounded: the fitted trend of the per-window maxima is small against their size, and the
-    # second half of the run reaches no higher than the first (the chaotic motion makes the
-    # window maxima fluctuate, so a first-window comparison would be meaningless)
-    assert abs(vi_slope) * 100.0 < 0.25 * vi_win.max()  # measured 0.053
-    assert late_over_early(vi.energy_error) < 2.0  # measured 1.11
+    # bounded: the fitted trend of the per-window maxima does not rise against their size,
+    # and the second half of the run reaches no higher than the first. Over 10^4 steps the
+    # chaotic motion makes the window maxima wander either way (a trend of −0.48 of their
+    # size in one run, +0.20 in another that differs from it only by round-off), so the
+    # size of the trend is tested over 10^5 steps, where both measured 0.03–0.16
+    assert vi_slope * 100.0 < 0.25 * vi_win.max()  # measured +0.20, −0.48
+    assert late_over_early(vi.energy_error) < 2.0  # measured 0.75–1.11
+    long = fastvi.integrate(double_pendulum, q0, v0, h=0.01, n_steps=100_000, method="P2L-Q3G")
+    long_slope, long_win = drift_slope(long.t, long.energy_error)
+    assert abs(long_slope) * 1000.0 < 0.25 * long_win.max()  # measured 0.03, 0.16
+    assert np.abs(long.energy_error).max() < 2.0 * np.abs(vi.energy_error).max()  # ≈ 1.1
     # RK4: the per-window maxima rise in every window, and by orders of magnitude
     assert rk_slope * 100.0 > 0.5 * rk_win.max()  # measured 0.99
     assert np.all(np.diff(rk_win) > 0)  # measured: strictly increasing

@@ -9,7 +9,7 @@ import pytest
 
 import fastvi
 from fastvi.kernels.layout import make_workspace
-from fastvi.kernels.step import assemble
+from fastvi.kernels.step import assemble, residual
 
 from . import models, reference
 
@@ -64,6 +64,34 @@ def test_kernel_residual_equals_the_numpy_twin(label, model, q, v, name):
     scale = max(1.0, np.abs(Rt).max())
     # the twin uses the uncorrected tables in absolute form: agreement to rounding, not bits
     assert np.abs(R - Rt).max() <= 5e-13 * scale  # measured ≤ 6.7e-14 (relative)
+
+
+def _chain_start():
+    from fastvi.studies.wpd import chain_angles
+
+    ch = fastvi.scenes.chain(6)  # n = 12: the constant-mass part's loops over the coordinates
+    q, v = ch.initial_state(chain_angles(6))
+    return ("chain6", ch, q, v + 0.3)
+
+
+@pytest.mark.parametrize("name", ["P2L-Q3G", "P3L-Q4G", "P2L-Q3G-NE-CE", "P3L-Q3L-NC-CG2"])
+@pytest.mark.parametrize("label,model,q,v", MODELS + [_chain_start()],
+                         ids=[m[0] for m in MODELS] + ["chain6"])
+def test_mechanics_residual_equals_the_numpy_twin(label, model, q, v, name):
+    """The residual of the mechanics iteration (its own loop order; for a constant M the mass
+    part from the method's quadratic form, ``tables._mass_block``) is the same equations."""
+    meth = fastvi.method(name)
+    h = 0.05
+    pk = model.mass_matrix(q) @ v
+    X = _random_unknowns(model, meth, h, v, 3)
+    ws = make_workspace(model.n, model.m, meth.s, meth.r, meth.J)
+    ws.X[:] = X
+    if model.m:
+        ws.G[0][:, :] = model.constraint_jacobian_value(q)  # the step starts with G(q_k)
+    assert residual(model.kernel_data(), meth.kernel_tables, h, q, pk, ws) == 0
+    Rt = reference.residual(model, meth, h, q, pk, X)
+    scale = max(1.0, np.abs(Rt).max())
+    assert np.abs(ws.R - Rt).max() <= 5e-13 * scale
 
 
 @pytest.mark.parametrize("name", METHODS)

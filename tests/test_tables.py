@@ -69,6 +69,27 @@ def test_method_tables_are_a_partition_of_unity_in_floating_point(name):
         assert math.fsum(m.E[:, nu]) == 1.0
 
 
+@pytest.mark.parametrize("name", ["P2L-Q3G", "P3L-Q4G", "P4L-Q5G", "P5L-Q7L-NC-CG3", "P8L-Q9G"])
+def test_mass_block_is_exactly_symmetric_and_correctly_rounded(name):
+    """The constant-mass residual's quadratic form: asymmetric by an ulp, the discrete
+    Noether theorem fails and a conserved momentum drifts linearly (tests of the spherical
+    pendulum's L_z)."""
+    from fractions import Fraction
+
+    m = method(name)
+    K = m.kernel_tables.Am
+    assert K.shape == (m.s, m.s)
+    assert np.array_equal(K, K.T)
+    for nu in range(1, m.s + 1):
+        for mu in range(1, m.s + 1):
+            exact = sum(Fraction(b) * Fraction(m.Ld[nu, i]) * Fraction(m.Ld[mu, i])
+                        for i, b in enumerate(m.b))
+            assert K[nu - 1, mu - 1] == float(exact)
+    # the same numbers as the mechanics matrix's A (rows 1…s−1) and As (row s), to rounding
+    A = np.einsum("i,vi,ui->vu", m.b, m.Ld, m.Ld[1:])[1:]
+    assert np.allclose(K, A, rtol=1e-13, atol=1e-13 * np.abs(A).max())
+
+
 def test_paper_b_names_mean_the_order_2s_default():
     m = method("P2L-Q3G")
     assert m.name == "P2L-Q3G-NL-CN"

@@ -201,7 +201,7 @@ NewtonOptions = namedtuple("NewtonOptions", ["tol", "max_iter", "mode"])
 Events = namedtuple("Events", ["fns", "count", "direction", "terminal", "g", "t", "q", "v", "n",
                                "dense", "Q", "qk", "qx", "vx", "ell", "dell", "scratch"])
 Tables = namedtuple("Tables", ["b", "L", "Ld", "Lc", "E", "tau", "Ainv", "W", "As", "mech",
-                               "c", "d", "E2"])
+                               "c", "d", "E2", "Am"])
 Tables.__doc__ = """Method tables read by the step kernel (see :class:`fastvi.tables.Method`).
 
 b (r,), L, Ld (s+1, r), Lc (s+1, J+1), E (s+1, s+1), tau (s+1,) as in ``Method``; the
@@ -213,7 +213,11 @@ As (s,) ``As[μ−1] = Σ_i b_i ℓ'_s(c_i) ℓ'_μ(c_i)``; mech (bool) whether 
 uses the mechanics matrix: not where ``A`` is singular (a quadrature with fewer points than
 ``s``) nor for ``s = 1``, where the full Newton measured faster; E2 (2s+1, s+1) the
 predictor from the last two steps: the Lagrange basis of their 2s + 1 control points
-(``τ_μ − 1``, μ < s, then ``τ_μ``, in the last step's local time) at ``1 + τ_ν``."""
+(``τ_μ − 1``, μ < s, then ``τ_μ``, in the last step's local time) at ``1 + τ_ν``; Am
+(s, s) the mass block ``Am[ν−1, μ−1] = Σ_i b_i ℓ'_ν(c_i) ℓ'_μ(c_i)``, ν, μ = 1…s, exactly
+symmetric: for a constant ``M`` the mass part of ``∂S/∂Q^ν`` is ``(1/h) M Σ_μ Am[ν−1, μ−1]
+ΔQ^μ``, and that of ``∂S/∂Q^0`` minus their sum (the mechanics residual's shortcut;
+``fastvi.tables._mass_block``)."""
 
 Workspace = namedtuple(
     "Workspace",

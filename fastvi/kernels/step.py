@@ -58,6 +58,9 @@ FULL_HOLD = 32
 #: the two-step predictor is used while it differs from the one-step one by at most this
 #: fraction of the last step's displacement (its asymptotic range; docs/benchmarks.md)
 PREDICT_TRUST = 1e-2
+#: up to this many coordinates the constant-mass part of the residual is formed coordinate
+#: by coordinate, above it with vectorised loops over the coordinates (the same arithmetic)
+_MASS_ROWS_SMALL = 8
 
 
 # ----------------------------------------------------------------------------- derivatives
@@ -683,9 +686,63 @@ def residual(md, tabs, h, qk, pk, ws):
     N = sn + J * m
     inv_h = 1.0 / h
     Mi = Mc if not has_mass else ws.Mi
-    for nu in range(s + 1):
-        for a in range(n):
-            D[nu, a] = 0.0
+    # a constant M: the mass part of D is linear in X with the method's own quadratic form,
+    # (1/h) M Σ_μ Am[ν−1, μ−1] ΔQ^μ for ν ≥ 1 and minus their sum for ν = 0 (the same
+    # quadrature sums, in another order; a sum so that the rows sum to zero exactly, as
+    # the discrete Noether theorem needs: tables._mass_block), and v at the quadrature
+    # points is needed only by a velocity-dependent force
+    need_v = has_mass or (is_timed(md) and flags[F_FORCE] != 0)
+    if has_mass:
+        for nu in range(s + 1):
+            for a in range(n):
+                D[nu, a] = 0.0
+    else:
+        # the same operations in the same order either way (bit for bit); for a few
+        # coordinates one pass over them with the short sums over μ innermost (n s
+        # independent chains, no loop of run-time length n for each ν and μ: those cost
+        # the generic kernels more than the multiply–adds saved), for many the loops over
+        # the coordinates innermost, where they vectorise
+        Am = tabs.Am
+        if n <= _MASS_ROWS_SMALL:
+            for a in range(n):
+                d0 = 0.0
+                for nu in range(1, s + 1):
+                    acc = 0.0
+                    for mu in range(s):
+                        acc += Am[nu - 1, mu] * X[mu * n + a]
+                    acc *= inv_h
+                    if diag:
+                        acc *= Mc[a, a]
+                    D[nu, a] = acc  # without M for a full M: applied below
+                    d0 -= acc
+                D[0, a] = d0
+        else:
+            for a in range(n):
+                D[0, a] = 0.0
+            for nu in range(1, s + 1):
+                Dn = D[nu]
+                for a in range(n):
+                    Dn[a] = 0.0
+                for mu in range(s):
+                    cm = Am[nu - 1, mu]
+                    off = mu * n
+                    for a in range(n):
+                        Dn[a] += cm * X[off + a]
+                for a in range(n):
+                    acc = Dn[a] * inv_h
+                    if diag:
+                        acc *= Mc[a, a]
+                    Dn[a] = acc
+                    D[0, a] -= acc
+        if not diag:
+            for nu in range(s + 1):
+                for a in range(n):
+                    Pm[a] = D[nu, a]
+                for a in range(n):
+                    acc = 0.0
+                    for c in range(n):
+                        acc += Mc[a, c] * Pm[c]
+                    D[nu, a] = acc
     for i in range(r):
         _at(md, ws, h, tabs.c[i])
         for a in range(n):
@@ -693,29 +750,35 @@ def residual(md, tabs, h, qk, pk, ws):
             vi[a] = 0.0
         for nu in range(1, s + 1):
             cl = L[nu, i]
-            cd = Ld[nu, i] * inv_h
             off = (nu - 1) * n
-            for a in range(n):
-                x = X[off + a]
-                qi[a] += cl * x
-                vi[a] += cd * x
+            if need_v:
+                cd = Ld[nu, i] * inv_h
+                for a in range(n):
+                    x = X[off + a]
+                    qi[a] += cl * x
+                    vi[a] += cd * x
+            else:
+                for a in range(n):
+                    qi[a] += cl * X[off + a]
         _point_force(md, ws, Mi, has_mass, n)
-        if diag:
-            for a in range(n):
-                Pm[a] = Mi[a, a] * vi[a]
-        else:
+        w = h * b[i]
+        if has_mass:
             for a in range(n):
                 Pm[a] = 0.0
             for c in range(n):
                 vc = vi[c]
                 for a in range(n):
                     Pm[a] += Mi[a, c] * vc
-        w = h * b[i]
-        for nu in range(s + 1):
-            cl = w * L[nu, i]
-            cd = b[i] * Ld[nu, i]
-            for a in range(n):
-                D[nu, a] += cl * F[a] + cd * Pm[a]
+            for nu in range(s + 1):
+                cl = w * L[nu, i]
+                cd = b[i] * Ld[nu, i]
+                for a in range(n):
+                    D[nu, a] += cl * F[a] + cd * Pm[a]
+        else:
+            for nu in range(s + 1):
+                cl = w * L[nu, i]
+                for a in range(n):
+                    D[nu, a] += cl * F[a]
     for a in range(n):
         R[a] = pk[a] + D[0, a]
     for nu in range(1, s):

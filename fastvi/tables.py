@@ -316,14 +316,14 @@ class Method:
         (``docs/method.md`` §10): with ``A[ν, μ−1] = Σ_i b_i ℓ'_ν(c_i) ℓ'_μ(c_i)``
         (ν = 0…s−1, μ = 1…s; the mass block of the step equations is ``(1/h) A ⊗ M``),
         ``Ainv = A⁻¹``, the impulse coupling ``W = Lc_C A⁻¹ Lc_B`` of the Schur complement
-        ``S_{jj'} = h W[j−1, j'] G_j M⁻¹ G_{j'}ᵀ``, and ``As[μ−1] = Σ_i b_i ℓ'_s(c_i) ℓ'_μ(c_i)``
-        (the mass part of ``∂P/∂Q^μ``).
+        ``S_{jj'} = h W[j−1, j'] G_j M⁻¹ G_{j'}ᵀ``, and the mass block ``Am`` of the rows
+        ν = 1…s, exactly symmetric (:func:`_mass_block`; its last row is the mass part of
+        ``∂P/∂Q^μ``).
         """
         from .kernels.layout import Tables
 
         s, J = self.s, self.J
         A = np.einsum("i,vi,ui->vu", self.b, self.Ld[:s], self.Ld[1:])
-        As = np.einsum("i,i,ui->u", self.b, self.Ld[s], self.Ld[1:])
         invertible = bool(np.linalg.cond(A) < 1e12)  # r < s Gauss points make A singular
         Ainv = np.linalg.inv(A) if invertible else np.zeros((s, s))
         # s = 1: the predictor is only second order, the linear mechanics iteration needed
@@ -337,7 +337,7 @@ class Method:
         E2, _ = lagrange_basis(nodes, 1.0 + self.tau)
         E2, _ = _consistent(E2, np.zeros_like(E2))
         return Tables(self.b, self.L, self.Ld, self.Lc, self.E, self.tau,
-                      np.ascontiguousarray(Ainv), np.ascontiguousarray(W), As, mech,
+                      np.ascontiguousarray(Ainv), np.ascontiguousarray(W), mech,
                       np.ascontiguousarray(self.c), np.ascontiguousarray(self.d),
                       np.ascontiguousarray(E2), _mass_block(self.b, self.Ld))
 

@@ -200,7 +200,7 @@ NewtonOptions = namedtuple("NewtonOptions", ["tol", "max_iter", "mode"])
 #: (n,), ``ell``, ``dell`` (s+1,), ``scratch`` (1,)
 Events = namedtuple("Events", ["fns", "count", "direction", "terminal", "g", "t", "q", "v", "n",
                                "dense", "Q", "qk", "qx", "vx", "ell", "dell", "scratch"])
-Tables = namedtuple("Tables", ["b", "L", "Ld", "Lc", "E", "tau", "Ainv", "W", "As", "mech",
+Tables = namedtuple("Tables", ["b", "L", "Ld", "Lc", "E", "tau", "Ainv", "W", "mech",
                                "c", "d", "E2", "Am"])
 Tables.__doc__ = """Method tables read by the step kernel (see :class:`fastvi.tables.Method`).
 
@@ -208,8 +208,7 @@ b (r,), L, Ld (s+1, r), Lc (s+1, J+1), E (s+1, s+1), tau (s+1,) as in ``Method``
 quadrature nodes c (r,) and constraint points d (J+1,) in [0, 1] (the times of the
 callbacks of a time-aware model: ``t_k + c_i h``, ``t_k + d_j h``); for the
 mechanics Newton matrix: Ainv (s, s) the inverse of ``A[ν, μ−1] = Σ_i b_i ℓ'_ν(c_i) ℓ'_μ(c_i)``
-(ν = 0…s−1, μ = 1…s), W (J, J) ``W[j−1, j'] = Σ ℓ_μ(d_j) Ainv[μ−1, ν] ℓ_ν(d_j')`` and
-As (s,) ``As[μ−1] = Σ_i b_i ℓ'_s(c_i) ℓ'_μ(c_i)``; mech (bool) whether ``newton="auto"``
+(ν = 0…s−1, μ = 1…s), W (J, J) ``W[j−1, j'] = Σ ℓ_μ(d_j) Ainv[μ−1, ν] ℓ_ν(d_j')``; mech (bool) whether ``newton="auto"``
 uses the mechanics matrix: not where ``A`` is singular (a quadrature with fewer points than
 ``s``) nor for ``s = 1``, where the full Newton measured faster; E2 (2s+1, s+1) the
 predictor from the last two steps: the Lagrange basis of their 2s + 1 control points

@@ -979,12 +979,13 @@ def _finish_mech(md, tabs, h, qk, ws, q1, n, m, s, J):
 
     ``ws.D`` was assembled one increment ``δ = ws.R`` earlier; instead of a second full
     residual, its mass part is moved along ``δ`` exactly for a constant ``M`` (to
-    O(|δ| h |∂M/∂q|) otherwise): ``D_s −= (1/h) Σ_μ As_μ M̄ δQ^μ``. The force part moves by
+    O(|δ| h |∂M/∂q|) otherwise): ``D_s −= (1/h) Σ_μ Am[s−1, μ−1] M̄ δQ^μ`` (the last row of
+    the residual's own mass block). The force part moves by
     O(h |∂F/∂q| |δ|), below round-off of the momentum. Returns max|g(q1)|.
     """
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     X, R, D, G = ws.X, ws.R, ws.D, ws.G
-    As = tabs.As
+    Ks = tabs.Am[s - 1]
     inv_h = 1.0 / h
     for a in range(n):
         q1[a] = qk[a] + X[(s - 1) * n + a]
@@ -992,7 +993,7 @@ def _finish_mech(md, tabs, h, qk, ws, q1, n, m, s, J):
     for a in range(n):
         acc = 0.0
         for mu in range(s):
-            acc += As[mu] * R[mu * n + a]
+            acc += Ks[mu] * R[mu * n + a]
         dv[a] = acc * inv_h
     if flags[F_DIAG] != 0:
         for a in range(n):

@@ -16,7 +16,7 @@ from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_IT
                      I_RES, I_SLOT, I_STEPS, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK, INFO_SIZE,
                      POT, S_FULL, S_G, S_GV, S_ITERS, S_RES, S_WORK, SAVE_DIAGNOSTICS, SAVE_FINAL,
                      SAVE_STRIDE, STEP_OUT_SIZE, EVENT_SLOTS, EVENTS_FULL, Events, ModelData,
-                     Samples, dim, is_timed, member_sizes, sizes, with_plan,
+                     Samples, dim, is_timed, member_sizes, sized_flag, sizes, with_plan,
                      workspace_for)
 from .events import after_step, event_values, room_for_crossings
 from .step import step, step_inlined
@@ -171,7 +171,7 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
 # ----------------------------------------------------------------------------- ensembles
 @hot
 def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, ist, fst, sout,
-               info, ev):
+               info, ev, sized=None):
     """Advance one member (rows q, p, v, then scratch of ``state``) through ``n_total`` steps.
 
     ``mode`` is ``SAVE_FINAL`` (the final state into slot 0 of ``smp``), ``SAVE_STRIDE``
@@ -187,6 +187,10 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
     counts further crossings without keeping them. A terminal event ends the member after
     the step that contains it (status ``EVENT_TERMINAL``); in stride mode that step is then
     the last sample, as in :func:`fastvi.integrate`.
+
+    ``sized``: None, or True for a workspace of size markers, whose member loop has the
+    step compiled into it (:data:`.step.step_inlined`), as :func:`run` does for
+    ``integrate(..., specialize=True)``: the same step, bit for bit.
     """
     for k in range(INFO_SIZE):
         info[k] = 0.0
@@ -208,8 +212,12 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
             for a in range(state.shape[1]):
                 ev.qk[a] = state[0, a]
         _clock(ws, info, h)
-        status = _book(step(md, tabs, opts, h, state, ws, info[I_FIRST] != 0.0, sout), k, state,
-                       ws, info, sout)
+        first = info[I_FIRST] != 0.0
+        if sized is None:  # pruned when numba compiles run_member, as in run
+            status = step(md, tabs, opts, h, state, ws, first, sout)
+        else:
+            status = step_inlined(md, tabs, opts, h, state, ws, first, sout)
+        status = _book(status, k, state, ws, info, sout)
         fst[F_RES] = sout[S_RES]
         if status != 0:
             ist[E_FAILED] = int(info[I_FAILED])
@@ -283,4 +291,4 @@ def run_ensemble(fns, flags, Mc, P, timed, tabs, opts, h, t0, dims, si, sb, X0, 
                     np.zeros(n), np.zeros(s + 1), np.zeros(s + 1), np.zeros(1))
         run_member(ModelData(fns, flags, Mc, P[i], timed), tabs, opts, h, t0, state, ws, n_total,
                    mode, every, H0[i], smp, ist[i], fst[i], np.zeros(STEP_OUT_SIZE),
-                   np.zeros(INFO_SIZE), ev)
+                   np.zeros(INFO_SIZE), ev, sized_flag(dims))

@@ -41,6 +41,20 @@ def test_parallel_markers_carry_the_sizes_into_a_compiled_body():
     assert lay.member_sizes(dims) == dims  # the generic kernels' integers pass unchanged
 
 
+@njit
+def _runs_inlined_step(dims):
+    return lay.sized_flag(dims) is not None
+
+
+def test_sized_flag_tells_the_member_loop_which_step_to_run():
+    """Inside the ensembles' parallel loop, parallel markers select the inlined step of
+    integrate(..., specialize=True) and integer sizes the generic step (drive.run_member's
+    ``sized``), decided when numba compiles the loop."""
+    dims = (4, 2, 2, 3, 2)
+    assert _runs_inlined_step(lay.parallel_markers(dims))
+    assert not _runs_inlined_step(dims)
+
+
 # compiles the time loop for the double pendulum's sizes (≈ 90 s on an empty cache): over
 # the 8-minute budget of `make test` together with the rest; `make test-slow` and `make bench`
 # (which asserts the same equality on every method it times) run it

@@ -235,7 +235,7 @@ def test_peer_section_quick(tmp_path):
     assert set(table) == {1e3, 1e5}
     text = "\n".join(wpd.peer_markdown(pts, pcfg, [], elapsed))
     for s in ("fastvi's best method / DOP853", "Stiff rod–slider", "Where fastvi loses",
-              "Energy error and constraint drift"):
+              "Energy error and constraint drift", "**Cost per step**", "- Why: a step of the methods"):
         assert s in text
 
 

@@ -1095,11 +1095,17 @@ PEERS_FULL = dict(
     specialize=True,
     T=(1000.0, 10000.0),
     fastvi={
-        # (h = 0.1 is beyond P4L-Q5G's stability limit here: its energy error explodes)
+        # (h = 0.1 is beyond P4L-Q5G's stability limit here: its energy error explodes).
+        # P4L-Q4G (r = s: one quadrature point fewer, the same order 8; docs/orders.md) costs
+        # 0.89–0.96 of a P4L-Q5G step here, with 0.35–1.04× its energy error; P2L-Q2G and
+        # P3L-Q3G cost 0.93–0.96 of their defaults' step but leave 1.4–2.1× their energy
+        # error at h = 0.02, 0.025, so they are left out (docs/benchmarks.md)
         1000.0: {"P1L-Q2G": (0.01,), "P2L-Q3G": (0.04, 0.02, 0.01),
-                 "P3L-Q4G": (0.05, 0.025, 0.0125), "P4L-Q5G": (0.05, 0.025, 0.0125)},
+                 "P3L-Q4G": (0.05, 0.025, 0.0125), "P4L-Q5G": (0.05, 0.025, 0.0125),
+                 "P4L-Q4G": (0.05, 0.025, 0.0125)},
         # fewer points at T = 10^4 s (cost; the finest, 8·10^5 steps, is timed once)
-        10000.0: {"P3L-Q4G": (0.025,), "P4L-Q5G": (0.05, 0.025, 0.0125)},
+        10000.0: {"P3L-Q4G": (0.05, 0.025), "P4L-Q5G": (0.05, 0.025, 0.0125),
+                  "P4L-Q4G": (0.05, 0.025, 0.0125)},
     },
     dop={1000.0: (1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12, 1e-13, 1e-14),
          10000.0: (1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12, 1e-13, 1e-14)},
@@ -1306,6 +1312,15 @@ def _front_cost(points, E):
     return cost_at([p for p in points if p.ok], "dH", E, cost="cpu")
 
 
+def _step_costs(points, T) -> dict:
+    """Median CPU time per step (s) of each contender of the pendulum panel at ``T``."""
+    per = {}
+    for p in points:
+        if p.panel == "pendulum" and p.T == T and p.ok and p.work:
+            per.setdefault(p.label, []).append(p.cpu / p.work)
+    return {lab: float(np.median(v)) for lab, v in per.items()}
+
+
 def peer_ratios(points, T, rival, levels=PEER_LEVELS):
     """[(E, fastvi-best CPU, method, rival CPU, fastvi / rival)] at each level ``E``."""
     rows = []
@@ -1450,7 +1465,8 @@ def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> li
         "best case (no constraints). fastvi runs through its public `fastvi.integrate` (so the "
         "numbers follow the kernels) with `specialize=True` (the kernels compiled for the "
         "model's sizes, bit for bit the default kernels' trajectories: what a speed-minded "
-        "user runs; compiled outside the timing); `P1L-Q2G` … `P4L-Q5G`, h swept. "
+        "user runs; compiled outside the timing); `P1L-Q2G` … `P4L-Q5G` and `P4L-Q4G` "
+        "(r = s: one quadrature point fewer than `P4L-Q5G`, the same order 8), h swept. "
         "Regenerate with "
         "`make wpd` (installs the `bench` extra, CyRK, into `.venv`) or `python -m fastvi wpd` "
         "with CyRK installed (`pip install -e .[bench]`); `--no-peers` skips these sections. "
@@ -1530,17 +1546,15 @@ def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> li
                  "which it buys cheaply (the panels above).\n")
     # cost per step: where the gap comes from
     T0 = pcfg["T"][0]
-    fv = [p.cpu / p.work for p in points if p.panel == "pendulum" and p.T == T0 and p.is_fastvi
-          and p.ok and p.work]
-    da = [p.cpu / p.work for p in points if p.panel == "pendulum" and p.T == T0 and p.label == DOP_A
-          and p.ok and p.work]
-    if fv and da:
-        P.append(f"**Cost per step** (T = {T0:g} s, median over the runs): fastvi "
-                 f"{1e6 * np.median(fv):.2f} µs (whole public call / steps), DOP853 (a) "
-                 f"{1e6 * np.median(da):.2f} µs per accepted step ({peers.DOP853_STAGES} "
-                 "evaluations). At equal energy error the two take similar numbers of steps (the "
-                 "steps columns of the data table), so the ratio above is essentially the ratio "
-                 "of the costs per step.\n")
+    cost = _step_costs(points, T0)
+    fv = sorted(lab for lab in cost if lab.startswith("P"))
+    if fv and DOP_A in cost:
+        P.append(f"**Cost per step** (T = {T0:g} s, median over each contender's runs): fastvi "
+                 + ", ".join(f"{lab} {1e6 * cost[lab]:.2f}" for lab in fv)
+                 + f" µs (whole public call / steps), DOP853 (a) {1e6 * cost[DOP_A]:.2f} µs per "
+                 f"accepted step ({peers.DOP853_STAGES} evaluations). At equal energy error the "
+                 "two take similar numbers of steps (the steps columns of the data table), so the "
+                 "ratio above is essentially the ratio of the costs per step.\n")
     # stiff
     table, target = stiff_table(points, pcfg)
     s = pcfg["stiff"]
@@ -1656,15 +1670,16 @@ def _loses_lines(points, pcfg, table) -> list[str]:
                        "the spring, like DOP853, at a higher cost per step. The lead at large k "
                        "belongs to the r = s methods only.")
     T0 = pcfg["T"][0]
-    fv = [p.cpu / p.work for p in points if p.panel == "pendulum" and p.T == T0 and p.is_fastvi
-          and p.ok and p.work]
-    da = [p.cpu / p.work for p in points if p.panel == "pendulum" and p.T == T0 and p.label == DOP_A
-          and p.ok and p.work]
-    if fv and da:
-        out.append(f"- Why: a fastvi step costs ≈ {np.median(fv) / np.median(da):.0f}× a DOP853 (a) "
-                   "step (medians, cost per step above) and the two need similar numbers of steps "
-                   "at equal energy error; the kernel rewrite of issue 11 targets exactly this. "
-                   "These numbers follow the kernels: rerun `python -m fastvi wpd` after it lands.")
+    cost = _step_costs(points, T0)
+    best = sorted({row[2] for row in peer_ratios(points, T0, DOP_A) if row[2] in cost})
+    if best and DOP_A in cost:
+        x = [cost[lab] / cost[DOP_A] for lab in best]
+        out.append(f"- Why: a step of the methods cheapest at these levels ({', '.join(best)}) "
+                   f"costs {min(x):.2g}–{max(x):.2g}× a DOP853 (a) step (cost per step above) "
+                   "and the two need similar numbers of steps at equal energy error. fastvi's "
+                   "step runs at about its arithmetic and its Newton iteration count is at the "
+                   "limit of this design for momenta conserved to round-off "
+                   "(`docs/benchmarks.md`, issue 11).")
     out.append("- What fastvi wins regardless: constraints at round-off (max|g| above) and an "
                "energy error that does not drift with T.")
     return out

@@ -4,7 +4,7 @@
 
 Each pair (``P2L-Q2G`` / ``P2L-Q3G`` at h = 0.02, ``P3L-Q3G`` / ``P3L-Q4G`` and ``P4L-Q4G`` /
 ``P4L-Q5G`` at h = 0.025 and 0.05) is run as ``python -m fastvi wpd`` runs fastvi against
-DOP853 (``fastvi.studies.wpd._fastvi_peer_run``: the public ``integrate`` with
+DOP853 (``fastvi.studies.wpd.fastvi_peer_run``: the public ``integrate`` with
 ``specialize=True``, T = 1000 s, energies saved every 0.1 s), round-robin in one process,
 REPEATS times (default 3); printed: the median CPU time per step, max|ΔH| and max|g|. An
 r = s method integrates the quadratic kinetic energy exactly with one Gauss point fewer
@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 import fastvi
-from fastvi.studies.wpd import THETA0, _fastvi_peer_run
+from fastvi.studies.wpd import THETA0, fastvi_peer_run
 
 PAIRS = (("P2L-Q2G", "P2L-Q3G", 0.02), ("P3L-Q3G", "P3L-Q4G", 0.025),
          ("P4L-Q4G", "P4L-Q5G", 0.025), ("P3L-Q3G", "P3L-Q4G", 0.05),
@@ -37,7 +37,7 @@ def main(repeats=3, T=1000.0):
     runs = {spec: [] for spec in specs}
     for _ in range(repeats):
         for method, h in specs:
-            runs[(method, h)].append(_fastvi_peer_run(model, q0, v0, method, h, T,
+            runs[(method, h)].append(fastvi_peer_run(model, q0, v0, method, h, T,
                                                       specialize=True))
     per_step = {}
     for (method, h), rs in runs.items():

@@ -1162,9 +1162,12 @@ class PeerPoint:
         return self.label.startswith("P")
 
 
-def _fastvi_peer_run(model, q0, v0, method, h, T, params=None, sample_dt=PEER_SAMPLE_DT,
+def fastvi_peer_run(model, q0, v0, method, h, T, params=None, sample_dt=PEER_SAMPLE_DT,
                      specialize=False):
-    """One public ``fastvi.integrate`` call, energies saved every ``sample_dt`` seconds."""
+    """One public ``fastvi.integrate`` call as the peer panels time it, energies saved every
+    ``sample_dt`` seconds: ``(cpu, info)`` with the process CPU time of the call and ``info``
+    holding ``dH`` (max|H − H0| over the samples), ``g`` (max|g|), ``steps``, ``ok`` and the
+    final ``end`` configuration. Also used by ``bench/rs_methods.py``."""
     every = max(1, int(round(sample_dt / h)))
     c0 = time.process_time()
     res = fastvi.integrate(model, q0, v0, h=h, t_end=T, method=method, save_every=every,
@@ -1304,7 +1307,7 @@ def _quiet_fastvi(model, q0, v0, method, h, T, params=None, sample_dt=STIFF_SAMP
 
         with warnings.catch_warnings():  # the energy-growth alarm of an unstable setting
             warnings.simplefilter("ignore", RuntimeWarning)
-            return _fastvi_peer_run(model, q0, v0, method, h, T, params, sample_dt, specialize)
+            return fastvi_peer_run(model, q0, v0, method, h, T, params, sample_dt, specialize)
 
 
 def _front_cost(points, E):

@@ -326,10 +326,9 @@ class Method:
         A = np.einsum("i,vi,ui->vu", self.b, self.Ld[:s], self.Ld[1:])
         invertible = bool(np.linalg.cond(A) < 1e12)  # r < s Gauss points make A singular
         Ainv = np.linalg.inv(A) if invertible else np.zeros((s, s))
-        # s = 1: the predictor is only second order, the linear mechanics iteration needed
-        # 5.5 iterations a step against the full Newton's 3.0, which is then faster (N = n + m
-        # is small): docs/benchmarks.md
-        mech = invertible and s >= 2
+        # s = 1 too: its mechanics iteration needs 5.5 iterations a step against the full
+        # Newton's 3.0, but in the sized kernels 0.69× the time (docs/benchmarks.md)
+        mech = invertible
         W = self.Lc[1:, 1:].T @ Ainv @ self.Lc[:s, :J]
         # the predictor from the last two steps: the degree-2s polynomial through their
         # 2s + 1 control points (local time of the last step: τ_μ − 1, then τ_μ), at 1 + τ_ν

@@ -381,7 +381,13 @@ class Model:
         ``g(q)`` (m,) and ``G(q) = ∂g/∂q`` (m, n); required when ``m > 0``.
     potential_hessian, constraint_hessian, kinetic_hessian, momentum_jacobian : callable, optional
         Exact second derivatives (see the module docstring). Missing ones are replaced by
-        finite differences of the first derivatives.
+        finite differences of the first derivatives. ``potential_hessian=0`` declares the
+        potential linear in q, ``∇²V = 0`` (uniform gravity in Cartesian coordinates): the
+        kernels then evaluate ``∇V`` once a step, at ``q_k``, instead of at every quadrature
+        point of every Newton iteration (0.6–0.8× the time of a double-pendulum step,
+        ``docs/benchmarks.md``), and Newton's matrix has no potential-Hessian block.
+        :meth:`check` verifies the declaration (finite differences of ``potential_grad``
+        against zero).
     force : callable, optional
         ``force(t, q, v, params, out)`` writes the generalized non-conservative force
         ``F(t, q, v)`` (n): damping, actuation, prescribed loads. It enters the discrete
@@ -456,6 +462,10 @@ class Model:
         self.params = _as_params(params)
         self.name = name or "model"
         self._recipe = None  # set by scenes / pickling support
+        #: ∇²V = 0 was declared (``potential_hessian=0``): ∇V is evaluated once a step
+        self.linear_potential = _is_zero(potential_hessian)
+        if self.linear_potential:
+            potential_hessian = None
         funcs = dict(
             kinetic_grad=kinetic_grad,
             potential=potential,
@@ -515,7 +525,8 @@ class Model:
                     raise ValueError(f"`{key}` was given but m = 0; pass the number of constraints `m`")
         for key, fn in funcs.items():
             if fn is not None and not callable(fn):
-                raise TypeError(f"`{key}` must be a function or None, got {fn!r}")
+                hint = ", 0 (∇V does not depend on q)" if key == "potential_hessian" else ""
+                raise TypeError(f"`{key}` must be a function{hint} or None, got {fn!r}")
         self._functions = {k: v for k, v in funcs.items() if v is not None}
         self.constraint_jacobian_pattern = _as_pattern(constraint_jacobian_pattern, self.m, self.n)
         self._compiled = None
@@ -551,6 +562,8 @@ class Model:
                 RuntimeWarning, stacklevel=2,
             )
         funcs = {k: v for k, v in self._functions.items() if k != "mass"}
+        if self.linear_potential:
+            funcs["potential_hessian"] = 0
         kwargs = dict(params=self.params, mass=self._mass_arg, name=self.name,
                       time_dependent=self.time_dependent,
                       constraint_jacobian_pattern=self.constraint_jacobian_pattern, **funcs)
@@ -617,6 +630,7 @@ class Model:
             flags[lay.F_TIME] = int(self.time_dependent)
             flags[lay.F_EX_GT] = int("constraint_time_derivative" in self._functions)
             flags[lay.F_TSLOT] = k
+            flags[lay.F_LINPOT] = int(self.linear_potential)
             self._compiled = (cfs, flags, Mc)
         return self._compiled
 
@@ -632,8 +646,10 @@ class Model:
 
     @property
     def has_exact_second_derivatives(self) -> dict[str, bool]:
-        """Which second derivatives are exact (the rest use finite differences)."""
-        return {s: s in self._functions for s in _SECOND}
+        """Which second derivatives are exact (the rest use finite differences); a declared
+        ``potential_hessian=0`` is exact."""
+        return {s: s in self._functions or (s == "potential_hessian" and self.linear_potential)
+                for s in _SECOND}
 
     # ------------------------------------------------------------------ evaluation from Python
     def _eval(self, slot: str, q, v=None, params=None, shape=(), t: float = 0.0):
@@ -730,6 +746,12 @@ class Model:
 
 def _model_from_kwargs(n, m, kwargs):
     return Model(n, m, **kwargs)
+
+
+def _is_zero(x) -> bool:
+    """``potential_hessian=0``: the number zero (not False, not an array)."""
+    return (isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
+            and x == 0)
 
 
 def _scene_from_recipe(scene, kwargs, params):

@@ -260,7 +260,9 @@ def model_from_lagrangian(q, T, V=0, constraints=(), *, v=None, params=None, nam
     exact_hessians : bool, default True
         Generate the four second-derivative callbacks (``potential_hessian``,
         ``constraint_hessian``, ``kinetic_hessian``, ``momentum_jacobian``); with False the
-        kernels finite-difference the first derivatives instead.
+        kernels finite-difference the first derivatives instead. A potential linear in q
+        (∇²V = 0, e.g. gravity in Cartesian coordinates) is declared ``potential_hessian=0``
+        instead of a callback: the kernels then evaluate ∇V once a step.
     compile : bool, default True
         Compile the callbacks with numba now (about a second), so that an expression numba
         cannot compile fails here rather than at the first integration.
@@ -374,7 +376,13 @@ def model_from_lagrangian(q, T, V=0, constraints=(), *, v=None, params=None, nam
     w.function("potential", "q, p", [((), V)], None, "V(q)")
     w.function("potential_grad", "q, p, out", _vector_outputs([sp.diff(V, s) for s in qs]), (n,), "∇V")
     if exact_hessians:
-        w.function("potential_hessian", "q, p, out", _matrix_outputs(sp.hessian(V, qs), True), (n, n), "∇²V")
+        HV = sp.hessian(V, qs)
+        if HV.is_zero_matrix:
+            # declared, not a callback: the kernels then evaluate ∇V once a step
+            w.blocks.append("# ∇²V = 0: V is linear in q (fastvi.Model's potential_hessian=0)\n"
+                            "potential_hessian = 0")
+        else:
+            w.function("potential_hessian", "q, p, out", _matrix_outputs(HV, True), (n, n), "∇²V")
     if m:
         Gm = sp.Matrix(gs).jacobian(qs)
         w.function("constraint", "q, p, out", _vector_outputs(gs), (m,), "g(q)")

@@ -338,7 +338,8 @@ class Method:
         return Tables(self.b, self.L, self.Ld, self.Lc, self.E, self.tau,
                       np.ascontiguousarray(Ainv), np.ascontiguousarray(W), mech,
                       np.ascontiguousarray(self.c), np.ascontiguousarray(self.d),
-                      np.ascontiguousarray(E2), _mass_block(self.b, self.Ld))
+                      np.ascontiguousarray(E2), _mass_block(self.b, self.Ld),
+                      np.ascontiguousarray(self.L @ self.b))
 
 
 def _mass_block(b: np.ndarray, Ld: np.ndarray) -> np.ndarray:

@@ -153,24 +153,23 @@ def test_variational_energy_error_stays_bounded_while_rk4_grows(double_pendulum,
     q0, v0 = dp_start
     vi = fastvi.integrate(double_pendulum, q0, v0, h=0.01, n_steps=10_000, method="P2L-Q3G")
     rk = rk4(double_pendulum, q0, v0, h=0.01, n_steps=10_000)
-    vi_slope, vi_win = drift_slope(vi.t, vi.energy_error)
+    _, vi_win = drift_slope(vi.t, vi.energy_error)
     rk_slope, rk_win = drift_slope(rk.t, rk.energy_error)
     half = len(vi.t) // 2
 
     def late_over_early(err):
         return np.abs(err[half:]).max() / np.abs(err[:half]).max()
 
-    # bounded: the fitted trend of the per-window maxima does not rise against their size,
-    # and the second half of the run reaches no higher than the first. Over 10^4 steps the
-    # chaotic motion makes the window maxima wander either way (a trend of −0.48 of their
-    # size in one run, +0.20 in another that differs from it only by round-off), so the
-    # size of the trend is tested over 10^5 steps, where both measured 0.03–0.16
-    assert vi_slope * 100.0 < 0.25 * vi_win.max()  # measured +0.20, −0.48
-    assert late_over_early(vi.energy_error) < 2.0  # measured 0.75–1.11
+    # bounded: the second half of the run reaches no higher than the first, and over 10^5
+    # steps the fitted trend of the per-window maxima is small against their size and the
+    # maximum no higher than over 10^4 steps. The trend over 10^4 steps is no test: the
+    # chaotic motion makes its 20 window maxima wander either way, and runs that differ only
+    # by round-off measured −0.48, +0.20, +0.42 and +0.44 of their size (RK4: +0.99)
+    assert late_over_early(vi.energy_error) < 2.0  # measured 0.75–1.12
     long = fastvi.integrate(double_pendulum, q0, v0, h=0.01, n_steps=100_000, method="P2L-Q3G")
     long_slope, long_win = drift_slope(long.t, long.energy_error)
-    assert abs(long_slope) * 1000.0 < 0.25 * long_win.max()  # measured 0.03, 0.16
-    assert np.abs(long.energy_error).max() < 2.0 * np.abs(vi.energy_error).max()  # ≈ 1.1
+    assert abs(long_slope) * 1000.0 < 0.25 * long_win.max()  # measured 0.03, 0.16, 0.03
+    assert np.abs(long.energy_error).max() < 2.0 * np.abs(vi.energy_error).max()  # 1.03–1.12
     # RK4: the per-window maxima rise in every window, and by orders of magnitude
     assert rk_slope * 100.0 > 0.5 * rk_win.max()  # measured 0.99
     assert np.all(np.diff(rk_win) > 0)  # measured: strictly increasing

@@ -10,7 +10,7 @@ from fastvi.kernels import layout as lay
 from fastvi.kernels.banded import band_factor, band_ld, band_solve
 from fastvi.kernels.step import assemble
 from fastvi.scenes import chain, double_pendulum
-from fastvi.scenes.chain import _dV, _G, _g, _ddg, _ddV, _V, pattern
+from fastvi.scenes.chain import _dV, _G, _g, _ddg, _V, pattern
 
 P2 = fastvi.method("P2L-Q3G")
 
@@ -102,7 +102,7 @@ def _coupled_chain(N):
     M = np.eye(2 * N) * 2.0 + np.diag(np.full(2 * N - 2, 0.3), 2) + np.diag(np.full(2 * N - 2, 0.3), -2)
     prm = (*([1.0] * N), *([1.0] * N), 9.81)
     return fastvi.Model(2 * N, N, params=prm, mass=M, potential=_V, potential_grad=_dV,
-                        potential_hessian=_ddV, constraint=_g, constraint_jacobian=_G,
+                        potential_hessian=0, constraint=_g, constraint_jacobian=_G,
                         constraint_hessian=_ddg, constraint_jacobian_pattern=pattern(N),
                         name=f"coupled{N}")
 
@@ -193,7 +193,7 @@ def test_chain_256_holds_constraints_and_energy():
 def test_a_diagonal_mass_given_as_a_vector_is_the_matrix():
     N = 5
     prm = (*np.linspace(1.0, 2.0, N), *([1.0] * N), 9.81)
-    kw = dict(params=prm, potential=_V, potential_grad=_dV, potential_hessian=_ddV, constraint=_g,
+    kw = dict(params=prm, potential=_V, potential_grad=_dV, potential_hessian=0, constraint=_g,
               constraint_jacobian=_G, constraint_hessian=_ddg, constraint_jacobian_pattern=pattern(N))
     masses = np.repeat(prm[:N], 2)
     vec = fastvi.Model(2 * N, N, mass=masses, **kw)
@@ -212,7 +212,7 @@ def test_a_diagonal_mass_given_as_a_vector_is_the_matrix():
 def _chain_without_constraint_hessian(N):
     prm = (*([1.0] * N), *([1.0] * N), 9.81)
     return fastvi.Model(2 * N, N, params=prm, mass=np.ones(2 * N), potential=_V,
-                        potential_grad=_dV, potential_hessian=_ddV, constraint=_g,
+                        potential_grad=_dV, potential_hessian=0, constraint=_g,
                         constraint_jacobian=_G, constraint_jacobian_pattern=pattern(N),
                         name=f"nohess{N}")
 

@@ -85,7 +85,12 @@ F_EX_GT = 12  # exact ∂g/∂t given
 #: the kernels write the time of each evaluation there, the wrappers of time-aware
 #: callbacks read it, the others never look (docs/api.md).
 F_TSLOT = 13
-FLAGS_SIZE = 14
+#: ∇V does not depend on q (``potential_hessian=0``: uniform gravity in Cartesian
+#: coordinates). An autonomous potential's gradient is then evaluated once a step
+#: (``ws.Fg``) instead of at every quadrature point of every Newton iteration, and the
+#: full Newton matrix has no potential-Hessian block.
+F_LINPOT = 14
+FLAGS_SIZE = 15
 #: flag index of each optional second derivative, in SECOND order
 F_EXACT = (F_EX_PHESS, F_EX_CHESS, F_EX_KHESS, F_EX_MJAC)
 
@@ -201,7 +206,7 @@ NewtonOptions = namedtuple("NewtonOptions", ["tol", "max_iter", "mode"])
 Events = namedtuple("Events", ["fns", "count", "direction", "terminal", "g", "t", "q", "v", "n",
                                "dense", "Q", "qk", "qx", "vx", "ell", "dell", "scratch"])
 Tables = namedtuple("Tables", ["b", "L", "Ld", "Lc", "E", "tau", "Ainv", "W", "mech",
-                               "c", "d", "E2", "Am"])
+                               "c", "d", "E2", "Am", "bL"])
 Tables.__doc__ = """Method tables read by the step kernel (see :class:`fastvi.tables.Method`).
 
 b (r,), L, Ld (s+1, r), Lc (s+1, J+1), E (s+1, s+1), tau (s+1,) as in ``Method``; the
@@ -210,13 +215,14 @@ callbacks of a time-aware model: ``t_k + c_i h``, ``t_k + d_j h``); for the
 mechanics Newton matrix: Ainv (s, s) the inverse of ``A[ν, μ−1] = Σ_i b_i ℓ'_ν(c_i) ℓ'_μ(c_i)``
 (ν = 0…s−1, μ = 1…s), W (J, J) ``W[j−1, j'] = Σ ℓ_μ(d_j) Ainv[μ−1, ν] ℓ_ν(d_j')``; mech (bool) whether ``newton="auto"``
 uses the mechanics matrix: not where ``A`` is singular (a quadrature with fewer points than
-``s``) nor for ``s = 1``, where the full Newton measured faster; E2 (2s+1, s+1) the
+``s``); E2 (2s+1, s+1) the
 predictor from the last two steps: the Lagrange basis of their 2s + 1 control points
 (``τ_μ − 1``, μ < s, then ``τ_μ``, in the last step's local time) at ``1 + τ_ν``; Am
 (s, s) the mass block ``Am[ν−1, μ−1] = Σ_i b_i ℓ'_ν(c_i) ℓ'_μ(c_i)``, ν, μ = 1…s, exactly
 symmetric: for a constant ``M`` the mass part of ``∂S/∂Q^ν`` is ``(1/h) M Σ_μ Am[ν−1, μ−1]
 ΔQ^μ``, and that of ``∂S/∂Q^0`` minus their sum (the mechanics residual's shortcut;
-``fastvi.tables._mass_block``)."""
+``fastvi.tables._mass_block``); bL (s+1,) ``bL[ν] = Σ_i b_i ℓ_ν(c_i)``: for a constant
+∇V the potential's part of ``∂S/∂Q^ν`` is ``−h bL[ν] ∇V``."""
 
 Workspace = namedtuple(
     "Workspace",
@@ -249,6 +255,7 @@ Workspace = namedtuple(
         "P",  # (n,) end momentum before the projection
         "hold",  # (3,) int64, indices H_*: full-Newton steps left, M̄ factored, predictor history
         "Fv",  # (n, n) ∂F/∂v of the non-conservative force
+        "Fg",  # (n,) −∇V at q_k for a potential linear in q (F_LINPOT), set once a step
         "gt",  # (m,) ∂g/∂t at the step end (stays zero for an autonomous model)
         "time",  # (2,) t_k, t_{k+1} of the step being taken (set by the driver)
         "si",  # int64: structured-solve plan (header SI_*, permutations, patterns)
@@ -295,7 +302,7 @@ def workspace_for(dims):
         np.zeros((Jm, Jm)), np.zeros(Jm, dtype=np.int64),
         np.zeros((s, n)), np.zeros((s, n)),
         np.zeros(N), np.zeros(N), np.zeros(n), np.zeros(H_SIZE, dtype=np.int64),
-        np.zeros((n, n)), np.zeros(mm), np.zeros(2),
+        np.zeros((n, n)), np.zeros(n), np.zeros(mm), np.zeros(2),
         np.zeros(SI_HEADER, dtype=np.int64), np.zeros(1),
         dims,
     )

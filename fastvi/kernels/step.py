@@ -33,7 +33,7 @@ from .._numba import hot, hot_inline, inline_copy, ptr
 from .banded import (gt_times, mech_impulses_structured, mech_rows_sparse, newton_banded,
                      project_structured, schur_structured)
 from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
-                     F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_M, F_MASSFN, F_TIME,
+                     F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_LINPOT, F_M, F_MASSFN, F_TIME,
                      F_TSLOT, FJQ, FJV, FORCE, GT, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
                      NEWTON_FAILED, NEWTON_FULL, NONFINITE, OK, PGRAD, PHESS, POT, KHESS, S_FULL,
                      S_G, S_GV, S_ITERS, S_RES, S_WORK, SI_A, SI_GCOL, SI_GPTR, SI_HC_BCOL,
@@ -42,8 +42,8 @@ from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F
                      make_workspace, sizes)
 from .linalg import lu_factor, lu_solve
 
-__all__ = ["make_workspace", "assemble", "step", "step_inlined", "end_momentum",
-           "velocity_residual", "hidden_residual", "constraint_rate"]
+__all__ = ["make_workspace", "assemble", "residual", "linear_force", "step", "step_inlined",
+           "end_momentum", "velocity_residual", "hidden_residual", "constraint_rate"]
 
 _FD_REL = 6.0554544523933395e-06  # cbrt(machine epsilon): central differences' best step
 #: eps^(1/5): the best step of the five-point difference in time (error ~ eps^(4/5)); the
@@ -255,12 +255,36 @@ def constraint_rate(md, q, t, out, scratch):
 
 # ----------------------------------------------------------------------------- assembly
 @hot_inline
+def _linear_potential(md):
+    """Whether ∇V is one vector over the step (``ws.Fg``, :func:`linear_force`): a potential
+    declared linear in q (``potential_hessian=0``) that does not depend on time."""
+    return md.flags[F_LINPOT] != 0 and not (is_timed(md) and md.flags[F_TIME] != 0)
+
+
+@hot_inline
+def linear_force(md, ws, qk):
+    """``ws.Fg = −∇V(q_k)``, once a step, for a potential linear in q (else nothing): the
+    kernels then read it instead of calling ``potential_grad`` at every quadrature point
+    of every Newton iteration. Callers of :func:`residual` and :func:`assemble` outside a
+    step (tests, profiles) call it first."""
+    if _linear_potential(md):
+        Fg = ws.Fg
+        md.fns[PGRAD](ptr(qk), ptr(qk), ptr(md.prm), ptr(Fg))
+        for a in range(Fg.shape[0]):
+            Fg[a] = -Fg[a]
+
+
+@hot_inline
 def _point_force(md, ws, Mi, has_mass, n):
     """At ``(ws.qi, ws.vi)``: ``ws.F = ∂T/∂q − ∇V + F_nc``, ``ws.fa = ∇V`` and, for a mass
     function, ``Mi = M(q_i)``."""
     fns, prm = md.fns, md.prm
     qi, vi, F, fa = ws.qi, ws.vi, ws.F, ws.fa
-    fns[PGRAD](ptr(qi), ptr(qi), ptr(prm), ptr(fa))
+    if _linear_potential(md):
+        for a in range(n):
+            fa[a] = -ws.Fg[a]
+    else:
+        fns[PGRAD](ptr(qi), ptr(qi), ptr(prm), ptr(fa))
     if has_mass:
         fns[KGRAD](ptr(qi), ptr(vi), ptr(prm), ptr(F))
         fns[MASS](ptr(qi), ptr(qi), ptr(prm), ptr(Mi))
@@ -340,7 +364,11 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
         if not jac:
             continue
         # ∂F/∂q = T_qq − V_qq ; ∂(Mv)/∂q
-        if flags[F_EX_PHESS] != 0:
+        if flags[F_LINPOT] != 0:
+            for a in range(n):
+                for c in range(n):
+                    Aq[a, c] = 0.0
+        elif flags[F_EX_PHESS] != 0:
             fns[PHESS](ptr(qi), ptr(qi), ptr(prm), ptr(Aq))
         else:
             _fd_vec_jacobian(fns[PGRAD], _FD_HESSIAN, qi, qi, prm, Aq, fa, F, Pm, n)  # F, Pm: spent scratch
@@ -743,42 +771,51 @@ def residual(md, tabs, h, qk, pk, ws):
                     for c in range(n):
                         acc += Mc[a, c] * Pm[c]
                     D[nu, a] = acc
-    for i in range(r):
-        _at(md, ws, h, tabs.c[i])
-        for a in range(n):
-            qi[a] = qk[a]
-            vi[a] = 0.0
-        for nu in range(1, s + 1):
-            cl = L[nu, i]
-            off = (nu - 1) * n
-            if need_v:
-                cd = Ld[nu, i] * inv_h
-                for a in range(n):
-                    x = X[off + a]
-                    qi[a] += cl * x
-                    vi[a] += cd * x
-            else:
-                for a in range(n):
-                    qi[a] += cl * X[off + a]
-        _point_force(md, ws, Mi, has_mass, n)
-        w = h * b[i]
-        if has_mass:
+    # a potential linear in q and nothing else at the quadrature points: its part of D is
+    # −h Σ_i b_i ℓ_ν(c_i) ∇V, with ∇V evaluated once a step (linear_force)
+    if not need_v and _linear_potential(md):
+        Fg, bL = ws.Fg, tabs.bL
+        for nu in range(s + 1):
+            w = h * bL[nu]
             for a in range(n):
-                Pm[a] = 0.0
-            for c in range(n):
-                vc = vi[c]
+                D[nu, a] += w * Fg[a]
+    else:
+        for i in range(r):
+            _at(md, ws, h, tabs.c[i])
+            for a in range(n):
+                qi[a] = qk[a]
+                vi[a] = 0.0
+            for nu in range(1, s + 1):
+                cl = L[nu, i]
+                off = (nu - 1) * n
+                if need_v:
+                    cd = Ld[nu, i] * inv_h
+                    for a in range(n):
+                        x = X[off + a]
+                        qi[a] += cl * x
+                        vi[a] += cd * x
+                else:
+                    for a in range(n):
+                        qi[a] += cl * X[off + a]
+            _point_force(md, ws, Mi, has_mass, n)
+            w = h * b[i]
+            if has_mass:
                 for a in range(n):
-                    Pm[a] += Mi[a, c] * vc
-            for nu in range(s + 1):
-                cl = w * L[nu, i]
-                cd = b[i] * Ld[nu, i]
-                for a in range(n):
-                    D[nu, a] += cl * F[a] + cd * Pm[a]
-        else:
-            for nu in range(s + 1):
-                cl = w * L[nu, i]
-                for a in range(n):
-                    D[nu, a] += cl * F[a]
+                    Pm[a] = 0.0
+                for c in range(n):
+                    vc = vi[c]
+                    for a in range(n):
+                        Pm[a] += Mi[a, c] * vc
+                for nu in range(s + 1):
+                    cl = w * L[nu, i]
+                    cd = b[i] * Ld[nu, i]
+                    for a in range(n):
+                        D[nu, a] += cl * F[a] + cd * Pm[a]
+            else:
+                for nu in range(s + 1):
+                    cl = w * L[nu, i]
+                    for a in range(n):
+                        D[nu, a] += cl * F[a]
     for a in range(n):
         R[a] = pk[a] + D[0, a]
     for nu in range(1, s):
@@ -1044,6 +1081,7 @@ def step(md, tabs, opts, h, state, ws, first, out):
             # the previous step ended with G at q(d_J) = q_k, bit for bit, and its
             # end_momentum left it in G0 (a failed step leaves G0 alone: still G(q_k))
             pass
+    linear_force(md, ws, qk)
     out[S_FULL] = 0.0
     full = opts.mode == NEWTON_FULL or ws.hold[H_FULL] > 0 or not tabs.mech
     if ws.hold[H_FULL] > 0:

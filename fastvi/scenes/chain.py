@@ -48,10 +48,6 @@ def _dV(q, p, out):
         out[2 * i + 1] = p[2 * nb] * p[i]
 
 
-def _ddV(q, p, out):
-    out[:, :] = 0.0
-
-
 def _g(q, p, out):
     nb = q.shape[0] // 2
     px = 0.0
@@ -212,7 +208,7 @@ def chain(N: int, m=1.0, l=1.0, g: float = 9.81, damping: float = 0.0) -> Model:
     c = damping_.check(damping)
     model = Model(
         2 * N, N, params=(*ms, *ls, g) + ((c,) if c else ()), mass=np.repeat(ms, 2),
-        potential=_V, potential_grad=_dV, potential_hessian=_ddV, constraint=_g,
+        potential=_V, potential_grad=_dV, potential_hessian=0, constraint=_g,
         constraint_jacobian=_G, constraint_hessian=_ddg, constraint_jacobian_pattern=pattern(N),
         name=f"chain{N}" + ("-damped" if c else ""),
         **damping_.options(c),

@@ -38,10 +38,6 @@ def _dV(q, p, out):
         out[2 * i + 1] = p[0] * p[3]
 
 
-def _ddV(q, p, out):
-    out[:, :] = 0.0
-
-
 def _g(q, p, out):
     nb = q.shape[0] // 2
     px = 0.0
@@ -155,7 +151,7 @@ def closed_chain(N: int = 8, m: float = 1.0, l: float = 1.0, d: float | None = N
         raise ValueError(f"`d` must be below N·l = {N * l:g} (the loop would be stretched), got {d!r}")
     n = 2 * (N - 1)
     model = Model(n, N, params=(m, l, d, g), mass=np.full(n, float(m)) * np.eye(n), potential=_V,
-                  potential_grad=_dV, potential_hessian=_ddV, constraint=_g,
+                  potential_grad=_dV, potential_hessian=0, constraint=_g,
                   constraint_jacobian=_G, constraint_hessian=_ddg,
                   constraint_jacobian_pattern=pattern(N), name=f"closed_chain{N}")
 

@@ -29,10 +29,6 @@ def _dV(q, p, out):
     out[3] = p[4] * p[1]
 
 
-def _ddV(q, p, out):
-    out[:, :] = 0.0
-
-
 def _g(q, p, out):
     dx = q[2] - q[0]
     dy = q[3] - q[1]
@@ -118,7 +114,7 @@ def double_pendulum(m1: float = 1.0, m2: float = 1.0, l1: float = 1.0, l2: float
     c = damping_.check(damping)
     model = Model(
         4, 2, params=(m1, m2, l1, l2, g) + ((c,) if c else ()), mass=np.diag([m1, m1, m2, m2]),
-        potential=_V, potential_grad=_dV, potential_hessian=_ddV, constraint=_g,
+        potential=_V, potential_grad=_dV, potential_hessian=0, constraint=_g,
         constraint_jacobian=_G, constraint_hessian=_ddg,
         name="double_pendulum" + ("-damped" if c else ""), **damping_.options(c),
     )

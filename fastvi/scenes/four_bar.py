@@ -17,7 +17,7 @@ import numpy as np
 
 from ..model import Model
 from ._common import attach, check_positive
-from .double_pendulum import _V, _dV, _ddV  # same masses-then-g layout: V = g (mB yB + mC yC)
+from .double_pendulum import _V, _dV  # same masses-then-g layout: V = g (mB yB + mC yC)
 
 # params = (mB, mC, a, L, g)
 
@@ -71,7 +71,7 @@ def four_bar(mB: float = 1.0, mC: float = 1.0, a: float = 1.0, L: float = 2.0, g
     check_positive(mB=mB, mC=mC, a=a, L=L, g=g)
     model = Model(
         4, 3, params=(mB, mC, a, L, g), mass=np.diag([mB, mB, mC, mC]), potential=_V,
-        potential_grad=_dV, potential_hessian=_ddV, constraint=_g, constraint_jacobian=_G,
+        potential_grad=_dV, potential_hessian=0, constraint=_g, constraint_jacobian=_G,
         constraint_hessian=_ddg, name="four_bar",
     )
 

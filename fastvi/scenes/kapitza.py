@@ -29,10 +29,6 @@ def _dV(t, q, p, out):
     out[1] = p[0] * p[2]
 
 
-def _ddV(t, q, p, out):
-    out[:, :] = 0.0
-
-
 def _g(t, q, p, out):
     dy = q[1] - p[3] * np.cos(p[4] * t)
     out[0] = 0.5 * (q[0] * q[0] + dy * dy - p[1] * p[1])
@@ -77,7 +73,7 @@ def kapitza_pendulum(m: float = 1.0, l: float = 1.0, g: float = 9.81, a: float =
     check_positive(m=m, l=l, g=g, a=a, omega=omega)
     model = Model(
         2, 1, params=(m, l, g, a, omega), mass=m * np.eye(2), potential=_V, potential_grad=_dV,
-        potential_hessian=_ddV, constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
+        potential_hessian=0, constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
         time_dependent=True, constraint_time_derivative=_gt, name="kapitza_pendulum",
     )
 

@@ -48,10 +48,6 @@ def _dV(q, p, out):
         out[4 * i + 3] = p[0] * p[3]
 
 
-def _ddV(q, p, out):
-    out[:, :] = 0.0
-
-
 def _g(q, p, out):
     a, L = p[1], p[2]
     bx, by, cx, cy = 0.0, 0.0, L, 0.0
@@ -190,7 +186,7 @@ def ladder(N: int = 8, m: float = 1.0, a: float = 1.0, L: float = 1.0, g: float 
     check_positive(m=m, a=a, L=L, g=g)
     n = 4 * N
     model = Model(n, 3 * N, params=(m, a, L, g), mass=float(m) * np.eye(n), potential=_V,
-                  potential_grad=_dV, potential_hessian=_ddV, constraint=_g, constraint_jacobian=_G,
+                  potential_grad=_dV, potential_hessian=0, constraint=_g, constraint_jacobian=_G,
                   constraint_hessian=_ddg, constraint_jacobian_pattern=pattern(N), name=f"ladder{N}")
 
     def initial_state(thetas, omegas=None):

@@ -23,10 +23,6 @@ def _dV(q, p, out):
     out[1] = p[0] * p[2]
 
 
-def _ddV(q, p, out):
-    out[:, :] = 0.0
-
-
 def _g(q, p, out):
     out[0] = 0.5 * (q[0] * q[0] + q[1] * q[1] - p[1] * p[1])
 
@@ -51,7 +47,7 @@ def pendulum(m: float = 1.0, l: float = 1.0, g: float = 9.81) -> Model:
     check_positive(m=m, l=l, g=g)
     model = Model(
         2, 1, params=(m, l, g), mass=m * np.eye(2), potential=_V, potential_grad=_dV,
-        potential_hessian=_ddV, constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
+        potential_hessian=0, constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
         name="pendulum",
     )
 

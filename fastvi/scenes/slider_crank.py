@@ -40,10 +40,6 @@ def _dV(t, q, p, out):
     out[5] = p[5] * p[4]
 
 
-def _ddV(t, q, p, out):
-    out[:, :] = 0.0
-
-
 def _g(t, q, p, out):
     dx, dy = q[4] - q[0], q[5] - q[1]
     out[0] = 0.5 * (q[0] * q[0] + q[1] * q[1] - p[0] * p[0])
@@ -138,7 +134,7 @@ def slider_crank(r: float = 0.3, L: float = 1.0, m_a: float = 0.5, m_c: float = 
     model = Model(
         6, 6 if driven else 5, params=(r, L, m_a, m_c, m_b, g, float(drive or 0.0)),
         mass=np.diag([m_a, m_a, m_c, m_c, m_b, m_b]), potential=_V, potential_grad=_dV,
-        potential_hessian=_ddV, constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
+        potential_hessian=0, constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
         time_dependent=True, constraint_time_derivative=_gt,
         name="slider_crank" + ("-driven" if driven else ""),
     )

@@ -30,7 +30,7 @@ from numba import njit
 from ..model import Model
 from . import damping as damping_
 from ._common import attach, check_positive
-from .chain import _ddV, _dV, _per_link, _V
+from .chain import _dV, _per_link, _V
 
 
 @njit(inline="always", cache=True)
@@ -136,7 +136,7 @@ def tree(branches: int = 3, links: int = 3, m=1.0, l=1.0, g: float = 9.81, dampi
     par = parents(branches, links)
     model = Model(
         2 * N, N, params=(*ms, *ls, g, *par.astype(float)) + ((c,) if c else ()),
-        mass=np.repeat(ms, 2), potential=_V, potential_grad=_dV, potential_hessian=_ddV,
+        mass=np.repeat(ms, 2), potential=_V, potential_grad=_dV, potential_hessian=0,
         constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
         constraint_jacobian_pattern=pattern(branches, links),
         name=f"tree{branches}x{links}" + ("-damped" if c else ""), **damping_.options(c),

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..model import Model
 from ._common import attach, check_positive
-from .chain import _G, _V, _dV, _ddg, _ddV, _g
+from .chain import _G, _V, _dV, _ddg, _g
 from .chain import pattern as _chain_pattern
 from .chain import angles as _chain_angles
 from .chain import state_from_angles as _chain_state
@@ -74,7 +74,7 @@ def triple_pendulum(m=(1.0, 1.0, 1.0), l=(1.0, 1.0, 1.0), g: float = 9.81) -> Mo
     check_positive(g=g)
     model = Model(
         6, 3, params=(*m, *l, g), mass=np.diag([m[0], m[0], m[1], m[1], m[2], m[2]]),
-        potential=_V, potential_grad=_dV, potential_hessian=_ddV, constraint=_g,
+        potential=_V, potential_grad=_dV, potential_hessian=0, constraint=_g,
         constraint_jacobian=_G, constraint_hessian=_ddg, constraint_jacobian_pattern=_chain_pattern(3),
         name="triple_pendulum",
     )

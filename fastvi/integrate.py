@@ -131,8 +131,10 @@ def integrate(
         slower than ``MECH_THETA_MAX`` (a stiff spring) is redone with the full Newton, which
         then stays on for ``FULL_HOLD`` steps (``stats["full_newton_steps"]`` counts them).
         Being linearly convergent, it stops only when the increment itself is below ``tol``:
-        more iterations than the full Newton (5.5 against 3.0 a step for ``P1L-Q2G`` on the
-        double pendulum), each far cheaper. Methods whose quadrature has fewer than ``s``
+        more iterations than the full Newton, each far cheaper. For ``s = 1``, a potential
+        linear in q (``potential_hessian=0``) and a constant mass it drops nothing: it is
+        Newton's method and stops like the full Newton (3.0 iterations a step for
+        ``P1L-Q2G`` on the double pendulum). Methods whose quadrature has fewer than ``s``
         points (the mass block is singular) use the full Newton under ``"auto"``.
         ``"full"``: the exact Newton matrix, assembled and factored at every iteration
         (v0.1's iteration, bit for bit). Both solve the same equations to the same

@@ -383,8 +383,8 @@ class Model:
         Exact second derivatives (see the module docstring). Missing ones are replaced by
         finite differences of the first derivatives. ``potential_hessian=0`` declares the
         potential linear in q, ``∇²V = 0`` (uniform gravity in Cartesian coordinates): the
-        kernels then evaluate ``∇V`` once a step, at ``q_k``, instead of at every quadrature
-        point of every Newton iteration (0.6–0.8× the time of a double-pendulum step,
+        kernels then evaluate ``∇V`` once a trajectory instead of at every quadrature
+        point of every Newton iteration (0.83–0.89× the time of a double-pendulum step,
         ``docs/benchmarks.md``), and Newton's matrix has no potential-Hessian block.
         :meth:`check` verifies the declaration (finite differences of ``potential_grad``
         against zero).
@@ -462,7 +462,7 @@ class Model:
         self.params = _as_params(params)
         self.name = name or "model"
         self._recipe = None  # set by scenes / pickling support
-        #: ∇²V = 0 was declared (``potential_hessian=0``): ∇V is evaluated once a step
+        #: ∇²V = 0 was declared (``potential_hessian=0``): ∇V is evaluated once a trajectory
         self.linear_potential = _is_zero(potential_hessian)
         if self.linear_potential:
             potential_hessian = None

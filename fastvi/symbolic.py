@@ -262,7 +262,7 @@ def model_from_lagrangian(q, T, V=0, constraints=(), *, v=None, params=None, nam
         ``constraint_hessian``, ``kinetic_hessian``, ``momentum_jacobian``); with False the
         kernels finite-difference the first derivatives instead. A potential linear in q
         (∇²V = 0, e.g. gravity in Cartesian coordinates) is declared ``potential_hessian=0``
-        instead of a callback: the kernels then evaluate ∇V once a step.
+        instead of a callback: the kernels then evaluate ∇V once a trajectory.
     compile : bool, default True
         Compile the callbacks with numba now (about a second), so that an expression numba
         cannot compile fails here rather than at the first integration.
@@ -378,7 +378,7 @@ def model_from_lagrangian(q, T, V=0, constraints=(), *, v=None, params=None, nam
     if exact_hessians:
         HV = sp.hessian(V, qs)
         if HV.is_zero_matrix:
-            # declared, not a callback: the kernels then evaluate ∇V once a step
+            # declared, not a callback: the kernels then evaluate ∇V once a trajectory
             w.blocks.append("# ∇²V = 0: V is linear in q (fastvi.Model's potential_hessian=0)\n"
                             "potential_hessian = 0")
         else:

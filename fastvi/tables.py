@@ -326,8 +326,8 @@ class Method:
         A = np.einsum("i,vi,ui->vu", self.b, self.Ld[:s], self.Ld[1:])
         invertible = bool(np.linalg.cond(A) < 1e12)  # r < s Gauss points make A singular
         Ainv = np.linalg.inv(A) if invertible else np.zeros((s, s))
-        # s = 1 too: its mechanics iteration needs 5.5 iterations a step against the full
-        # Newton's 3.0, but in the sized kernels 0.69× the time (docs/benchmarks.md)
+        # s = 1 too: for a linear potential and a constant mass its mechanics iteration is
+        # Newton's method at a fraction of the full Newton's cost (docs/benchmarks.md)
         mech = invertible
         W = self.Lc[1:, 1:].T @ Ainv @ self.Lc[:s, :J]
         # the predictor from the last two steps: the degree-2s polynomial through their

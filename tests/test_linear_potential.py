@@ -1,6 +1,6 @@
 """``potential_hessian=0``: a potential linear in q (uniform gravity in Cartesian coordinates).
 
-The kernels then evaluate ∇V once a step instead of at every quadrature point of every Newton
+The kernels then evaluate ∇V once a trajectory instead of at every quadrature point of every Newton
 iteration, and drop the potential-Hessian block of the full Newton matrix. The equations are
 the same: the reference is the same model with an ordinary (zero-writing) Hessian callback,
 which takes the general path of every kernel.

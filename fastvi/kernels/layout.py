@@ -86,7 +86,7 @@ F_EX_GT = 12  # exact ∂g/∂t given
 #: callbacks read it, the others never look (docs/api.md).
 F_TSLOT = 13
 #: ∇V does not depend on q (``potential_hessian=0``: uniform gravity in Cartesian
-#: coordinates). An autonomous potential's gradient is then evaluated once a step
+#: coordinates). An autonomous potential's gradient is then evaluated once a trajectory
 #: (``ws.Fg``) instead of at every quadrature point of every Newton iteration, and the
 #: full Newton matrix has no potential-Hessian block.
 F_LINPOT = 14
@@ -158,10 +158,11 @@ LU_HEADER = 9
 
 # ----------------------------------------------------------------------------- workspace flags
 # entries of the int64 ``ws.hold``: steps left on the full Newton after the mechanics
-# iteration failed, whether M̄⁻¹ of a constant mass is prepared, and how many previous
-# steps of this trajectory the predictor may use (0 after a restart, at most 2)
-H_FULL, H_MBAR, H_HIST = range(3)
-H_SIZE = 3
+# iteration failed, whether M̄⁻¹ of a constant mass is prepared, how many previous
+# steps of this trajectory the predictor may use (0 after a restart, at most 2), and
+# whether ``ws.Fg`` holds the constant −∇V of a linear potential
+H_FULL, H_MBAR, H_HIST, H_FG = range(4)
+H_SIZE = 4
 
 # ----------------------------------------------------------------------------- step output
 # float64 vector filled by step(): Newton iterations, max|g(q1)|, max|G v1|, last residual,
@@ -253,9 +254,9 @@ Workspace = namedtuple(
         "Xprev",  # (N,) the previous step's unknowns (predictor)
         "Xpp",  # (N,) the unknowns of the step before that (two-step predictor)
         "P",  # (n,) end momentum before the projection
-        "hold",  # (3,) int64, indices H_*: full-Newton steps left, M̄ factored, predictor history
+        "hold",  # (H_SIZE,) int64, indices H_*: full-Newton steps left, M̄ factored, predictor history, Fg set
         "Fv",  # (n, n) ∂F/∂v of the non-conservative force
-        "Fg",  # (n,) −∇V at q_k for a potential linear in q (F_LINPOT), set once a step
+        "Fg",  # (n,) −∇V of a potential linear in q (F_LINPOT), set at a trajectory's first step
         "gt",  # (m,) ∂g/∂t at the step end (stays zero for an autonomous model)
         "time",  # (2,) t_k, t_{k+1} of the step being taken (set by the driver)
         "si",  # int64: structured-solve plan (header SI_*, permutations, patterns)

@@ -34,7 +34,7 @@ from .banded import (gt_times, mech_impulses_structured, mech_rows_sparse, newto
                      project_structured, schur_structured)
 from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
                      F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_LINPOT, F_M, F_MASSFN, F_TIME,
-                     F_TSLOT, FJQ, FJV, FORCE, GT, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
+                     F_TSLOT, FJQ, FJV, FORCE, GT, H_FG, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
                      NEWTON_FAILED, NEWTON_FULL, NONFINITE, OK, PGRAD, PHESS, POT, KHESS, S_FULL,
                      S_G, S_GV, S_ITERS, S_RES, S_WORK, SI_A, SI_GCOL, SI_GPTR, SI_HC_BCOL,
                      SI_HC_COLS, SI_HC_CPTR, SI_HC_NG, SI_HC_PPTR, SI_HC_ROWS, SI_S, SI_SC, SINGULAR,
@@ -263,10 +263,11 @@ def _linear_potential(md):
 
 @hot_inline
 def linear_force(md, ws, qk):
-    """``ws.Fg = −∇V(q_k)``, once a step, for a potential linear in q (else nothing): the
-    kernels then read it instead of calling ``potential_grad`` at every quadrature point
-    of every Newton iteration. Callers of :func:`residual` and :func:`assemble` outside a
-    step (tests, profiles) call it first."""
+    """``ws.Fg = −∇V(q_k)`` for a potential linear in q (else nothing): the kernels then read
+    it instead of calling ``potential_grad`` at every quadrature point of every Newton
+    iteration. The step calls it at a trajectory's first step (the parameters are fixed for
+    a trajectory); callers of :func:`residual` and :func:`assemble` outside a step (tests,
+    profiles) call it first."""
     if _linear_potential(md):
         Fg = ws.Fg
         md.fns[PGRAD](ptr(qk), ptr(qk), ptr(md.prm), ptr(Fg))
@@ -650,10 +651,7 @@ def _mass_bar(md, qk, ws, n):
     constant ``M`` once per trajectory). Returns a status code."""
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     if flags[F_DIAG] != 0:
-        if ws.hold[H_MBAR] == 0:
-            for a in range(n):
-                ws.minv[a] = 1.0 / Mc[a, a]
-            ws.hold[H_MBAR] = 1
+        _inverse_diagonal(md, ws, n)
         return OK
     Mb = ws.Mb
     if flags[F_MASSFN] != 0:
@@ -668,6 +666,17 @@ def _mass_bar(md, qk, ws, n):
     if lu_factor(Mb, ws.pivn, n) != 0:
         return SINGULAR_MASS
     return OK
+
+
+@hot_inline
+def _inverse_diagonal(md, ws, n):
+    """``ws.minv = 1 / diag(M)`` of a diagonal constant mass, once per trajectory: the kernels
+    multiply by it (a division costs several multiplications)."""
+    if ws.hold[H_MBAR] == 0:
+        for a in range(n):
+            ws.minv[a] = 1.0 / md.Mc[a, a]
+        ws.hold[H_MBAR] = 1
+    return ws.minv
 
 
 @hot_inline
@@ -772,7 +781,7 @@ def residual(md, tabs, h, qk, pk, ws):
                         acc += Mc[a, c] * Pm[c]
                     D[nu, a] = acc
     # a potential linear in q and nothing else at the quadrature points: its part of D is
-    # −h Σ_i b_i ℓ_ν(c_i) ∇V, with ∇V evaluated once a step (linear_force)
+    # −h Σ_i b_i ℓ_ν(c_i) ∇V, with ∇V evaluated once a trajectory (linear_force)
     if not need_v and _linear_potential(md):
         Fg, bL = ws.Fg, tabs.bL
         for nu in range(s + 1):
@@ -953,6 +962,17 @@ def _mech_solve(md, tabs, h, ws, n, m, s, J):
 
 
 @hot_inline
+def _exact_mechanics(md):
+    """Whether the mechanics matrix of an ``s = 1`` step is its exact Newton matrix: no
+    Hessian is dropped when the potential is linear in q, the mass constant and there is no
+    force (the one impulse of the step acts at q_k, through the fixed G(q_k)), once its
+    Schur complement is rebuilt from the current G(q_{k+1}) at every iteration."""
+    flags = md.flags
+    return (flags[F_LINPOT] != 0 and flags[F_MASSFN] == 0
+            and not (is_timed(md) and flags[F_FORCE] != 0))
+
+
+@hot_inline
 def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
     """Newton-like iteration with the mechanics matrix (see :func:`_mech_solve`).
 
@@ -966,6 +986,13 @@ def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
     Newton's. Returns ``NEWTON_FAILED`` as soon as the increments shrink by less than
     ``MECH_THETA_MAX`` (the caller then takes the full Newton). ``ws.R`` ends holding the
     last increment and ``out[S_RES]`` the max-norm of the last residual evaluated.
+
+    Where the mechanics matrix is the exact Newton matrix (:func:`_exact_mechanics`: an
+    ``s = 1`` step of a conservative model with a linear potential and a constant mass),
+    its Schur complement (m × m) is rebuilt at every iteration, the iteration is Newton's
+    method, and it stops with the full Newton's early exit: 3.0 iterations a step for
+    ``P1L-Q2G`` on the double pendulum, against 5.5 with the Schur complement of the
+    predictor's G(q_{k+1}) and the strict stop (docs/benchmarks.md).
     """
     X, R = ws.X, ws.R
     n, m, s, _, J = sizes(ws)
@@ -973,6 +1000,7 @@ def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
     N = sn + J * m
     tol = opts.tol
     qscale = _qscale(qk, n)
+    exact = s == 1 and _exact_mechanics(md) and ws.si[SI_SC] == SOLVE_DENSE
     dprev = np.inf
     it = 0
     while it < opts.max_iter:
@@ -985,7 +1013,7 @@ def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
         for k in range(N):
             res = max(res, abs(R[k]))
         out[S_RES] = res
-        if it == 1 and m > 0:
+        if (it == 1 or exact) and m > 0:
             # the Schur complement from the first iterate's G_j, kept for the step: the
             # constraint rows use the current G_j, so the iteration still converges to the
             # same solution, and later increments barely move the G_j
@@ -1002,6 +1030,8 @@ def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
             return OK
         if it >= 2:
             theta = dn / dprev
+            if exact and theta < 1.0 and theta / (1.0 - theta) * dn <= tol:
+                return OK  # Newton's own convergence: the full Newton's early exit
             if theta >= 0.5 and dn <= 100.0 * tol:
                 return OK  # round-off plateau
             if theta > MECH_THETA_MAX:
@@ -1081,7 +1111,9 @@ def step(md, tabs, opts, h, state, ws, first, out):
             # the previous step ended with G at q(d_J) = q_k, bit for bit, and its
             # end_momentum left it in G0 (a failed step leaves G0 alone: still G(q_k))
             pass
-    linear_force(md, ws, qk)
+    if first or ws.hold[H_FG] == 0:
+        linear_force(md, ws, qk)
+        ws.hold[H_FG] = 1
     out[S_FULL] = 0.0
     full = opts.mode == NEWTON_FULL or ws.hold[H_FULL] > 0 or not tabs.mech
     if ws.hold[H_FULL] > 0:
@@ -1262,9 +1294,11 @@ def end_momentum(md, q1, P, p1, v1, G1, ws, out):
     S = ws.S
     pivm = ws.pivm
     diag = flags[F_DIAG] != 0
+    minv = ws.minv
     if diag:
+        _inverse_diagonal(md, ws, n)
         for a in range(n):
-            v1[a] = P[a] / Mc[a, a]  # z = M⁻¹ P
+            v1[a] = P[a] * minv[a]  # z = M⁻¹ P
     else:
         if flags[F_MASSFN] != 0:
             fns[MASS](ptr(q1), ptr(q1), ptr(prm), ptr(Mlu))
@@ -1284,7 +1318,7 @@ def end_momentum(md, q1, P, p1, v1, G1, ws, out):
                 Yc[a] = G1[c, a]
             if diag:
                 for a in range(n):
-                    Yc[a] /= Mc[a, a]
+                    Yc[a] *= minv[a]
             else:
                 lu_solve(Mlu, pivn, Yc, n)  # row c of (M⁻¹ Gᵀ)ᵀ
         eta = ws.etaJ

@@ -256,8 +256,8 @@ def constraint_rate(md, q, t, out, scratch):
 # ----------------------------------------------------------------------------- assembly
 @hot_inline
 def _linear_potential(md):
-    """Whether ∇V is one vector over the step (``ws.Fg``, :func:`linear_force`): a potential
-    declared linear in q (``potential_hessian=0``) that does not depend on time."""
+    """Whether ∇V is one vector over the trajectory (``ws.Fg``, :func:`linear_force`): a
+    potential declared linear in q (``potential_hessian=0``) that does not depend on time."""
     return md.flags[F_LINPOT] != 0 and not (is_timed(md) and md.flags[F_TIME] != 0)
 
 
@@ -1016,7 +1016,8 @@ def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
         if (it == 1 or exact) and m > 0:
             # the Schur complement from the first iterate's G_j, kept for the step: the
             # constraint rows use the current G_j, so the iteration still converges to the
-            # same solution, and later increments barely move the G_j
+            # same solution, and later increments barely move the G_j. Where nothing else
+            # is dropped (exact) that lag alone made the convergence linear: rebuilt then
             for j in range(1, J):
                 _mech_rows(md, ws, j, n, m)
             st = _schur(tabs, h, ws, n, m, J)

@@ -100,6 +100,7 @@ def test_trajectories_agree_to_round_off(name, newton):
     assert a.constraint_residual.max() < 1e-14
 
 
+@pytest.mark.slow  # compiles a size-specialized loop: ≈ 100 s on an empty cache (make test compiles none)
 def test_specialized_kernels_take_the_same_path_bit_for_bit():
     q0, v0 = _start()
     kw = dict(h=0.01, n_steps=100, method="P2L-Q3G")

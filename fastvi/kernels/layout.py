@@ -214,11 +214,11 @@ b (r,), L, Ld (s+1, r), Lc (s+1, J+1), E (s+1, s+1), tau (s+1,) as in ``Method``
 quadrature nodes c (r,) and constraint points d (J+1,) in [0, 1] (the times of the
 callbacks of a time-aware model: ``t_k + c_i h``, ``t_k + d_j h``); for the
 mechanics Newton matrix: Ainv (s, s) the inverse of ``A[ν, μ−1] = Σ_i b_i ℓ'_ν(c_i) ℓ'_μ(c_i)``
-(ν = 0…s−1, μ = 1…s), W (J, J) ``W[j−1, j'] = Σ ℓ_μ(d_j) Ainv[μ−1, ν] ℓ_ν(d_j')``; mech (bool) whether ``newton="auto"``
-uses the mechanics matrix: not where ``A`` is singular (a quadrature with fewer points than
-``s``); E2 (2s+1, s+1) the
-predictor from the last two steps: the Lagrange basis of their 2s + 1 control points
-(``τ_μ − 1``, μ < s, then ``τ_μ``, in the last step's local time) at ``1 + τ_ν``; Am
+(ν = 0…s−1, μ = 1…s), W (J, J) ``W[j−1, j'] = Σ ℓ_μ(d_j) Ainv[μ−1, ν] ℓ_ν(d_j')``; mech
+(bool) whether ``newton="auto"`` uses the mechanics matrix: not where ``A`` is singular (a
+quadrature with fewer points than ``s``); E2 (2s+1, s+1) the predictor from the last two
+steps: the Lagrange basis of their 2s + 1 control points (``τ_μ − 1``, μ < s, then ``τ_μ``,
+in the last step's local time) at ``1 + τ_ν``; Am
 (s, s) the mass block ``Am[ν−1, μ−1] = Σ_i b_i ℓ'_ν(c_i) ℓ'_μ(c_i)``, ν, μ = 1…s, exactly
 symmetric: for a constant ``M`` the mass part of ``∂S/∂Q^ν`` is ``(1/h) M Σ_μ Am[ν−1, μ−1]
 ΔQ^μ``, and that of ``∂S/∂Q^0`` minus their sum (the mechanics residual's shortcut;

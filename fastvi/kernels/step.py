@@ -676,7 +676,6 @@ def _inverse_diagonal(md, ws, n):
         for a in range(n):
             ws.minv[a] = 1.0 / md.Mc[a, a]
         ws.hold[H_MBAR] = 1
-    return ws.minv
 
 
 @hot_inline

@@ -40,8 +40,12 @@ def _mechanics_matrix(meth, h, M, Gs):
     return K
 
 
+@pytest.mark.parametrize("inverse", [True, False], ids=["inverted", "factored"])
 @pytest.mark.parametrize("name", ["P2L-Q3G", "P3L-Q4G", "P2L-Q3G-NE-CE", "P3L-Q4G-CG2"])
-def test_mechanics_solve_equals_a_dense_solve_of_the_mechanics_matrix(double_pendulum, dp_start, name):
+def test_mechanics_solve_equals_a_dense_solve_of_the_mechanics_matrix(double_pendulum, dp_start, name,
+                                                                       inverse):
+    """Both forms of the impulses' solve: the Schur complement inverted (kept for a step) or
+    factored (rebuilt at every iteration where the iteration is Newton's method)."""
     meth = fastvi.method(name)
     model = double_pendulum
     q, v = dp_start
@@ -60,9 +64,9 @@ def test_mechanics_solve_equals_a_dense_solve_of_the_mechanics_matrix(double_pen
     md = model.kernel_data()
     for j in range(J):
         _mech_rows(md, ws, j, n, m)
-    assert _schur(meth.kernel_tables, 0.01, ws, n, m, J) == 0
+    assert _schur(meth.kernel_tables, 0.01, ws, n, m, J, inverse) == 0
     ws.R[:N] = rhs
-    _mech_solve(md, meth.kernel_tables, 0.01, ws, n, m, s, J)
+    _mech_solve(md, meth.kernel_tables, 0.01, ws, n, m, s, J, inverse)
     expected = np.linalg.solve(_mechanics_matrix(meth, 0.01, model.mass_matrix(q), Gs), rhs)
     assert np.max(np.abs(ws.R[:N] - expected)) < 1e-12 * np.max(np.abs(expected))
 

@@ -249,6 +249,7 @@ Workspace = namedtuple(
         "minv",  # (n,) 1 / diag(M) for a diagonal constant mass
         "Sc",  # (J m, J m) Schur complement of the mechanics matrix, factored
         "pivs",  # (J m,)
+        "w",  # (J m,) scratch of the impulses' solve
         "Z",  # (s, n) stage scratch of the mechanics solve
         "U",  # (s, n) stage scratch of the mechanics solve
         "Xprev",  # (N,) the previous step's unknowns (predictor)
@@ -300,7 +301,7 @@ def workspace_for(dims):
         np.zeros((mm, n)), np.zeros((mm, n)),
         np.zeros(mm), np.zeros(mm), np.zeros((mm, mm)), np.zeros(mm, dtype=np.int64),
         np.zeros((n, n)), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64), np.zeros(n),
-        np.zeros((Jm, Jm)), np.zeros(Jm, dtype=np.int64),
+        np.zeros((Jm, Jm)), np.zeros(Jm, dtype=np.int64), np.zeros(Jm),
         np.zeros((s, n)), np.zeros((s, n)),
         np.zeros(N), np.zeros(N), np.zeros(n), np.zeros(H_SIZE, dtype=np.int64),
         np.zeros((n, n)), np.zeros(n), np.zeros(mm), np.zeros(2),

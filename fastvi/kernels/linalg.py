@@ -1,17 +1,26 @@
-"""Small dense LU with partial pivoting, in place, no allocation.
+"""Small dense LU and inverse with partial pivoting, in place, no allocation.
 
 Hand-written because the Newton matrices are small (tens to a few hundred rows) and the
 step kernel must not allocate; numpy's ``solve`` would allocate on every call.
+
+The factors keep the *reciprocals* of the pivots on the diagonal: the back substitution
+multiplies instead of dividing, and its divisions sit on the chain of dependent
+operations that sets a small solve's time. The pivot search selects without branching:
+which row wins is data, and a mispredicted branch per row costs more than the
+comparison. ``lu_factor_small`` and ``lu_solve_small`` are the same functions inlined
+into their callers, for the systems of a constraint's or a coordinate's size, whose
+size is a compile-time constant in the size-specialized step (and there unrolled).
 """
 
 import numpy as np
 
-from .._numba import hot
+from .._numba import hot, hot_inline
 
 
 @hot
 def lu_factor(A, piv, N):
-    """Factor the leading N×N block of ``A`` in place as P A = L U.
+    """Factor the leading N×N block of ``A`` in place as P A = L U, with ``1/U_kk`` stored
+    on the diagonal (for :func:`lu_solve`).
 
     Returns 0 on success, or ``k + 1`` if the pivot of column ``k`` is zero or not finite
     (the matrix is singular to working precision or holds NaN/inf).
@@ -21,9 +30,9 @@ def lu_factor(A, piv, N):
         big = abs(A[k, k])
         for i in range(k + 1, N):
             a = abs(A[i, k])
-            if a > big:
-                big = a
-                p = i
+            better = a > big
+            big = a if better else big
+            p = i if better else p
         piv[k] = p
         if not (big > 0.0) or not np.isfinite(big):
             return k + 1
@@ -33,6 +42,7 @@ def lu_factor(A, piv, N):
                 A[k, j] = A[p, j]
                 A[p, j] = t
         inv = 1.0 / A[k, k]
+        A[k, k] = inv
         for i in range(k + 1, N):
             A[i, k] *= inv
         for i in range(k + 1, N):
@@ -61,16 +71,52 @@ def lu_solve(A, piv, b, N):
         s = b[i]
         for j in range(i + 1, N):
             s -= A[i, j] * b[j]
-        b[i] = s / A[i, i]
+        b[i] = s * A[i, i]
 
 
-@hot
-def pivot_ratio(A, N):
-    """min |U_kk| / max |U_kk| of a factored matrix: a cheap conditioning alarm."""
-    lo = np.inf
-    hi = 0.0
+@hot_inline
+def invert(A, piv, N):
+    """Overwrite the leading N×N block of ``A`` with its inverse (Gauss–Jordan, partial
+    pivoting, in place). Returns 0, or ``k + 1`` for a zero or non-finite pivot.
+
+    Inlined, so that a caller with a compile-time ``N`` (the size-specialized step) gets it
+    unrolled; the pivot search selects without branching (its comparisons are
+    unpredictable) and no zero is skipped (the Schur complements it inverts are dense)."""
     for k in range(N):
-        a = abs(A[k, k])
-        lo = min(lo, a)
-        hi = max(hi, a)
-    return lo / hi if hi > 0.0 else 0.0
+        p = k
+        big = abs(A[k, k])
+        for i in range(k + 1, N):
+            a = abs(A[i, k])
+            better = a > big
+            big = a if better else big
+            p = i if better else p
+        piv[k] = p
+        if not (big > 0.0) or not np.isfinite(big):
+            return k + 1
+        if p != k:
+            for j in range(N):
+                t = A[k, j]
+                A[k, j] = A[p, j]
+                A[p, j] = t
+        inv = 1.0 / A[k, k]
+        A[k, k] = 1.0
+        for j in range(N):
+            A[k, j] *= inv
+        for i in range(N):
+            if i != k:
+                f = A[i, k]
+                A[i, k] = 0.0
+                for j in range(N):
+                    A[i, j] -= f * A[k, j]
+    for k in range(N - 1, -1, -1):
+        p = piv[k]
+        if p != k:
+            for i in range(N):
+                t = A[i, k]
+                A[i, k] = A[i, p]
+                A[i, p] = t
+    return 0
+
+
+lu_factor_small = hot_inline(lu_factor.py_func)
+lu_solve_small = hot_inline(lu_solve.py_func)

@@ -40,7 +40,7 @@ from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F
                      SI_HC_COLS, SI_HC_CPTR, SI_HC_NG, SI_HC_PPTR, SI_HC_ROWS, SI_S, SI_SC, SINGULAR,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, SOLVE_BANDED, SOLVE_DENSE, is_timed,
                      make_workspace, sizes)
-from .linalg import lu_factor, lu_solve
+from .linalg import invert, lu_factor, lu_factor_small, lu_solve, lu_solve_small
 
 __all__ = ["make_workspace", "assemble", "residual", "linear_force", "step", "step_inlined",
            "end_momentum", "velocity_residual", "hidden_residual", "constraint_rate"]
@@ -663,7 +663,7 @@ def _mass_bar(md, qk, ws, n):
             for c in range(n):
                 Mb[a, c] = Mc[a, c]
         ws.hold[H_MBAR] = 1
-    if lu_factor(Mb, ws.pivn, n) != 0:
+    if lu_factor_small(Mb, ws.pivn, n) != 0:
         return SINGULAR_MASS
     return OK
 
@@ -685,7 +685,7 @@ def _minv(md, ws, x, n):
         for a in range(n):
             x[a] *= ws.minv[a]
     else:
-        lu_solve(ws.Mb, ws.pivn, x, n)
+        lu_solve_small(ws.Mb, ws.pivn, x, n)
 
 
 @hot_inline
@@ -868,9 +868,10 @@ def residual(md, tabs, h, qk, pk, ws):
 
 
 @hot_inline
-def _schur(tabs, h, ws, n, m, J):
-    """Build and factor the Schur complement ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` on the
-    impulses from ``ws.G`` and ``ws.Y``. Returns a status code."""
+def _schur(tabs, h, ws, n, m, J, inverse):
+    """Build the Schur complement ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` on the impulses from
+    ``ws.G`` and ``ws.Y``, and factor it, or with ``inverse`` invert it. Returns a status
+    code."""
     G, Y, Sc, W = ws.G, ws.Y, ws.Sc, tabs.W
     if ws.si[SI_SC] != SOLVE_DENSE:  # large sparse models (banded.py)
         if schur_structured(ws, W, h, m, J) != 0:
@@ -886,22 +887,28 @@ def _schur(tabs, h, ws, n, m, J):
                         for a in range(n):
                             acc += G[j, c, a] * Y[jp, e, a]
                     Sc[(j - 1) * m + c, jp * m + e] = w * acc
-    if lu_factor(Sc, ws.pivs, J * m) != 0:
+    if inverse:
+        # kept for the whole step: its inverse turns the back substitution of every
+        # iteration (a chain of J m dependent divisions and sums) into J m independent
+        # dot products; the iteration needs only an approximate inverse of its matrix
+        if invert(Sc, ws.pivs, J * m) != 0:
+            return SINGULAR
+    elif lu_factor_small(Sc, ws.pivs, J * m) != 0:
         return SINGULAR
     return OK
 
 
 @hot_inline
-def _mech_solve(md, tabs, h, ws, n, m, s, J):
+def _mech_solve(md, tabs, h, ws, n, m, s, J, inverse):
     r"""Overwrite the residual ``ws.R`` with ``K̃⁻¹ R`` for the mechanics matrix
 
         K̃ = [ (1/h) A ⊗ M̄    −B ]      (B δη)_ν = Σ_{j<J} ℓ_ν(d_j) G_jᵀ δη_j
              [      C          0 ]      (C δQ)_j = Σ_μ ℓ_μ(d_j) G_j δQ^μ
 
     by block elimination: ``t = h (A⁻¹ ⊗ M̄⁻¹) r_E``, the Schur complement
-    ``C K⁻¹ B = [h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` (factored by :func:`_schur`, once per step)
-    solved for ``δη``, then ``δQ = t + h (A⁻¹ ⊗ M̄⁻¹) B δη``. ``C`` uses the current
-    ``G_j``. Returns a status code.
+    ``C K⁻¹ B = [h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` (from :func:`_schur`: factored, or with
+    ``inverse`` inverted) solved for ``δη``, then ``δQ = t + h (A⁻¹ ⊗ M̄⁻¹) B δη``. ``C``
+    uses the current ``G_j``. Returns a status code.
     """
     R, Z, U, Y, G = ws.R, ws.Z, ws.U, ws.Y, ws.G
     Ainv, Lc = tabs.Ainv, tabs.Lc
@@ -938,7 +945,17 @@ def _mech_solve(md, tabs, h, ws, n, m, s, J):
                 for a in range(n):
                     acc += G[j, c, a] * T[a]
                 R[row + c] -= acc
-        lu_solve(ws.Sc, ws.pivs, R[sn:], Jm)
+        if inverse:
+            w, Sc = ws.w, ws.Sc
+            for i in range(Jm):
+                w[i] = R[sn + i]
+            for i in range(Jm):
+                acc = 0.0
+                for k in range(Jm):
+                    acc += Sc[i, k] * w[k]
+                R[sn + i] = acc
+        else:
+            lu_solve_small(ws.Sc, ws.pivs, R[sn:], Jm)
         for nu in range(s):
             for a in range(n):
                 Z[nu, a] = 0.0
@@ -1019,10 +1036,10 @@ def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
             # is dropped (exact) that lag alone made the convergence linear: rebuilt then
             for j in range(1, J):
                 _mech_rows(md, ws, j, n, m)
-            st = _schur(tabs, h, ws, n, m, J)
+            st = _schur(tabs, h, ws, n, m, J, not exact)
             if st != OK:
                 return st
-        _mech_solve(md, tabs, h, ws, n, m, s, J)
+        _mech_solve(md, tabs, h, ws, n, m, s, J, not exact)
         dn = _apply_increment(X, R, N, sn, qscale)
         if not np.isfinite(dn):
             return NONFINITE
@@ -1306,11 +1323,11 @@ def end_momentum(md, q1, P, p1, v1, G1, ws, out):
             for a in range(n):
                 for c in range(n):
                     Mlu[a, c] = Mc[a, c]
-        if lu_factor(Mlu, pivn, n) != 0:
+        if lu_factor_small(Mlu, pivn, n) != 0:
             return SINGULAR_MASS
         for a in range(n):
             v1[a] = P[a]
-        lu_solve(Mlu, pivn, v1, n)  # z = M⁻¹ P
+        lu_solve_small(Mlu, pivn, v1, n)  # z = M⁻¹ P
     if m > 0:
         for c in range(m):
             Yc = Y[c]
@@ -1320,7 +1337,7 @@ def end_momentum(md, q1, P, p1, v1, G1, ws, out):
                 for a in range(n):
                     Yc[a] *= minv[a]
             else:
-                lu_solve(Mlu, pivn, Yc, n)  # row c of (M⁻¹ Gᵀ)ᵀ
+                lu_solve_small(Mlu, pivn, Yc, n)  # row c of (M⁻¹ Gᵀ)ᵀ
         eta = ws.etaJ
         rheonomic = is_timed(md) and flags[F_TIME] != 0
         if rheonomic:
@@ -1336,9 +1353,9 @@ def end_momentum(md, q1, P, p1, v1, G1, ws, out):
                 for a in range(n):
                     acc += G1[c, a] * Y[d, a]
                 S[c, d] = acc
-        if lu_factor(S, pivm, m) != 0:
+        if lu_factor_small(S, pivm, m) != 0:
             return SINGULAR_CONSTRAINTS
-        lu_solve(S, pivm, eta, m)
+        lu_solve_small(S, pivm, eta, m)
         for a in range(n):
             acc = 0.0
             acc2 = 0.0

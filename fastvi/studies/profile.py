@@ -19,7 +19,7 @@ from fastvi._numba import njit, ptr, quiet
 from fastvi.kernels import layout as lay
 from fastvi.kernels.layout import make_workspace
 from fastvi.kernels.linalg import lu_factor, lu_solve
-from fastvi.kernels.step import _mech_solve, assemble, end_momentum, residual, step
+from fastvi.kernels.step import _exact_mechanics, _mech_solve, assemble, end_momentum, residual, step
 
 __all__ = ["profile_step", "main"]
 
@@ -77,10 +77,13 @@ def _loop_solve(A, piv, R0, R, N, K):
 def _loop_mech(md, tabs, h, ws, R0, n, m, s, J, K):
     st = 0
     N = R0.shape[0]
+    # the Schur complement as the step left it: inverted, or factored where the iteration
+    # is Newton's method (s = 1, nothing dropped) and rebuilds it at every iteration
+    inverse = not (s == 1 and _exact_mechanics(md))
     for _ in range(K):
         for i in range(N):
             ws.R[i] = R0[i]
-        st += _mech_solve(md, tabs, h, ws, n, m, s, J)
+        st += _mech_solve(md, tabs, h, ws, n, m, s, J, inverse)
     return st
 
 

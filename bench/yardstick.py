@@ -42,6 +42,10 @@ from fastvi.kernels.linalg import lu_factor, lu_solve
 from fastvi.kernels.step import extrapolate
 from fastvi.status import Status
 
+#: numba caches these kernels keyed on fastvi's sources too (fastvi._numba): they compile
+#: fastvi.kernels.linalg into themselves, and numba alone would watch only this file
+FASTVI_CACHE_STAMP = True
+
 # n and m of the double pendulum, read by numba as compile-time constants
 NQ = 4
 NC = 2

@@ -36,15 +36,28 @@ def _package_stamp() -> str:
     return _STAMP
 
 
+#: a module-level name that opts a module outside the package into the package stamp
+#: (``bench/yardstick.py``: it compiles ``fastvi.kernels.linalg`` into its own kernels)
+STAMP_OPT_IN = "FASTVI_CACHE_STAMP"
+
+
 class _PackageStampMixin:
     """Invalidate a cached kernel when any compiled fastvi source changes.
 
     numba checks only the file that defines a cached function, but ``drive.run`` inlines
     ``step`` from another file: an edit to ``step.py`` alone would leave a stale ``run`` in
     the cache. Stamping every kernel with the hash of the whole package closes that hole.
+    A module outside the package that compiles fastvi's kernels into its own (a benchmark's
+    hand-written kernel) opts in with a true module-level ``FASTVI_CACHE_STAMP``; its stamp
+    is then the package's and its own file's. Other modules (users' callbacks) keep numba's
+    own rule.
     """
 
+    _outside = False
+
     def get_source_stamp(self):
+        if self._outside:
+            return (_package_stamp(), super().get_source_stamp())
         return _package_stamp()
 
     @classmethod
@@ -53,7 +66,13 @@ class _PackageStampMixin:
             inside = Path(py_file).resolve().is_relative_to(_PACKAGE)
         except (OSError, ValueError):
             inside = False
-        return super().from_function(py_func, py_file) if inside else None
+        opted = bool(getattr(py_func, "__globals__", {}).get(STAMP_OPT_IN, False))
+        if not (inside or opted):
+            return None
+        loc = super().from_function(py_func, py_file)
+        if loc is not None and not inside:
+            loc._outside = True
+        return loc
 
 
 def _numba_class(name: str):

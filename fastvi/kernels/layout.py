@@ -247,7 +247,7 @@ Workspace = namedtuple(
         "pivn",  # (n,)
         "pivp",  # (n,) pivots of M(q_{k+1}) in the end projection
         "minv",  # (n,) 1 / diag(M) for a diagonal constant mass
-        "Sc",  # (J m, J m) Schur complement of the mechanics matrix, factored
+        "Sc",  # (J m, J m) Schur complement of the mechanics matrix, inverted (or factored: step._schur)
         "pivs",  # (J m,)
         "w",  # (J m,) scratch of the impulses' solve
         "Z",  # (s, n) stage scratch of the mechanics solve

@@ -17,6 +17,29 @@ import numpy as np
 from .._numba import hot, hot_inline
 
 
+@hot_inline
+def _pivot(A, piv, k, N):
+    """Partial pivoting at column ``k``: the row of the largest ``|A[i, k]|``, i ≥ k, swapped
+    into row k (its index in ``piv[k]``), found with selects, not branches. Returns False
+    for a zero or non-finite pivot."""
+    p = k
+    big = abs(A[k, k])
+    for i in range(k + 1, N):
+        a = abs(A[i, k])
+        better = a > big
+        big = a if better else big
+        p = i if better else p
+    piv[k] = p
+    if not (big > 0.0) or not np.isfinite(big):
+        return False
+    if p != k:
+        for j in range(N):
+            t = A[k, j]
+            A[k, j] = A[p, j]
+            A[p, j] = t
+    return True
+
+
 @hot
 def lu_factor(A, piv, N):
     """Factor the leading N×N block of ``A`` in place as P A = L U, with ``1/U_kk`` stored
@@ -26,21 +49,8 @@ def lu_factor(A, piv, N):
     (the matrix is singular to working precision or holds NaN/inf).
     """
     for k in range(N):
-        p = k
-        big = abs(A[k, k])
-        for i in range(k + 1, N):
-            a = abs(A[i, k])
-            better = a > big
-            big = a if better else big
-            p = i if better else p
-        piv[k] = p
-        if not (big > 0.0) or not np.isfinite(big):
+        if not _pivot(A, piv, k, N):
             return k + 1
-        if p != k:
-            for j in range(N):
-                t = A[k, j]
-                A[k, j] = A[p, j]
-                A[p, j] = t
         inv = 1.0 / A[k, k]
         A[k, k] = inv
         for i in range(k + 1, N):
@@ -80,24 +90,10 @@ def invert(A, piv, N):
     pivoting, in place). Returns 0, or ``k + 1`` for a zero or non-finite pivot.
 
     Inlined, so that a caller with a compile-time ``N`` (the size-specialized step) gets it
-    unrolled; the pivot search selects without branching (its comparisons are
-    unpredictable) and no zero is skipped (the Schur complements it inverts are dense)."""
+    unrolled; no zero is skipped (the Schur complements it inverts are dense)."""
     for k in range(N):
-        p = k
-        big = abs(A[k, k])
-        for i in range(k + 1, N):
-            a = abs(A[i, k])
-            better = a > big
-            big = a if better else big
-            p = i if better else p
-        piv[k] = p
-        if not (big > 0.0) or not np.isfinite(big):
+        if not _pivot(A, piv, k, N):
             return k + 1
-        if p != k:
-            for j in range(N):
-                t = A[k, j]
-                A[k, j] = A[p, j]
-                A[p, j] = t
         inv = 1.0 / A[k, k]
         A[k, k] = 1.0
         for j in range(N):

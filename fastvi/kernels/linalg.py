@@ -104,6 +104,8 @@ def invert(A, piv, N):
                 A[i, k] = 0.0
                 for j in range(N):
                     A[i, j] -= f * A[k, j]
+    # the rows were interchanged in place, so this is the inverse of P A; A⁻¹ = (P A)⁻¹ P
+    # is it with the interchanges undone on the columns, the last one first
     for k in range(N - 1, -1, -1):
         p = piv[k]
         if p != k:

@@ -18,8 +18,8 @@ Two Newton variants solve these equations (``docs/method.md`` §9–10):
 * ``auto`` (default): the *mechanics matrix* — the mass block ``(1/h) A ⊗ M̄`` with
   ``M̄ = M(q_k)`` and the exact constraint-Jacobian blocks, the force and constraint
   Hessians dropped (they are O((ωh)²) relative to the mass block). Its inverse factors
-  into ``h A⁻¹ ⊗ M̄⁻¹`` and a Schur complement of size ``J m`` on the impulses, so an
-  iteration costs one residual and a few small solves. It contracts like (ωh)²; when it
+  into ``h A⁻¹ ⊗ M̄⁻¹`` and a Schur complement of size ``J m`` on the impulses (inverted
+  once a step), so an iteration costs one residual and a few small products. It contracts like (ωh)²; when it
   contracts slower than ``MECH_THETA_MAX`` (stiff springs) the step is redone with the
   full Newton, which then stays on for ``FULL_HOLD`` steps.
 

@@ -2,6 +2,7 @@
 
 import pickle
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -238,3 +239,31 @@ def test_kernel_cache_is_stamped_with_every_compiled_source():
     assert loc is not None
     plain = _numba._numba_class("InTreeCacheLocator").from_function(scope["kernel"], __file__)
     assert loc.get_source_stamp() == (stamp, plain.get_source_stamp())
+
+
+def test_a_study_edit_leaves_the_kernels_cached_and_recompiles_the_studies(monkeypatch):
+    """The kernels' stamp leaves out fastvi/studies (no kernel compiles a study); a study's
+    compiled loop (it inlines kernels) carries the kernels' stamp and the studies' own."""
+    from fastvi import _numba
+    from fastvi.studies import profile
+
+    kernels, studies = _numba._package_stamp(), _numba._sources_stamp(True)
+    assert kernels != studies
+    loc = _numba._InTree.from_function(profile.loop_residual.py_func, profile.__file__)
+    assert loc is not None and loc.get_source_stamp() == (kernels, studies)
+    # an edited study: the studies' stamp moves, the kernels' does not
+    real = Path.read_bytes
+    def edited(path):
+        text = real(path)
+        return text + b"\n# edited\n" if path.name == "wpd.py" else text
+    monkeypatch.setattr(_numba, "_STAMPS", {})
+    monkeypatch.setattr(Path, "read_bytes", edited)
+    assert _numba._package_stamp() == kernels
+    assert _numba._sources_stamp(True) != studies
+    # and an edited kernel moves the kernels' stamp
+    def kernel_edited(path):
+        text = real(path)
+        return text + b"\n# edited\n" if path.name == "step.py" else text
+    monkeypatch.setattr(_numba, "_STAMPS", {})
+    monkeypatch.setattr(Path, "read_bytes", kernel_edited)
+    assert _numba._package_stamp() != kernels

@@ -235,8 +235,13 @@ def test_peer_section_quick(tmp_path):
     assert set(table) == {1e3, 1e5}
     text = "\n".join(wpd.peer_markdown(pts, pcfg, [], elapsed))
     for s in ("fastvi's best method / DOP853", "Stiff rod–slider", "Where fastvi loses",
-              "Energy error and constraint drift", "**Cost per step**", "- Why: a step of the methods"):
+              "Energy error and constraint drift", "**Cost per step**"):
         assert s in text
+    # the split into steps and cost per step is printed wherever the two fronts overlap
+    split = wpd.peer_split(pts, pcfg["T"][0], wpd.DOP_A)
+    reached = any(np.isfinite(r[2]) for r in split)
+    assert ("**Where the ratio comes from**" in text) == reached
+    assert ("- Why (T =" in text) == reached
 
 
 def test_peer_ratio_interpolation_on_synthetic_curves():
@@ -248,6 +253,25 @@ def test_peer_ratio_interpolation_on_synthetic_curves():
     for Elev, best, which, riv, x in rows:
         assert which == "P3L-Q4G"
         assert x == pytest.approx(10 * Elev ** -0.125, rel=1e-9)
+
+
+def test_peer_split_into_steps_and_cost_per_step_on_synthetic_curves():
+    """steps = a E^(−1/k) and a fixed cost per step for each contender: the split recovers
+    the two ratios exactly, and their product is the CPU ratio of :func:`peer_ratios`."""
+    E = np.logspace(-1, -9, 9)
+    pts = [wpd.PeerPoint("pendulum", "P4L-Q4G", 0.0, 1.0, 1.2e-6 * 300 * e ** -0.125,
+                         dH=e, work=int(round(300 * e ** -0.125))) for e in E]
+    pts += [wpd.PeerPoint("pendulum", wpd.DOP_A, 0.0, 1.0, 0.4e-6 * 500 * e ** -0.125,
+                          dH=e, work=int(round(500 * e ** -0.125))) for e in E]
+    ratios = wpd.peer_ratios(pts, 1.0, wpd.DOP_A, levels=(1e-4, 1e-8))
+    for (Elev, which, xs, xc), row in zip(wpd.peer_split(pts, 1.0, wpd.DOP_A, levels=(1e-4, 1e-8)),
+                                          ratios):
+        assert which == "P4L-Q4G"
+        assert xs == pytest.approx(0.6, rel=2e-3)  # the steps are rounded to integers
+        assert xc == pytest.approx(3.0, rel=2e-3)
+        assert xs * xc == pytest.approx(row[4], rel=1e-9)
+    far = wpd.peer_split(pts, 1.0, wpd.DOP_A, levels=(1e-12,))  # outside both fronts
+    assert np.isnan(far[0][2]) and np.isnan(far[0][3])
 
 
 def test_growth_section_is_spliced_into_an_existing_page(tmp_path):

@@ -15,18 +15,23 @@ import time
 import numpy as np
 
 import fastvi
-from fastvi._numba import njit, ptr, quiet
+from fastvi._numba import hot, ptr, quiet
 from fastvi.kernels import layout as lay
 from fastvi.kernels.layout import make_workspace
 from fastvi.kernels.linalg import lu_factor, lu_solve
 from fastvi.kernels.step import _exact_mechanics, _mech_solve, assemble, end_momentum, residual, step
 
-__all__ = ["profile_step", "main"]
+__all__ = ["profile_step", "main", "loop_step", "loop_residual", "loop_assemble", "loop_lu",
+           "loop_solve", "loop_mech", "loop_end", "loop_callback"]
 
 
-@njit
-def _loop_step(md, tabs, opts, h, state, ws, K):
-    out = np.zeros(lay.STEP_OUT_SIZE)
+# The loops are compiled like the kernels they time (``hot``: no reference counting, so
+# the caller passes every scratch array): a loop that counts references to the views it
+# takes times numba's atomic counts, not the kernel (a sized residual measured 0.76 µs in
+# such a loop against 0.066 µs in a ``hot`` one; docs/benchmarks.md, 2026-11-25 late night).
+@hot
+def loop_step(md, tabs, opts, h, state, ws, out, K):
+    """``K`` steps from ``state``, each continuing from the last (``out``: the step's output)."""
     st = 0
     for _ in range(K):
         st += step(md, tabs, opts, h, state, ws, False, out)
@@ -37,35 +42,41 @@ def _loop_step(md, tabs, opts, h, state, ws, K):
     return st
 
 
-@njit
-def _loop_residual(md, tabs, h, qk, pk, ws, K):
+@hot
+def loop_residual(md, tabs, h, qk, pk, ws, K):
+    """``K`` residuals of the mechanics iteration at ``ws.X``."""
     st = 0
     for _ in range(K):
         st += residual(md, tabs, h, qk, pk, ws)
     return st
 
 
-@njit
-def _loop_assemble(md, tabs, h, qk, pk, ws, jac, K):
+@hot
+def loop_assemble(md, tabs, h, qk, pk, ws, jac, K):
+    """``K`` assemblies of the full Newton's residual (with its matrix when ``jac``)."""
     st = 0
     for _ in range(K):
         st += assemble(md, tabs, h, qk, pk, ws, jac)
     return st
 
 
-@njit
-def _loop_lu(A0, A, piv, N, K):
+@hot
+def loop_lu(A0, A, piv, N, factor, K):
+    """``K`` copies of ``A0`` into ``A``, each factored when ``factor`` (without: the copy's
+    own cost, to subtract)."""
     st = 0
     for _ in range(K):
         for i in range(N):
             for j in range(N):
                 A[i, j] = A0[i, j]
-        st += lu_factor(A, piv, N)
+        if factor:
+            st += lu_factor(A, piv, N)
     return st
 
 
-@njit
-def _loop_solve(A, piv, R0, R, N, K):
+@hot
+def loop_solve(A, piv, R0, R, N, K):
+    """``K`` solves with the LU factors in ``A`` of a copy of ``R0``."""
     for _ in range(K):
         for i in range(N):
             R[i] = R0[i]
@@ -73,8 +84,9 @@ def _loop_solve(A, piv, R0, R, N, K):
     return 0
 
 
-@njit
-def _loop_mech(md, tabs, h, ws, R0, n, m, s, J, K):
+@hot
+def loop_mech(md, tabs, h, ws, R0, n, m, s, J, K):
+    """``K`` mechanics-matrix solves of a copy of ``R0``."""
     st = 0
     N = R0.shape[0]
     # the Schur complement as the step left it: inverted, or factored where the iteration
@@ -87,20 +99,23 @@ def _loop_mech(md, tabs, h, ws, R0, n, m, s, J, K):
     return st
 
 
-@njit
-def _loop_end(md, q1, P, p1, v1, G1, ws, K):
+@hot
+def loop_end(md, q1, P, p1, v1, G1, ws, out, K):
+    """``K`` end projections (RATTLE's momentum at the step end)."""
     st = 0
-    out = np.zeros(lay.STEP_OUT_SIZE)
     for _ in range(K):
         st += end_momentum(md, q1, P, p1, v1, G1, ws, out)
     return st
 
 
-@njit
-def _loop_callback(fn, q, prm, out, K):
+@hot
+def loop_callback(fn, q, prm, out, K):
+    """``K`` calls of one model callback."""
+    acc = 0.0
     for _ in range(K):
         fn(ptr(q), ptr(q), ptr(prm), ptr(out))
-    return 0
+        acc += out[0]
+    return acc
 
 
 def _per_call(fn, *args, calls=20000, repeats=5):
@@ -142,32 +157,34 @@ def profile_step(model, q0, v0, method: str = "P2L-Q3G", h: float = 0.01, warm: 
             # a first step fills the predictor's history; the loop then runs on
             st0 = np.zeros(lay.STEP_OUT_SIZE)
             step(md, tabs, opts, h, state, ws, True, st0)
-            out[f"step_{mode}"] = _per_call(_loop_step, md, tabs, opts, h, state, ws, calls=calls)
+            out[f"step_{mode}"] = _per_call(loop_step, md, tabs, opts, h, state, ws, st0,
+                                            calls=calls)
         qk, pk = state[0].copy(), state[1].copy()
         ws = make_workspace(n, m, s, meth.r, J)
         step(md, tabs, lay.NewtonOptions(1e-14, 30, lay.NEWTON_FULL), h, state, ws, True,
              np.zeros(lay.STEP_OUT_SIZE))
-        out["residual"] = _per_call(_loop_residual, md, tabs, h, qk, pk, ws, calls=calls)
-        out["residual_generic"] = _per_call(_loop_assemble, md, tabs, h, qk, pk, ws, False,
+        out["residual"] = _per_call(loop_residual, md, tabs, h, qk, pk, ws, calls=calls)
+        out["residual_generic"] = _per_call(loop_assemble, md, tabs, h, qk, pk, ws, False,
                                             calls=calls)
-        out["residual_jacobian"] = _per_call(_loop_assemble, md, tabs, h, qk, pk, ws, True,
+        out["residual_jacobian"] = _per_call(loop_assemble, md, tabs, h, qk, pk, ws, True,
                                              calls=calls)
         A0 = ws.A.copy()
         R0 = ws.R.copy()
         A, piv, R = np.zeros((N, N)), np.zeros(N, dtype=np.int64), np.zeros(N)
-        out["lu_factor"] = _per_call(_loop_lu, A0, A, piv, N, calls=calls)
-        out["lu_solve"] = _per_call(_loop_solve, A, piv, R0, R, N, calls=calls)
+        out["lu_factor"] = (_per_call(loop_lu, A0, A, piv, N, True, calls=calls)
+                            - _per_call(loop_lu, A0, A, piv, N, False, calls=calls))
+        out["lu_solve"] = _per_call(loop_solve, A, piv, R0, R, N, calls=calls)
         # the mechanics solve needs M̄⁻¹ and Y_0 prepared as a step does
         ws2 = make_workspace(n, m, s, meth.r, J)
         step(md, tabs, lay.NewtonOptions(1e-14, 30, lay.NEWTON_AUTO), h, state, ws2, True,
              np.zeros(lay.STEP_OUT_SIZE))
-        out["mech_solve"] = _per_call(_loop_mech, md, tabs, h, ws2, ws2.R.copy(), n, m, s, J,
+        out["mech_solve"] = _per_call(loop_mech, md, tabs, h, ws2, ws2.R.copy(), n, m, s, J,
                                       calls=calls)
         q1, P = state[3].copy(), ws.P.copy()
         p1, v1 = np.zeros(n), np.zeros(n)
-        out["end_momentum"] = _per_call(_loop_end, md, q1, P, p1, v1, ws.G[J].copy(), ws,
-                                        calls=calls)
-        out["callback"] = _per_call(_loop_callback, md.fns[lay.PGRAD], qk, prm, np.zeros(n),
+        out["end_momentum"] = _per_call(loop_end, md, q1, P, p1, v1, ws.G[J].copy(), ws,
+                                        np.zeros(lay.STEP_OUT_SIZE), calls=calls)
+        out["callback"] = _per_call(loop_callback, md.fns[lay.PGRAD], qk, prm, np.zeros(n),
                                     calls=calls)
     return out
 

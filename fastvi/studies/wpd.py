@@ -83,7 +83,7 @@ from fastvi.kernels.layout import make_workspace as vi_workspace
 from fastvi.kernels.step import assemble
 from fastvi.kernels.step import step as _vi_step
 from fastvi.status import Status
-from fastvi.studies.profile import _loop_assemble, _loop_end, _loop_solve
+from fastvi.studies.profile import loop_assemble, loop_callback, loop_end, loop_lu, loop_solve
 from fastvi.studies.reference import REF_TOL, chain_cartesian, chain_pendulum_reference
 
 #: fastvi's defaults P1…P4 and paper B's own scheme
@@ -470,27 +470,6 @@ def method_crossovers(points, metric: str, per_decade: int = 40):
 
 
 # ----------------------------------------------------------------------------- profile
-@njit
-def _loop_factor(A0, A, piv, N, factor, K):
-    st = 0
-    for _ in range(K):
-        for i in range(N):
-            for j in range(N):
-                A[i, j] = A0[i, j]
-        if factor:
-            st += lu_factor(A, piv, N)
-    return st
-
-
-@njit
-def _loop_callback(fns, q, prm, out, K):
-    acc = 0.0
-    for _ in range(K):
-        fns[_PGRAD](ptr(q), ptr(q), ptr(prm), ptr(out))
-        acc += out[0]
-    return acc
-
-
 def _per_call(fn, *args, budget: float = 0.05, repeats: int = 5) -> float:
     """CPU seconds per iteration of a compiled loop ``fn(*args, K)``: the minimum of
     ``repeats`` timings of ``K`` iterations, ``K`` grown until one takes ``budget`` seconds.
@@ -547,8 +526,8 @@ def lu_factor_cost(A0: np.ndarray, budget: float = 0.05, repeats: int = 3) -> fl
     """CPU seconds of one in-place LU factorisation of (a copy of) ``A0``, copy excluded."""
     N = A0.shape[0]
     A, piv = np.zeros_like(A0), np.zeros(N, dtype=np.int64)
-    return max(0.0, _per_call(_loop_factor, A0, A, piv, N, True, budget=budget, repeats=repeats)
-               - _per_call(_loop_factor, A0, A, piv, N, False, budget=budget, repeats=repeats))
+    return max(0.0, _per_call(loop_lu, A0, A, piv, N, True, budget=budget, repeats=repeats)
+               - _per_call(loop_lu, A0, A, piv, N, False, budget=budget, repeats=repeats))
 
 
 def profile_step(model, q0, v0, method: str, h: float, n_steps: int = 2000, rounds: int = 3,
@@ -603,12 +582,13 @@ def profile_step(model, q0, v0, method: str, h: float, n_steps: int = 2000, roun
             fastvi.integrate(model, q0, v0, h=h, n_steps=n_steps, method=method, newton="full")
             parts = dict(
                 step=(time.thread_time() - t0) / n_steps,
-                assemble_jac=_per_call(_loop_assemble, md, tabs, h, qk, pk, ws, True, **timed),
-                assemble_res=_per_call(_loop_assemble, md, tabs, h, qk, pk, ws, False, **timed),
+                assemble_jac=_per_call(loop_assemble, md, tabs, h, qk, pk, ws, True, **timed),
+                assemble_res=_per_call(loop_assemble, md, tabs, h, qk, pk, ws, False, **timed),
                 lu_factor=lu_factor_cost(A0, **timed),
-                lu_solve=_per_call(_loop_solve, A, piv, R0, R, N, **timed),
-                end_momentum=_per_call(_loop_end, md, q1, P, p1, v1, ws.G[meth.J], ws, **timed),
-                callback=_per_call(_loop_callback, fns, qk.copy(), prm, np.zeros(n), **timed),
+                lu_solve=_per_call(loop_solve, A, piv, R0, R, N, **timed),
+                end_momentum=_per_call(loop_end, md, q1, P, p1, v1, ws.G[meth.J], ws,
+                                       np.zeros(STEP_OUT_SIZE), **timed),
+                callback=_per_call(loop_callback, fns[_PGRAD], qk.copy(), prm, np.zeros(n), **timed),
             )
             for k, v in parts.items():
                 t[k] = min(t.get(k, np.inf), v)
@@ -1324,6 +1304,34 @@ def _step_costs(points, T) -> dict:
     return {lab: float(np.median(v)) for lab, v in per.items()}
 
 
+def _front_at(points, E):
+    """(CPU time, steps) to reach max|ΔH| = E on these runs' Pareto front in (max|ΔH|, CPU),
+    each interpolated log–log between the two front runs around E; NaN outside the front."""
+    errs, cpus = pareto([p for p in points if p.ok], "dH", cost="cpu")
+    if len(errs) < 2 or not errs.min() <= E <= errs.max():
+        return np.nan, np.nan
+    work = {(p.dH, p.cpu): p.work for p in points if p.ok}
+    steps = np.array([work[(e, c)] for e, c in zip(errs, cpus)], float)
+    le = np.log(errs[::-1])  # increasing error
+    x = np.log(E)
+    return (float(np.exp(np.interp(x, le, np.log(cpus[::-1])))),
+            float(np.exp(np.interp(x, le, np.log(steps[::-1])))))
+
+
+def peer_split(points, T, rival, levels=PEER_LEVELS):
+    """Where each ratio of :func:`peer_ratios` comes from: ``[(E, method, steps ratio, cost
+    per step ratio)]``, fastvi's cheapest method at ``E`` against ``rival``, each contender's
+    steps and CPU time read off its own front at ``E`` (the product of the two ratios is the
+    CPU ratio). NaN where either front does not reach ``E``."""
+    rows = []
+    riv = [p for p in points if p.label == rival and p.T == T and p.panel == "pendulum"]
+    for E, _, which, _, _ in peer_ratios(points, T, rival, levels):
+        mine = [p for p in points if p.label == which and p.T == T and p.panel == "pendulum"]
+        (cf, sf), (cr, sr) = _front_at(mine, E), _front_at(riv, E)
+        rows.append((E, which, sf / sr, (cf / sf) / (cr / sr)))
+    return rows
+
+
 def peer_ratios(points, T, rival, levels=PEER_LEVELS):
     """[(E, fastvi-best CPU, method, rival CPU, fastvi / rival)] at each level ``E``."""
     rows = []
@@ -1555,9 +1563,19 @@ def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> li
         P.append(f"**Cost per step** (T = {T0:g} s, median over each contender's runs): fastvi "
                  + ", ".join(f"{lab} {1e6 * cost[lab]:.2f}" for lab in fv)
                  + f" µs (whole public call / steps), DOP853 (a) {1e6 * cost[DOP_A]:.2f} µs per "
-                 f"accepted step ({peers.DOP853_STAGES} evaluations). At equal energy error the "
-                 "two take similar numbers of steps (the steps columns of the data table), so the "
-                 "ratio above is essentially the ratio of the costs per step.\n")
+                 f"accepted step ({peers.DOP853_STAGES} evaluations).\n")
+    split = [r for r in peer_split(points, T0, DOP_A) if np.isfinite(r[2])]
+    if split:
+        P.append(f"**Where the ratio comes from** (T = {T0:g} s): each ratio of the first table is "
+                 "the product of how many more steps fastvi's cheapest method takes than DOP853 "
+                 "(a) at that energy error and how much more a step of it costs there, both read "
+                 "off each contender's own front (log–log, like the CPU times):\n")
+        P.append("| max\\|ΔH\\| (J) | best fastvi | its steps / DOP853 (a)'s | its cost per step "
+                 "/ DOP853 (a)'s | product |")
+        P.append("|---|---|---|---|---|")
+        for E, which, xs, xc in split:
+            P.append(f"| {E:.0e} | {which} | {xs:.3g} | {xc:.3g} | {xs * xc:.3g} |")
+        P.append("")
     # stiff
     table, target = stiff_table(points, pcfg)
     s = pcfg["stiff"]
@@ -1639,6 +1657,8 @@ def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> li
 
 def _loses_lines(points, pcfg, table) -> list[str]:
     """A plain statement, from the measured numbers, of where fastvi is slower."""
+    from fastvi.studies import peers
+
     out = []
     for T in pcfg["T"]:
         for rival in (DOP_A, DOP_B):
@@ -1673,16 +1693,17 @@ def _loses_lines(points, pcfg, table) -> list[str]:
                        "the spring, like DOP853, at a higher cost per step. The lead at large k "
                        "belongs to the r = s methods only.")
     T0 = pcfg["T"][0]
-    cost = _step_costs(points, T0)
-    best = sorted({row[2] for row in peer_ratios(points, T0, DOP_A) if row[2] in cost})
-    if best and DOP_A in cost:
-        x = [cost[lab] / cost[DOP_A] for lab in best]
-        out.append(f"- Why: a step of the methods cheapest at these levels ({', '.join(best)}) "
-                   f"costs {min(x):.2g}–{max(x):.2g}× a DOP853 (a) step (cost per step above) "
-                   "and the two need similar numbers of steps at equal energy error. fastvi's "
-                   "step runs at about its arithmetic and its Newton iteration count is at the "
-                   "limit of this design for momenta conserved to round-off "
-                   "(`docs/benchmarks.md`, issue 11).")
+    split = [r for r in peer_split(points, T0, DOP_A) if np.isfinite(r[2])]
+    if split:
+        why = "; ".join(f"at {E:.0e} J `{w}` takes {xs:.2g}× DOP853 (a)'s steps at {xc:.2g}× its "
+                        "cost per step" for E, w, xs, xc in split)
+        out.append(f"- Why (T = {T0:g} s, the table *Where the ratio comes from*): {why}. Where "
+                   "the steps ratio dominates, fastvi's energy error at its fixed step is larger than "
+                   "that of DOP853, which adapts its step to the motion; where the "
+                   "cost ratio dominates, the step is a Newton solve of s n + J m unknowns against "
+                   f"{peers.DOP853_STAGES} explicit evaluations. fastvi's step runs at about its arithmetic and its "
+                   "Newton iteration count is at the limit of this design for momenta conserved "
+                   "to round-off (`docs/benchmarks.md`, issue 11).")
     out.append("- What fastvi wins regardless: constraints at round-off (max|g| above) and an "
                "energy error that does not drift with T.")
     return out

@@ -20,12 +20,14 @@ import numba as nb
 import numpy as np
 
 import fastvi
+from fastvi._numba import _OPTIONS
 from fastvi.kernels import layout as lay
 from fastvi.kernels import step as S
 from fastvi.kernels.layout import make_workspace, specialize
-from fastvi.kernels.linalg import invert
+from fastvi.kernels.linalg import invert_unpivoted
 
-hot = nb.njit(_nrt=False, error_model="numpy", boundscheck=False)
+#: the kernels' own options, without the disk cache
+hot = nb.njit(**{**_OPTIONS, "cache": False}, _nrt=False)
 H = 0.01
 
 
@@ -77,7 +79,7 @@ def _inverses(ws, S0, K):
         for i in range(J * m):
             for k in range(J * m):
                 ws.Sc[i, k] = S0[i, k]
-        st += invert(ws.Sc, ws.pivs, J * m)
+        st += invert_unpivoted(ws.Sc, J * m)
     return st
 
 

@@ -71,6 +71,41 @@ def test_mechanics_solve_equals_a_dense_solve_of_the_mechanics_matrix(double_pen
     assert np.max(np.abs(ws.R[:N] - expected)) < 1e-12 * np.max(np.abs(expected))
 
 
+def test_a_vanishing_pivot_of_the_schur_complement_takes_row_interchanges(double_pendulum, dp_start):
+    """The Schur complement is inverted without row interchanges where its pivots allow it.
+    With the constraint rows at q_k made M̄⁻¹-orthogonal to those at the first constraint
+    point, its first pivot vanishes: the pivot-free inverse refuses it, the kernel rebuilds it
+    and inverts it with partial pivoting, and the mechanics solve still equals the dense
+    solve of the mechanics matrix."""
+    from fastvi.kernels.linalg import invert_unpivoted
+    from fastvi.kernels.step import _mech_rows, _schur, _schur_build
+
+    meth = fastvi.method("P2L-Q3G")
+    model = double_pendulum
+    q, v = dp_start
+    M = model.mass_matrix(q)
+    st, *_, ws = one_step(model, meth, 0.01, q, M @ v, v)
+    assert st == 0
+    n, m, s, J = model.n, model.m, meth.s, meth.J
+    N = s * n + J * m
+    Minv = np.linalg.inv(M)
+    g1, u = ws.G[1][0].copy(), ws.G[0][0].copy()
+    ws.G[0][0] = u - (g1 @ Minv @ u) / (g1 @ Minv @ g1) * g1
+    Gs = [ws.G[j].copy() for j in range(J + 1)]
+    md = model.kernel_data()
+    for j in range(J):
+        _mech_rows(md, ws, j, n, m)
+    _schur_build(meth.kernel_tables, 0.01, ws, n, m, J)
+    assert abs(ws.Sc[0, 0]) < 1e-15 * np.abs(ws.Sc[:J * m, :J * m]).max()
+    assert invert_unpivoted(ws.Sc.copy(), J * m) == 1
+    assert _schur(meth.kernel_tables, 0.01, ws, n, m, J, True) == 0
+    rhs = np.random.default_rng(2).normal(size=N)
+    ws.R[:N] = rhs
+    _mech_solve(md, meth.kernel_tables, 0.01, ws, n, m, s, J, True)
+    expected = np.linalg.solve(_mechanics_matrix(meth, 0.01, M, Gs), rhs)
+    assert np.max(np.abs(ws.R[:N] - expected)) < 1e-11 * np.max(np.abs(expected))
+
+
 @pytest.mark.parametrize("name", ["P2L-Q3G", "P3L-Q4G", "P4L-Q5G"])
 def test_both_variants_solve_the_same_step_equations(double_pendulum, dp_start, name):
     """100 steps of this chaotic motion: the trajectories agree to round-off growth

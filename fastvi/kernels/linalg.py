@@ -116,5 +116,43 @@ def invert(A, piv, N):
     return 0
 
 
+#: :func:`invert_unpivoted` gives up, for :func:`invert`, on a pivot below this fraction of
+#: the matrix's largest entry: without row interchanges the error of the inverse grows like
+#: the inverse of that ratio
+PIVOT_MIN = 1e-3
+
+
+@hot_inline
+def invert_unpivoted(A, N):
+    """Overwrite the leading N×N block of ``A`` with its inverse by Gauss–Jordan without row
+    interchanges, for matrices whose diagonal pivots are known to stay large (the mechanics
+    iteration's Schur complement). Returns 0, or ``k + 1`` when the pivot of column ``k`` is
+    below ``PIVOT_MIN`` times the largest ``|A_ij|`` or not finite: ``A`` is then left
+    part-way, to be rebuilt for :func:`invert`.
+
+    The pivot search and the row interchanges (data-dependent, so never unrolled away) were
+    a third of :func:`invert`'s time on the 4 × 4 to 8 × 8 Schur complements."""
+    big = 0.0
+    for i in range(N):
+        for j in range(N):
+            big = max(big, abs(A[i, j]))
+    floor = PIVOT_MIN * big
+    for k in range(N):
+        pk = A[k, k]
+        if not (abs(pk) > floor) or not np.isfinite(pk):
+            return k + 1
+        inv = 1.0 / pk
+        A[k, k] = 1.0
+        for j in range(N):
+            A[k, j] *= inv
+        for i in range(N):
+            if i != k:
+                f = A[i, k]
+                A[i, k] = 0.0
+                for j in range(N):
+                    A[i, j] -= f * A[k, j]
+    return 0
+
+
 lu_factor_small = hot_inline(lu_factor.py_func)
 lu_solve_small = hot_inline(lu_solve.py_func)

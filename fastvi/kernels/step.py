@@ -40,7 +40,8 @@ from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F
                      SI_HC_COLS, SI_HC_CPTR, SI_HC_NG, SI_HC_PPTR, SI_HC_ROWS, SI_S, SI_SC, SINGULAR,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, SOLVE_BANDED, SOLVE_DENSE, is_timed,
                      make_workspace, sizes)
-from .linalg import invert, lu_factor, lu_factor_small, lu_solve, lu_solve_small
+from .linalg import (invert, invert_unpivoted, lu_factor, lu_factor_small, lu_solve,
+                     lu_solve_small)
 
 __all__ = ["make_workspace", "assemble", "residual", "linear_force", "step", "step_inlined",
            "end_momentum", "velocity_residual", "hidden_residual", "constraint_rate"]
@@ -868,15 +869,9 @@ def residual(md, tabs, h, qk, pk, ws):
 
 
 @hot_inline
-def _schur(tabs, h, ws, n, m, J, inverse):
-    """Build the Schur complement ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` on the impulses from
-    ``ws.G`` and ``ws.Y``, and factor it, or with ``inverse`` invert it. Returns a status
-    code."""
+def _schur_build(tabs, h, ws, n, m, J):
+    """``ws.Sc`` ← the dense Schur complement ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]``."""
     G, Y, Sc, W = ws.G, ws.Y, ws.Sc, tabs.W
-    if ws.si[SI_SC] != SOLVE_DENSE:  # large sparse models (banded.py)
-        if schur_structured(ws, W, h, m, J) != 0:
-            return SINGULAR
-        return OK
     for j in range(1, J + 1):
         for jp in range(J):
             w = h * W[j - 1, jp]
@@ -887,13 +882,31 @@ def _schur(tabs, h, ws, n, m, J, inverse):
                         for a in range(n):
                             acc += G[j, c, a] * Y[jp, e, a]
                     Sc[(j - 1) * m + c, jp * m + e] = w * acc
+
+
+@hot_inline
+def _schur(tabs, h, ws, n, m, J, inverse):
+    """Build the Schur complement ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` on the impulses from
+    ``ws.G`` and ``ws.Y``, and factor it, or with ``inverse`` invert it. Returns a status
+    code."""
+    if ws.si[SI_SC] != SOLVE_DENSE:  # large sparse models (banded.py)
+        if schur_structured(ws, tabs.W, h, m, J) != 0:
+            return SINGULAR
+        return OK
+    _schur_build(tabs, h, ws, n, m, J)
     if inverse:
         # kept for the whole step: its inverse turns the back substitution of every
         # iteration (a chain of J m dependent divisions and sums) into J m independent
-        # dot products; the iteration needs only an approximate inverse of its matrix
-        if invert(Sc, ws.pivs, J * m) != 0:
-            return SINGULAR
-    elif lu_factor_small(Sc, ws.pivs, J * m) != 0:
+        # dot products; the iteration needs only an approximate inverse of its matrix.
+        # Without row interchanges first: with Lobatto constraint points its diagonal
+        # blocks h W_{j−1,j−1} G_j M̄⁻¹ G_{j−1}ᵀ keep the pivots away from zero; a small
+        # pivot (another placement, a near-singular configuration) rebuilds it for
+        # partial pivoting
+        if invert_unpivoted(ws.Sc, J * m) != 0:
+            _schur_build(tabs, h, ws, n, m, J)
+            if invert(ws.Sc, ws.pivs, J * m) != 0:
+                return SINGULAR
+    elif lu_factor_small(ws.Sc, ws.pivs, J * m) != 0:
         return SINGULAR
     return OK
 

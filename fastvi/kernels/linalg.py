@@ -10,6 +10,8 @@ which row wins is data, and a mispredicted branch per row costs more than the
 comparison. ``lu_factor_small`` and ``lu_solve_small`` are the same functions inlined
 into their callers, for the systems of a constraint's or a coordinate's size, whose
 size is a compile-time constant in the size-specialized step (and there unrolled).
+``invert_unpivoted`` inverts without row interchanges the matrices whose pivots are known
+to stay large (the mechanics iteration's Schur complement) and says when one is not.
 """
 
 import numpy as np
@@ -85,6 +87,23 @@ def lu_solve(A, piv, b, N):
 
 
 @hot_inline
+def _eliminate(A, k, N):
+    """One Gauss–Jordan step in place at the pivot ``A[k, k]``: row k scaled by its
+    reciprocal, column k cleared in every other row; the cleared column keeps the inverse's
+    column as it builds up."""
+    inv = 1.0 / A[k, k]
+    A[k, k] = 1.0
+    for j in range(N):
+        A[k, j] *= inv
+    for i in range(N):
+        if i != k:
+            f = A[i, k]
+            A[i, k] = 0.0
+            for j in range(N):
+                A[i, j] -= f * A[k, j]
+
+
+@hot_inline
 def invert(A, piv, N):
     """Overwrite the leading N×N block of ``A`` with its inverse (Gauss–Jordan, partial
     pivoting, in place). Returns 0, or ``k + 1`` for a zero or non-finite pivot.
@@ -94,16 +113,7 @@ def invert(A, piv, N):
     for k in range(N):
         if not _pivot(A, piv, k, N):
             return k + 1
-        inv = 1.0 / A[k, k]
-        A[k, k] = 1.0
-        for j in range(N):
-            A[k, j] *= inv
-        for i in range(N):
-            if i != k:
-                f = A[i, k]
-                A[i, k] = 0.0
-                for j in range(N):
-                    A[i, j] -= f * A[k, j]
+        _eliminate(A, k, N)
     # the rows were interchanged in place, so this is the inverse of P A; A⁻¹ = (P A)⁻¹ P
     # is it with the interchanges undone on the columns, the last one first
     for k in range(N - 1, -1, -1):
@@ -141,16 +151,7 @@ def invert_unpivoted(A, N):
         pk = A[k, k]
         if not (abs(pk) > floor) or not np.isfinite(pk):
             return k + 1
-        inv = 1.0 / pk
-        A[k, k] = 1.0
-        for j in range(N):
-            A[k, j] *= inv
-        for i in range(N):
-            if i != k:
-                f = A[i, k]
-                A[i, k] = 0.0
-                for j in range(N):
-                    A[i, j] -= f * A[k, j]
+        _eliminate(A, k, N)
     return 0
 
 

@@ -884,6 +884,17 @@ def _schur_build(tabs, h, ws, n, m, J):
                     Sc[(j - 1) * m + c, jp * m + e] = w * acc
 
 
+@hot
+def _schur_pivoted(tabs, h, ws, n, m, J):
+    """The Schur complement rebuilt and inverted with partial pivoting: the rare fallback of
+    :func:`_schur`, called rather than inlined (a second build and a pivoted inverse inlined
+    into every kernel cost compile time, not speed). Returns a status code."""
+    _schur_build(tabs, h, ws, n, m, J)
+    if invert(ws.Sc, ws.pivs, J * m) != 0:
+        return SINGULAR
+    return OK
+
+
 @hot_inline
 def _schur(tabs, h, ws, n, m, J, inverse):
     """Build the Schur complement ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` on the impulses from
@@ -903,9 +914,7 @@ def _schur(tabs, h, ws, n, m, J, inverse):
         # pivot (another placement, a near-singular configuration) rebuilds it for
         # partial pivoting
         if invert_unpivoted(ws.Sc, J * m) != 0:
-            _schur_build(tabs, h, ws, n, m, J)
-            if invert(ws.Sc, ws.pivs, J * m) != 0:
-                return SINGULAR
+            return _schur_pivoted(tabs, h, ws, n, m, J)
     elif lu_factor_small(ws.Sc, ws.pivs, J * m) != 0:
         return SINGULAR
     return OK

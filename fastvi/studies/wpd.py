@@ -1290,11 +1290,6 @@ def _quiet_fastvi(model, q0, v0, method, h, T, params=None, sample_dt=STIFF_SAMP
             return fastvi_peer_run(model, q0, v0, method, h, T, params, sample_dt, specialize)
 
 
-def _front_cost(points, E):
-    """CPU time to reach max|ΔH| = E on these runs' Pareto front (log–log), NaN outside."""
-    return cost_at([p for p in points if p.ok], "dH", E, cost="cpu")
-
-
 def _step_costs(points, T) -> dict:
     """Median CPU time per step (s) of each contender of the pendulum panel at ``T``."""
     per = {}
@@ -1340,10 +1335,10 @@ def peer_ratios(points, T, rival, levels=PEER_LEVELS):
     for E in levels:
         best, which = np.nan, ""
         for m in methods:
-            c = _front_cost([p for p in points if p.label == m and p.T == T and p.panel == "pendulum"], E)[0]
+            c = _front_at([p for p in points if p.label == m and p.T == T and p.panel == "pendulum"], E)[0]
             if np.isfinite(c) and not (c >= best):
                 best, which = c, m
-        r = _front_cost(riv, E)[0]
+        r = _front_at(riv, E)[0]
         rows.append((E, best, which, r, best / r if np.isfinite(best) and np.isfinite(r) else np.nan))
     return rows
 
@@ -1362,7 +1357,7 @@ def stiff_table(points, pcfg):
         for label in labels:
             pts = [p for p in points if p.panel == "stiff" and p.k == k and p.label == label and p.ok]
             meeting = [p for p in pts if p.dH <= target]
-            c = _front_cost(pts, target)[0]
+            c = _front_at(pts, target)[0]
             if np.isfinite(c):
                 row[label] = (c, "interp")
             elif meeting and all(p.dH <= target for p in pts):

@@ -29,7 +29,7 @@ import numpy as np
 
 import fastvi
 from fastvi.kernels import layout as lay
-from fastvi.kernels.step import assemble, predict, step
+from fastvi.kernels.step import assemble, linear_force, predict, step
 
 CASES = (("P2L-Q3G", 0.01), ("P2L-Q3G", 0.02), ("P3L-Q4G", 0.0125), ("P3L-Q4G", 0.025))
 KINDS = ("mech", "broyden", "frozen", "newton")
@@ -115,6 +115,7 @@ def study(method, h, n_steps):
             w = lay.make_workspace(*dims)
             w.X[:] = X
             w.G[0][:, :] = G0
+            linear_force(md, w, qk)  # −∇V of gravity: assemble reads it from the workspace
             if assemble(md, tabs, h, qk, pk, w, True) != 0:
                 raise RuntimeError("assembly failed")
             return w.R.copy(), w.A.copy()

@@ -234,7 +234,7 @@ def test_peer_section_quick(tmp_path):
     table, target = wpd.stiff_table(pts, pcfg)
     assert set(table) == {1e3, 1e5}
     text = "\n".join(wpd.peer_markdown(pts, pcfg, [], elapsed))
-    for s in ("fastvi's best method / DOP853", "Stiff rod–slider", "Where fastvi loses",
+    for s in ("fastvi's best method / DOP853", "Stiff rod–slider", "Where fastvi loses", "**Starts.**",
               "Energy error and constraint drift", "**Cost per step**"):
         assert s in text
     # the split into steps and cost per step is printed wherever the two fronts overlap
@@ -291,3 +291,33 @@ def test_growth_section_is_spliced_into_an_existing_page(tmp_path):
     with pytest.raises(ValueError, match="no section"):
         page.write_text("# nothing\n", encoding="utf-8")
         wpd.splice_growth(str(page), rows, "x")
+
+
+def test_peer_starts_are_fixed_and_a_hair_apart():
+    a, b = wpd.peer_starts(4), wpd.peer_starts(4)
+    assert a == b and a[0] == tuple(wpd.THETA0)
+    d = np.abs(np.array(a[1:]) - np.array(wpd.THETA0))
+    assert np.all(d > 0) and np.all(d < 10 * wpd.PEER_START_SPREAD)
+    assert len({tuple(x) for x in a}) == 4
+
+
+def test_starts_median_nominal_column_and_spread():
+    pts = [wpd.PeerPoint("pendulum", "P3L-Q4G", 0.025, 1.0, 1.0, dH=2e-4, dHs=[4e-4, 1e-4, 2e-4]),
+           wpd.PeerPoint("pendulum", "P3L-Q4G", 0.05, 1.0, 0.5, dH=3e-3, dHs=[3e-3, 6e-3, 1.5e-3]),
+           wpd.PeerPoint("stiff", "P2L-Q2G", 0.01, 10.0, 0.1, dH=1e-5)]
+    nominal = wpd.at_nominal_start(pts)
+    assert [p.dH for p in nominal] == [4e-4, 3e-3, 1e-5]
+    assert [p.dH for p in pts] == [2e-4, 3e-3, 1e-5]  # the originals are left alone
+    assert wpd.start_spread(pts, 1.0) == {"P3L-Q4G": pytest.approx(4.0)}  # median of 4 and 4
+
+
+def test_a_level_only_fastvi_reaches_is_named():
+    """DOP853's front ends at 1e-6 J; fastvi's reaches 1e-9 J: 1e-8 J is fastvi's alone."""
+    E = np.logspace(-1, -9, 9)
+    pts = [wpd.PeerPoint("pendulum", "P4L-Q4G", 0.01, 1.0, 1e-3 * e ** -0.125, dH=e) for e in E]
+    pts += [wpd.PeerPoint("pendulum", wpd.DOP_A, tol, 1.0, 1e-4 * e ** -0.125, dH=e)
+            for tol, e in zip((1e-6, 1e-8, 1e-10), (1e-2, 1e-4, 1e-6))]
+    line = wpd.unreached_line(pts, 1.0, wpd.DOP_A, levels=(1e-4, 1e-8))
+    assert "1e-08 J (P4L-Q4G)" in line and "1e-04" not in line
+    assert "1.00e-06 J" in line and "rtol = atol = 1e-10" in line
+    assert wpd.unreached_line(pts, 1.0, wpd.DOP_A, levels=(1e-4,)) == ""

@@ -7,7 +7,7 @@ measures what the generic model interface costs (opaque callbacks, sizes known o
 time, dense handling of ``M``, ``∇²V``, ``G`` and ``∇²g``) and nothing else:
 
 * same unknowns ``X = (ΔQ^1 … ΔQ^s, η_0 … η_{J−1})`` and residual rows, same predictor
-  (the last two steps' polynomial extrapolated with ``E2`` where it agrees with the last
+  (the last two steps' Hermite polynomial extrapolated with ``E2`` where it agrees with the last
   step's, extrapolated with ``E``), same Newton stopping rule and tolerance (increment
   scaled by ``max(1, |q_k|)``, contraction estimate, round-off plateau), the same
   divergence exit and retries from guesses of lower degree when Newton fails, same final residual
@@ -229,7 +229,7 @@ def predict(tabs, s, J, h, vk, X, Xp, Xpp, Z, hist, order):
         for k in range(sn, sn + J * NC):
             X[k] = 0.0
         return
-    extrapolate(E, tabs.E2, Xp, Xpp, X, Z, s, NQ, order >= 2 and hist[0] >= 2)
+    extrapolate(E, tabs.E2, Xp, Xpp, X, Z, s, NQ, order >= 2 and hist[0] >= 2, h, vk)
     for k in range(sn, sn + J * NC):
         X[k] = Xp[k]
 

@@ -330,16 +330,40 @@ class Method:
         # Newton's method at a fraction of the full Newton's cost (docs/benchmarks.md)
         mech = invertible
         W = self.Lc[1:, 1:].T @ Ainv @ self.Lc[:s, :J]
-        # the predictor from the last two steps: the degree-2s polynomial through their
-        # 2s + 1 control points (local time of the last step: τ_μ − 1, then τ_μ), at 1 + τ_ν
-        nodes = np.concatenate([self.tau[:s] - 1.0, self.tau])
-        E2, _ = lagrange_basis(nodes, 1.0 + self.tau)
-        E2, _ = _consistent(E2, np.zeros_like(E2))
+        E2 = hermite_predictor(self.tau)
         return Tables(self.b, self.L, self.Ld, self.Lc, self.E, self.tau,
                       np.ascontiguousarray(Ainv), np.ascontiguousarray(W), mech,
                       np.ascontiguousarray(self.c), np.ascontiguousarray(self.d),
                       np.ascontiguousarray(E2), _mass_block(self.b, self.Ld),
                       np.ascontiguousarray(self.L @ self.b))
+
+
+def hermite_predictor(tau: np.ndarray) -> np.ndarray:
+    """Weights of the predictor from the last two steps, ``(s + 3, s + 1)``.
+
+    The polynomial of degree s + 2 through the last step's control points (local time
+    τ_0 … τ_s), the nearest one of the step before (τ_{s−1} − 1) and with the step-end
+    velocity as its slope at τ = 1 (value ``h v_k``), evaluated at this step's nodes
+    ``1 + τ_ν``: row 0 weighs the earlier point, rows 1 … s + 1 the last step's, row s + 2
+    ``h v_k``. Against the degree-2s polynomial through both steps' 2s + 1 points it
+    extrapolates from points nearer the new step and from the slope the step left, which
+    the end projection made exact to the method's order. On the chaotic double pendulum its
+    guesses are closer in the median by 1.7× (s = 2, h = 0.02) and 10× (s = 4, h = 0.025)
+    and at the 90th percentile by 1.3–5×; for s = 3, whose degree-6 guess was already
+    good, about as close (docs/benchmarks.md, 2026-11-26 afternoon). The value rows of each column sum to 1
+    exactly and its slope row is untouched (a guess of increments from ``q_k``).
+    """
+    s = len(tau) - 1
+    nodes = np.concatenate([[tau[s - 1] - 1.0], tau])
+    deg = s + 2
+    V = np.zeros((deg + 1, deg + 1))
+    V[: s + 2] = np.vander(nodes, deg + 1, increasing=True)
+    V[s + 2, 1:] = np.arange(1, deg + 1)  # d/dτ of τ^p at τ = 1
+    at = np.vander(1.0 + tau, deg + 1, increasing=True)
+    EH = np.linalg.solve(V.T, at.T)  # (inputs, targets): at @ V⁻¹, transposed
+    values, _ = _consistent(EH[: s + 2], np.zeros((s + 2, s + 1)))
+    EH[: s + 2] = values
+    return np.ascontiguousarray(EH)
 
 
 def _mass_block(b: np.ndarray, Ld: np.ndarray) -> np.ndarray:

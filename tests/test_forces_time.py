@@ -65,7 +65,10 @@ def _oscillator_exact(t, x0=1.0, k=4.0, c=0.3):
 @pytest.mark.parametrize("name,order", ORDER_METHODS)
 def test_damped_oscillator_converges_at_order_2s(name, order):
     model = _oscillator()
-    T, hs = 3.0, [0.1, 0.05, 0.025]
+    # order 6 at h = 0.025 is 7e-14 off, where Newton's tolerance (1e-14 on the increment)
+    # moves the end point by as much (measured 1e-14 … 1.2e-13 with two predictors): its fit
+    # stays above that floor
+    T, hs = 3.0, [0.2, 0.1, 0.05] if order >= 6 else [0.1, 0.05, 0.025]
     errs = [abs(fastvi.integrate(model, [1.0], [0.0], h=h, t_end=T, method=name).q[-1, 0]
                 - _oscillator_exact(T)) for h in hs]
     assert np.all(_slopes(hs, errs) > order - 0.3), (errs, _slopes(hs, errs))

@@ -231,3 +231,48 @@ def test_stiff_fallback_conserves_noethers_momentum():
     # the same energy behaviour on a diverging (chaotic) path: measured max|ΔH| 3.0e-6 for both
     assert np.abs(ra.energy_error).max() < 2.0 * np.abs(rf.energy_error).max()
     assert ra.constraint_residual.max() < 1e-14 and ra.velocity_residual.max() < 1e-12
+
+
+@pytest.mark.parametrize("name, h", [("P2L-Q3G", 0.01), ("P4L-Q4G", 0.01)])
+def test_the_two_step_guess_is_the_hermite_interpolant_of_the_last_two_steps(name, h):
+    """After three steps the kernel's guess for the fourth is the polynomial (SciPy's Krogh
+    interpolator, built here) through the node τ_{s−1} − 1 of the step before last, the last
+    step's control points and with the slope v_k at t_k, at the new step's nodes; and it is
+    closer to the step's solution than the one-step extrapolation."""
+    from scipy.interpolate import KroghInterpolator
+
+    from fastvi.kernels.step import predict
+
+    model = fastvi.scenes.double_pendulum()
+    meth = fastvi.method(name)
+    n, m, s = model.n, model.m, meth.s
+    q, v = model.initial_state(1.0, 0.5)
+    p = model.mass_matrix(q) @ v
+    ws = None
+    for k in range(3):
+        st, q, p, v, out, ws = one_step(model, meth, h, q, p, v, ws=ws, first=k == 0)
+        assert st == 0
+    guesses = []
+    for order in (2, 1):
+        w = lay.make_workspace(n, m, s, meth.r, meth.J)
+        for name_ in ws._fields:
+            a = getattr(ws, name_)
+            if isinstance(a, np.ndarray):
+                getattr(w, name_)[...] = a
+        predict(meth.kernel_tables, n, m, h, v, w, order)
+        guesses.append(w.X[:s * n].reshape(s, n).copy())
+    # positions of the last two steps relative to q_{k−1} (local time of the last step)
+    Xp, Xpp = ws.Xprev[:s * n].reshape(s, n), ws.Xpp[:s * n].reshape(s, n)
+    tau = meth.tau
+    before = (Xpp[s - 2] if s >= 2 else 0.0) - Xpp[s - 1]
+    last = np.vstack([np.zeros(n), Xp])
+    xi = np.concatenate([[tau[s - 1] - 1.0], tau, [1.0]])  # 1.0 twice: value, then slope
+    order = np.argsort(xi, kind="stable")
+    yi = np.vstack([before, last, h * v])[order]
+    ref = KroghInterpolator(xi[order], yi)(1.0 + tau[1:]) - Xp[s - 1]
+    assert np.abs(guesses[0] - ref).max() < 1e-12 * max(1.0, np.abs(ref).max())
+    st, q1, *_ = one_step(model, meth, h, q, p, v, ws=ws, first=False)
+    assert st == 0
+    solved = ws.Xprev[:s * n].reshape(s, n)
+    err2, err1 = np.abs(guesses[0] - solved).max(), np.abs(guesses[1] - solved).max()
+    assert err2 < 0.2 * err1, (err2, err1)

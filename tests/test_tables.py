@@ -140,3 +140,26 @@ def test_nominal_order_is_promised_only_where_measured():
     assert method("P3L-Q4G-NE-CL4").nominal_order == 6  # the same s + 1 Lobatto points
     assert method("P3L-Q2G").nominal_order == 4  # capped by the quadrature
     assert method("P5L-Q6G-NE-CN").nominal_order is None  # measured 4, no general rule
+
+
+@pytest.mark.parametrize("s", [1, 2, 3, 4, 5])
+def test_two_step_predictor_is_the_hermite_polynomial_of_degree_s_plus_2(s):
+    """The predictor's table reproduces every polynomial of degree ≤ s + 2 from its value at
+    τ_{s−1} − 1 and at the last step's nodes and its slope at τ = 1, and no polynomial of
+    degree s + 3 (so it is that interpolant, not another); its value rows sum to exactly 1
+    (a guess of increments: a constant shift of the points moves it by the same shift)."""
+    from fastvi.tables import hermite_predictor
+
+    tau = method(f"P{s}L-Q{s + 1}G").tau
+    EH = hermite_predictor(tau)
+    assert EH.shape == (s + 3, s + 1)
+    nodes = np.concatenate([[tau[s - 1] - 1.0], tau])
+
+    def guess(p):
+        return nodes ** p @ EH[: s + 2] + (p if p else 0.0) * EH[s + 2]
+
+    for p in range(s + 3):
+        assert np.allclose(guess(p), (1.0 + tau) ** p, rtol=0, atol=1e-11), p
+    assert np.abs(guess(s + 3) - (1.0 + tau) ** (s + 3)).max() > 1e-3
+    for nu in range(s + 1):
+        assert math.fsum(EH[: s + 2, nu]) == 1.0

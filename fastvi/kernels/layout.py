@@ -216,9 +216,10 @@ callbacks of a time-aware model: ``t_k + c_i h``, ``t_k + d_j h``); for the
 mechanics Newton matrix: Ainv (s, s) the inverse of ``A[ν, μ−1] = Σ_i b_i ℓ'_ν(c_i) ℓ'_μ(c_i)``
 (ν = 0…s−1, μ = 1…s), W (J, J) ``W[j−1, j'] = Σ ℓ_μ(d_j) Ainv[μ−1, ν] ℓ_ν(d_j')``; mech
 (bool) whether ``newton="auto"`` uses the mechanics matrix: not where ``A`` is singular (a
-quadrature with fewer points than ``s``); E2 (2s+1, s+1) the predictor from the last two
-steps: the Lagrange basis of their 2s + 1 control points (``τ_μ − 1``, μ < s, then ``τ_μ``,
-in the last step's local time) at ``1 + τ_ν``; Am
+quadrature with fewer points than ``s``); E2 (s+3, s+1) the predictor from the last two
+steps (:func:`fastvi.tables.hermite_predictor`): weights of the point ``τ_{s−1} − 1`` of the
+step before, the last step's control points ``τ_μ`` and its end slope ``h v_k``, at
+``1 + τ_ν``; Am
 (s, s) the mass block ``Am[ν−1, μ−1] = Σ_i b_i ℓ'_ν(c_i) ℓ'_μ(c_i)``, ν, μ = 1…s, exactly
 symmetric: for a constant ``M`` the mass part of ``∂S/∂Q^ν`` is ``(1/h) M Σ_μ Am[ν−1, μ−1]
 ΔQ^μ``, and that of ``∂S/∂Q^0`` minus their sum (the mechanics residual's shortcut;

@@ -58,7 +58,7 @@ MECH_THETA_MAX = 0.25
 FULL_HOLD = 32
 #: the two-step predictor is used while it differs from the one-step one by at most this
 #: fraction of the last step's displacement (its asymptotic range; docs/benchmarks.md)
-PREDICT_TRUST = 1e-2
+PREDICT_TRUST = 1e-1
 #: up to this many coordinates the constant-mass part of the residual is formed coordinate
 #: by coordinate, above it with vectorised loops over the coordinates (the same arithmetic)
 _MASS_ROWS_SMALL = 8
@@ -497,11 +497,13 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
 
 # ----------------------------------------------------------------------------- predictor, full Newton
 @hot_inline
-def extrapolate(E, E2, Xp, Xpp, X, Z, s, n, two):
+def extrapolate(E, E2, Xp, Xpp, X, Z, s, n, two, h, vk):
     """``X[:s n]`` ← the last step's polynomial (unknowns ``Xp``) extrapolated by ``E`` onto
-    this step's nodes; with ``two``, the last two steps' (``Xpp`` the one before) by ``E2``
-    instead, where the two guesses agree to ``PREDICT_TRUST`` of the last step's
-    displacement (``Z``: (s, n) scratch). Positions are increments from each step's start."""
+    this step's nodes; with ``two``, the Hermite polynomial of the last two steps (``Xpp``
+    the one before; slope ``h v_k`` at the step's start) by ``E2`` instead
+    (:func:`fastvi.tables.hermite_predictor`), where the two guesses agree to
+    ``PREDICT_TRUST`` of the last step's displacement (``Z``: (s, n) scratch). Positions
+    are increments from each step's start."""
     gap = 0.0
     move = 0.0
     for nu in range(1, s + 1):
@@ -512,20 +514,21 @@ def extrapolate(E, E2, Xp, Xpp, X, Z, s, n, two):
                 acc += (Xp[(mu - 1) * n + a] - last) * E[mu, nu]
             X[(nu - 1) * n + a] = acc
             if two:
-                # nodes τ_μ − 1 (μ < s) of the step before last, relative to q_{k−1}:
-                # ΔQ^μ − ΔQ^s of that step; the result relative to q_k = q_{k−1} + ΔQ^s
-                back = Xpp[(s - 1) * n + a]
-                acc2 = -back * E2[0, nu]  # μ = 0: ΔQ^0 = 0
-                for mu in range(1, s):
-                    acc2 += (Xpp[(mu - 1) * n + a] - back) * E2[mu, nu]
-                for mu in range(1, s + 1):
-                    acc2 += Xp[(mu - 1) * n + a] * E2[s + mu, nu]
+                # node τ_{s−1} − 1 of the step before last, relative to q_{k−1}: ΔQ^{s−1} − ΔQ^s
+                # of that step; the result relative to q_k = q_{k−1} + ΔQ^s
+                back = -Xpp[(s - 1) * n + a]
+                if s >= 2:
+                    back += Xpp[(s - 2) * n + a]
+                acc2 = back * E2[0, nu]
+                for mu in range(1, s + 1):  # row 1 (μ = 0): ΔQ^0 = 0
+                    acc2 += Xp[(mu - 1) * n + a] * E2[mu + 1, nu]
+                acc2 += h * vk[a] * E2[s + 2, nu]
                 acc2 -= last
                 Z[nu - 1, a] = acc2
                 gap = max(gap, abs(acc2 - acc))
                 move = max(move, abs(last))
     # The two guesses differ by about the error of the one-step guess. Far below the last
-    # step's displacement the extrapolation is in its asymptotic range and the degree-2s
+    # step's displacement the extrapolation is in its asymptotic range and the two-step
     # guess is the better one; otherwise (long steps, sudden turns) its higher degree
     # makes it the worse one, and Newton may even find another root from it.
     if two and gap <= PREDICT_TRUST * move:
@@ -536,10 +539,11 @@ def extrapolate(E, E2, Xp, Xpp, X, Z, s, n, two):
 
 @hot_inline
 def predict(tabs, n, m, h, vk, ws, order):
-    """Initial guess of ``order`` 2: the polynomial through the control points of the last
-    two steps (degree 2s, error O(h^(2s+1))) extrapolated onto this step; 1 (or 2 with only
-    one step known): of the last step alone (degree s); 0: the straight line with ``v_k``.
-    The impulses are the last step's (zero for order 0)."""
+    """Initial guess of ``order`` 2: the polynomial of degree s + 2 through the last step's
+    control points and the nearest one of the step before, with slope ``v_k`` at ``t_k``
+    (error O(h^(s+3))), extrapolated onto this step; 1 (or 2 with only one step known): of
+    the last step alone (degree s); 0: the straight line with ``v_k``. The impulses are the
+    last step's (zero for order 0)."""
     E, tau = tabs.E, tabs.tau
     _, _, s, _, J = sizes(ws)
     X = ws.X
@@ -553,7 +557,7 @@ def predict(tabs, n, m, h, vk, ws, order):
             X[k] = 0.0
         return
     sn = s * n
-    extrapolate(E, tabs.E2, Xp, ws.Xpp, X, ws.Z, s, n, order >= 2 and ws.hold[H_HIST] >= 2)
+    extrapolate(E, tabs.E2, Xp, ws.Xpp, X, ws.Z, s, n, order >= 2 and ws.hold[H_HIST] >= 2, h, vk)
     for k in range(sn, sn + J * m):
         X[k] = Xp[k]
 
@@ -1179,7 +1183,7 @@ def step(md, tabs, opts, h, state, ws, first, out):
         order = 0 if first else ws.hold[H_HIST]
         while True:
             # An extrapolated polynomial can be far off (stiff oscillations with ωh > 1, a
-            # sudden turn, a long step: the degree-2s one first): start again from a guess
+            # sudden turn, a long step: the two-step one first): start again from a guess
             # of lower degree, down to the straight line through q_k with velocity v_k.
             # (One call site of newton_full: the sized step inlines it, assembly and all.)
             predict(tabs, n, m, h, vk, ws, order)

@@ -321,3 +321,15 @@ def test_a_level_only_fastvi_reaches_is_named():
     assert "1e-08 J (P4L-Q4G)" in line and "1e-04" not in line
     assert "1.00e-06 J" in line and "rtol = atol = 1e-10" in line
     assert wpd.unreached_line(pts, 1.0, wpd.DOP_A, levels=(1e-4,)) == ""
+
+
+def test_a_longer_step_that_costs_more_is_named():
+    pts = [wpd.PeerPoint("pendulum", "P3L-Q4G", 0.05, 1e4, 0.386, dH=0.52),
+           wpd.PeerPoint("pendulum", "P3L-Q4G", 0.025, 1e4, 0.381, dH=1.4e-3),
+           wpd.PeerPoint("pendulum", "P4L-Q4G", 0.05, 1e4, 0.52, dH=3e-2),
+           wpd.PeerPoint("pendulum", "P4L-Q4G", 0.025, 1e4, 0.54, dH=1e-4),
+           wpd.PeerPoint("pendulum", wpd.DOP_A, 1e-6, 1e4, 0.9, dH=1.0)]
+    line = wpd.dominated_line(pts, 1e4)
+    assert "P3L-Q4G h = 0.05 (0.386 s" in line and "h = 0.025: 0.381 s" in line
+    assert "P4L-Q4G" not in line and "DOP853" not in line
+    assert wpd.dominated_line(pts[2:], 1e4) == ""

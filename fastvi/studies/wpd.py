@@ -1379,6 +1379,27 @@ def peer_split(points, T, rival, levels=PEER_LEVELS):
     return rows
 
 
+def dominated_line(points, T) -> str:
+    """A sentence on the fastvi runs at ``T`` that a shorter step of the same method beats in
+    both CPU time and max|ΔH| ('' if none): the fronts drop them, so a method whose longer
+    step costs more (more iterations, full-Newton fallbacks) reaches no level looser than
+    its shorter step's error, though that run is an upper bound of the cost there."""
+    out = []
+    runs = [p for p in points if p.panel == "pendulum" and p.T == T and p.is_fastvi and p.ok]
+    for p in runs:
+        better = [o for o in runs if o.label == p.label and o.knob < p.knob and o.cpu <= p.cpu
+                  and o.dH < p.dH]
+        if better:
+            o = min(better, key=lambda o: o.cpu)
+            out.append(f"{p.label} h = {p.knob:g} ({p.cpu:.3g} s, {p.dH:.1e} J; h = {o.knob:g}: "
+                       f"{o.cpu:.3g} s, {o.dH:.1e} J)")
+    if not out:
+        return ""
+    return (f"Runs beaten by a shorter step of the same method at T = {T:g} s, left off the "
+            "fronts (a front through the rest reaches no looser level; the shorter step's run "
+            "bounds the cost there): " + "; ".join(out) + ".")
+
+
 def unreached_line(points, T, rival, levels=PEER_LEVELS) -> str:
     """A sentence on the levels that fastvi reaches and ``rival`` does not at any of its
     tolerances ('' if none): there fastvi is ahead by default."""
@@ -1595,6 +1616,10 @@ def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> li
                      f"**{_fmt(xa)}** | {_fmt(cb, '.4f')} | **{_fmt(xb)}** | "
                      f"{_fmt(row0[4])} ({row0[2] or '—'}) |")
     P.append("")
+    for T in pcfg["T"]:
+        line = dominated_line(points, T)
+        if line:
+            P.append(line + "\n")
     T0 = pcfg["T"][0]
     xs = [r[4] for r in peer_ratios(points, T0, DOP_A) if np.isfinite(r[4])]
     if xs:

@@ -1056,9 +1056,10 @@ PEER_GOAL = 2.0  # issue 11: fastvi's best within 2× of DOP853 (a) at equal max
 #: the double pendulum from π/2 is chaotic: starts 1e-12 rad apart follow different paths
 #: after a few tens of seconds, and max|ΔH| over T = 1000 s, an extreme of the path, then
 #: differs by up to 4× for the same method and h (docs/benchmarks.md, 2026-11-26 afternoon).
-#: Each setting's max|ΔH| is the median over the nominal start and PEER_STARTS − 1 starts
-#: perturbed by PEER_START_SPREAD (rad, the same for every contender); the CPU time is the
-#: nominal start's (it does not depend on the path beyond noise).
+#: Each setting's max|ΔH| is the median over the nominal start and ``starts − 1`` starts of
+#: the panel's configuration perturbed by PEER_START_SPREAD (rad, the same for every
+#: contender: peer_starts); the CPU time is the nominal start's (it does not depend on the
+#: path beyond noise).
 PEER_START_SPREAD = 1e-12
 PEER_START_SEED = 2026
 STIFF_GOAL = 10.0  # issue 11: ≥ 10× ahead of every compiled peer at k = 1e8

@@ -255,14 +255,15 @@ def main(argv):
                 fronts[key].append((k, dH))
                 print(f"{method} {key} Δτ = {dtau:g}: {k} steps, max|ΔH| {dH:.3e}", flush=True)
         print(f"\n{method}: steps to reach max|ΔH| over T = {T:g} s (— outside a front)")
-        print("| max|ΔH| (J) | fixed h | " + " | ".join(k for k in fronts if k != "fixed")
+        print("| max\\|ΔH\\| (J) | fixed h | " + " | ".join(k for k in fronts if k != "fixed")
               + " | fixed / best transformed |")
         for E in LEVELS:
             kf = steps_at(fronts["fixed"], E)
             kt = [steps_at(fr, E) for key, fr in fronts.items() if key != "fixed"]
             best = np.nanmin(kt) if np.any(np.isfinite(kt)) else np.nan
             cells = " | ".join("—" if not np.isfinite(x) else f"{x:.0f}" for x in [kf] + kt)
-            print(f"| {E:.0e} | {cells} | {kf / best:.2f} |")
+            ratio = f"{kf / best:.2f}" if np.isfinite(kf / best) else "—"
+            print(f"| {E:.0e} | {cells} | {ratio} |")
         dp = fastvi.scenes.double_pendulum()
         q0, v0 = dp.initial_state(np.pi / 2, np.pi / 2)
         E0 = float(dp.energy(q0, v0))

@@ -36,7 +36,7 @@ def accuracy():
     dp = fastvi.scenes.double_pendulum()
     q_ref = reference_q(10.0)
     T = 1000.0
-    print("| method, h | tol | CPU (s) | iterations a step | max|ΔH| (J) | max|g| | error of q at 10 s |")
+    print("| method, h | tol | CPU (s) | iterations a step | max\\|ΔH\\| (J) | max\\|g\\| | error of q at 10 s |")
     for meth, h in ACCURACY:
         every = max(1, int(round(0.1 / h)))
 

@@ -257,6 +257,7 @@ def main(argv):
         print(f"\n{method}: steps to reach max|ΔH| over T = {T:g} s (— outside a front)")
         print("| max\\|ΔH\\| (J) | fixed h | " + " | ".join(k for k in fronts if k != "fixed")
               + " | fixed / best transformed |")
+        print("|---" * (len(fronts) + 2) + "|")
         for E in LEVELS:
             kf = steps_at(fronts["fixed"], E)
             kt = [steps_at(fr, E) for key, fr in fronts.items() if key != "fixed"]

@@ -3,7 +3,6 @@
     .venv/bin/python bench/time_transform_steps.py [--starts=8] [--T=1000] [--quick]
     PYTHONPATH=TREE .venv/bin/python bench/time_transform_steps.py cost KIND METHOD H
 
-
 The speed study's gap to DOP853 at max|ΔH| = 1e-2 J is the number of steps (fastvi's fixed
 step against an adaptive one; docs/benchmarks.md). This measures what an adaptive step that
 stays variational would buy, *before* any kernel is built: the Poincaré time transformation
@@ -136,25 +135,13 @@ def cost(kind, method, h, Kr=3.0, steps=40000, repeats=7):
         md = prototype_model(E0, Kr)
         res = fastvi.integrate(md, q0, v0, h=h, n_steps=2000, method=method,
                                specialize=True)
-        p = np.array(md.params)
-        sg = sigma(res.q, p)
-        t = np.concatenate([[0.0], np.cumsum(0.5 * (sg[1:] + sg[:-1]) * h)])
-        k = int(np.searchsorted(t, 20.0))
-        H = 0.5 * np.sum(res.p[: k + 1] ** 2, axis=1) + G_ACC * (res.q[: k + 1, 1]
-                                                                 + res.q[: k + 1, 3])
         # the same numbers as run_transformed(method, Kr, h, THETA, 20.0) in an unpatched tree
-        print(f"prototype over 20 s: {k} steps, max|ΔH| {np.max(np.abs(H - E0)):.6e}")
-    fastvi.integrate(md, q0, v0, h=h, n_steps=10, method=method, specialize=True)
-    best = np.inf
-    for _ in range(repeats):
-        c0 = time.process_time()
-        res = fastvi.integrate(md, q0, v0, h=h, n_steps=steps, method=method,
-                               save_every=steps, specialize=True)
-        best = min(best, time.process_time() - c0)
-    its = res.stats["newton_iterations"] / steps
+        k, dH = _to_physical_time(res, np.array(md.params), h, 20.0)
+        print(f"prototype over 20 s: {k} steps, max|ΔH| {dH:.6e}")
+    us, stats = step_cost(md, q0, v0, method, h, steps, repeats, specialize=True)
     print(f"{kind} {method} {'Δτ' if kind == 'prototype' else 'h'} = {h:g}: "
-          f"{best / steps * 1e6:.3f} µs a step, {its:.2f} Newton iterations a step, "
-          f"full-Newton steps {res.stats.get('full_newton_steps', 0)}")
+          f"{us:.3f} µs a step, {stats['newton_iterations'] / steps:.2f} Newton iterations "
+          f"a step, full-Newton steps {stats.get('full_newton_steps', 0)}")
 
 
 def run_fixed(method, h, theta, T):
@@ -178,16 +165,27 @@ def run_transformed(method, Kr, dtau, theta, T):
     n = int(np.ceil(T / (dtau / np.sqrt(1.0 + (E0 + 3.0 * G_ACC) / Kr))))
     res = fastvi.integrate(md, q0, v0 * s0, h=dtau, n_steps=n, method=method,
                            on_failure="return")
+    k, dH = _to_physical_time(res, p, dtau, T)
+    if k < len(res.q):  # the energy formula against the scene's own, once
+        vp = res.v[k] / sigma(res.q[k], p)
+        H = 0.5 * np.sum(res.p[k] ** 2) + G_ACC * (res.q[k, 1] + res.q[k, 3])
+        assert abs(H - dp.energy(res.q[k], vp)) <= 1e-12 * (1.0 + abs(H))
+    return k, dH
+
+
+def _to_physical_time(res, p, dtau, T):
+    """(steps of a fictive-time run to reach t = T, max|H − E0| over them; inf if it stops
+    short). t = ∫σ dτ by the trapezoid; H from the momenta, the physical ones (M q'/σ) for
+    the model-level transform and the prototype alike, with unit masses:
+    H = ½ |p|² + g (y1 + y2)."""
     sg = sigma(res.q, p)
     t = np.concatenate([[0.0], np.cumsum(0.5 * (sg[1:] + sg[:-1]) * dtau)])
     k = int(np.searchsorted(t, T))
     if k >= len(t):
         return k, np.inf
-    vp = res.v[: k + 1] / sg[: k + 1, None]
-    # unit masses: H = ½ |v|² + g (y1 + y2) (checked against the scene's own energy once)
-    H = 0.5 * np.sum(vp * vp, axis=1) + G_ACC * (res.q[: k + 1, 1] + res.q[: k + 1, 3])
-    assert abs(H[k] - dp.energy(res.q[k], vp[k])) <= 1e-12 * (1.0 + abs(H[k]))
-    return k, float(np.max(np.abs(H - E0)))
+    H = 0.5 * np.sum(res.p[: k + 1] ** 2, axis=1) + G_ACC * (res.q[: k + 1, 1]
+                                                             + res.q[: k + 1, 3])
+    return k, float(np.max(np.abs(H - p[5])))
 
 
 def median_over_starts(run, starts):
@@ -205,15 +203,17 @@ def steps_at(front, E):
     return np.nan
 
 
-def step_cost(model, q0, v0, method, h, steps=20000, repeats=5):
-    """Process CPU µs a step (generic kernels, nothing saved but the ends), best of repeats."""
-    fastvi.integrate(model, q0, v0, h=h, n_steps=10, method=method)
+def step_cost(model, q0, v0, method, h, steps=20000, repeats=5, specialize=False):
+    """(process CPU µs a step, the last run's stats): nothing saved but the ends, best of
+    ``repeats`` runs of ``steps`` steps."""
+    fastvi.integrate(model, q0, v0, h=h, n_steps=10, method=method, specialize=specialize)
     best = np.inf
     for _ in range(repeats):
         c0 = time.process_time()
-        fastvi.integrate(model, q0, v0, h=h, n_steps=steps, method=method, save_every=steps)
+        res = fastvi.integrate(model, q0, v0, h=h, n_steps=steps, method=method,
+                               save_every=steps, specialize=specialize)
         best = min(best, time.process_time() - c0)
-    return best / steps * 1e6
+    return best / steps * 1e6, res.stats
 
 
 CASES = {
@@ -269,8 +269,8 @@ def main(argv):
         q0, v0 = dp.initial_state(np.pi / 2, np.pi / 2)
         E0 = float(dp.energy(q0, v0))
         md = transformed(E0, 10.0)
-        cf = step_cost(dp, q0, v0, method, 0.02)
-        ct = step_cost(md, q0, v0 * sigma(q0, np.array(md.params)), method, 0.04)
+        cf = step_cost(dp, q0, v0, method, 0.02)[0]
+        ct = step_cost(md, q0, v0 * sigma(q0, np.array(md.params)), method, 0.04)[0]
         print(f"{method}: a step costs {cf:.2f} µs fixed, {ct:.2f} µs transformed through the "
               f"mass path (generic kernels): {ct / cf:.2f}×\n", flush=True)
 

@@ -163,6 +163,36 @@ def newton_options(tol_, max_iter_, mode):
     return NewtonOptions(tolerance(tol_), max_iter(max_iter_), newton(mode))
 
 
+def adaptive(Kr, model, t_end, n_steps, t0: float, *, events, dense_output, recover) -> float | None:
+    """The energy scale ``K_r`` of ``integrate(..., adaptive=K_r)`` (None: fixed steps), and
+    what an adaptive run needs: ``t_end``, a conservative autonomous model, no events, dense
+    output or recovery."""
+    if Kr is None:
+        return None
+    if isinstance(Kr, bool) or not isinstance(Kr, (int, float, np.integer, np.floating)):
+        raise TypeError(f"`adaptive` must be None or an energy scale K_r > 0 (a float), got {Kr!r}")
+    Kr = float(Kr)
+    if not (Kr > 0.0 and math.isfinite(Kr)):
+        raise ValueError(f"`adaptive` (the energy scale K_r of the step density) must be positive "
+                         f"and finite, got {Kr}; pass None for fixed steps")
+    if n_steps is not None or t_end is None:
+        raise ValueError("adaptive steps need `t_end` (the number of steps is not known in "
+                         "advance), not `n_steps`")
+    start_time(t_end)
+    if not float(t_end) > t0:
+        raise ValueError(f"`t_end` must be after `t0` = {t0:g}, got {t_end}")
+    if model.timed:
+        raise ValueError(f"adaptive steps follow the kinetic energy on the energy shell, which model "
+                         f"{model.name!r} (with a force or time-dependent callbacks) does not keep: "
+                         "use fixed steps")
+    for name, on in (("events", events is not None), ("dense_output", bool(dense_output)),
+                     ("recover", bool(recover))):
+        if on:
+            raise ValueError(f"`adaptive` cannot be combined with `{name}` (it assumes steps of "
+                             "one length); use fixed steps")
+    return Kr
+
+
 def recover(k) -> int:
     """Number of halvings for the opt-in failed-step recovery (0 = off, at most 10)."""
     k = count(k, "recover", 0)

@@ -237,6 +237,8 @@ class Result(TrajectoryResult):
     sol: object | None = None
 
     def _label(self) -> str:
+        if "adaptive" in self.stats:  # h is then the step where the motion is slow
+            return f"{self.method.name} adaptive (K_r = {self.stats['adaptive']:g})"
         return self.method.name
 
     def summary(self) -> str:

@@ -335,7 +335,7 @@ class Method:
                       np.ascontiguousarray(Ainv), np.ascontiguousarray(W), mech,
                       np.ascontiguousarray(self.c), np.ascontiguousarray(self.d),
                       np.ascontiguousarray(E2), _mass_block(self.b, self.Ld),
-                      np.ascontiguousarray(self.L @ self.b))
+                      np.ascontiguousarray(self.L @ self.b), _basis_at_end(self.tau))
 
 
 def hermite_predictor(tau: np.ndarray) -> np.ndarray:
@@ -364,6 +364,31 @@ def hermite_predictor(tau: np.ndarray) -> np.ndarray:
     values, _ = _consistent(EH[: s + 2], np.zeros((s + 2, s + 1)))
     EH[: s + 2] = values
     return np.ascontiguousarray(EH)
+
+
+def _basis_at_end(tau: np.ndarray) -> np.ndarray:
+    """``(2, s + 1)``: the barycentric weights ``1 / Π_{k≠μ} (τ_μ − τ_k)`` of the control
+    nodes and the slopes ``ℓ'_μ(1)`` of their Lagrange basis at the step's end, from exact
+    rational arithmetic on the rounded nodes (the variable-step predictor's tables)."""
+    t = [Fraction(x) for x in tau]
+    out = np.zeros((2, len(t)))
+    for mu, tm in enumerate(t):
+        den = Fraction(1)
+        for k, tk in enumerate(t):
+            if k != mu:
+                den *= tm - tk
+        out[0, mu] = float(1 / den)
+        # ℓ'_μ(1) = Σ_{j≠μ} Π_{k≠μ,j} (1 − τ_k) / den
+        slope = Fraction(0)
+        for j in range(len(t)):
+            if j != mu:
+                prod = Fraction(1)
+                for k, tk in enumerate(t):
+                    if k not in (mu, j):
+                        prod *= 1 - tk
+                slope += prod
+        out[1, mu] = float(slope / den)
+    return out
 
 
 def _mass_block(b: np.ndarray, Ld: np.ndarray) -> np.ndarray:

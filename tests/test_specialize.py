@@ -72,6 +72,9 @@ def test_specialized_double_pendulum_is_the_generic_trajectory_bit_for_bit():
     # the full Newton variant goes through the same specialized kernel
     full = fastvi.integrate(dp, q0, v0, newton="full", specialize=True, **kw)
     _same(fastvi.integrate(dp, q0, v0, newton="full", **kw), full)
+    # adaptive steps: the sized step inlines the predictor of a changing step length
+    ka = dict(h=0.05, t_end=30.0, method="P2L-Q3G", save_every=3, adaptive=3.0)
+    _same(fastvi.integrate(dp, q0, v0, **ka), fastvi.integrate(dp, q0, v0, specialize=True, **ka))
 
 
 def test_specialize_is_a_flag():

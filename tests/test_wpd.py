@@ -231,11 +231,14 @@ def test_peer_section_quick(tmp_path):
     assert missing is None and pts
     assert all(p.ok for p in pts if p.panel == "pendulum")
     assert all(p.g < 1e-13 for p in pts if p.is_fastvi and p.panel == "pendulum")
+    adaptive = [p for p in pts if p.label.endswith(wpd.ADAPTIVE)]
+    assert adaptive and all(p.ok and p.work > 0 for p in adaptive)
     table, target = wpd.stiff_table(pts, pcfg)
     assert set(table) == {1e3, 1e5}
     text = "\n".join(wpd.peer_markdown(pts, pcfg, [], elapsed))
     for s in ("fastvi's best method / DOP853", "Stiff rod–slider", "Where fastvi loses", "**Starts.**",
-              "Energy error and constraint drift", "**Cost per step**"):
+              "Energy error and constraint drift", "**Cost per step**",
+              "fixed step only: fastvi / (a)", "P3L-Q4G adaptive"):
         assert s in text
     # the split into steps and cost per step is printed wherever the two fronts overlap
     split = wpd.peer_split(pts, pcfg["T"][0], wpd.DOP_A)
@@ -253,6 +256,19 @@ def test_peer_ratio_interpolation_on_synthetic_curves():
     for Elev, best, which, riv, x in rows:
         assert which == "P3L-Q4G"
         assert x == pytest.approx(10 * Elev ** -0.125, rel=1e-9)
+
+
+def test_peer_ratios_of_fixed_steps_only_leave_the_adaptive_contenders_out():
+    E = np.logspace(-1, -9, 9)
+    pts = [wpd.PeerPoint("pendulum", "P3L-Q4G", 0.0, 1.0, 1e-3 * e ** -0.25, dH=e) for e in E]
+    pts += [wpd.PeerPoint("pendulum", "P3L-Q4G" + wpd.ADAPTIVE, 0.0, 1.0, 5e-4 * e ** -0.25, dH=e)
+            for e in E]
+    pts += [wpd.PeerPoint("pendulum", wpd.DOP_A, 0.0, 1.0, 1e-4 * e ** -0.125, dH=e) for e in E]
+    (_, best, which, _, x), = wpd.peer_ratios(pts, 1.0, wpd.DOP_A, levels=(1e-4,))
+    (_, bestf, whichf, _, xf), = wpd.peer_ratios(pts, 1.0, wpd.DOP_A, levels=(1e-4,),
+                                                 fixed_only=True)
+    assert which == "P3L-Q4G adaptive" and whichf == "P3L-Q4G"
+    assert xf == pytest.approx(2 * x, rel=1e-9)
 
 
 def test_peer_split_into_steps_and_cost_per_step_on_synthetic_curves():

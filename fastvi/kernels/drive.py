@@ -13,11 +13,13 @@ from numba import prange
 from .._numba import hot, hot_inline, njit, ptr
 from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_ITERS,
                      F_MAXRES, F_RES, F_TSLOT, I_FAILED, I_FIRST, I_FULL, I_ITERS, I_MAXRES,
-                     I_RES, I_SLOT, I_STEPS, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK, INFO_SIZE,
+                     I_KR, I_RES, I_SLOT, I_STEPS, I_T, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK,
+                     INFO_SIZE,
                      POT, S_FULL, S_G, S_GV, S_ITERS, S_RES, S_WORK, SAVE_DIAGNOSTICS, SAVE_FINAL,
                      SAVE_STRIDE, STEP_OUT_SIZE, EVENT_SLOTS, EVENTS_FULL, Events, ModelData,
                      Samples, dim, is_timed, member_sizes, sized_flag, sizes, with_plan,
                      workspace_for)
+from .adapt import advance, finished, next_step
 from .events import after_step, event_values, room_for_crossings
 from .step import step, step_inlined
 
@@ -57,9 +59,10 @@ def record(md, t, state, ws, smp, slot, info):
 
 
 @hot_inline
-def accept(md, h, state, ws, n_total, save_every, smp, info, sout):
-    """Book-keeping after a step has been taken (state rows 0–2 already hold the new state):
-    counters, residual windows, and the sample when one is due."""
+def accept(md, t1, last, state, ws, save_every, smp, info, sout):
+    """Book-keeping after a step has been taken (state rows 0–2 already hold the new state,
+    at time ``t1``): counters, residual windows, and the sample when one is due (every
+    ``save_every``-th step, and the ``last``)."""
     info[I_MAXRES] = max(info[I_MAXRES], sout[S_RES])
     info[I_WIN_G] = max(info[I_WIN_G], sout[S_G])
     info[I_WIN_GV] = max(info[I_WIN_GV], sout[S_GV])
@@ -68,20 +71,20 @@ def accept(md, h, state, ws, n_total, save_every, smp, info, sout):
     info[I_WORK] += sout[S_WORK]
     k = int(info[I_STEPS]) + 1
     info[I_STEPS] = k
-    if save_every > 0 and (k % save_every == 0 or k == n_total):
+    if save_every > 0 and (k % save_every == 0 or last):
         j = int(info[I_SLOT])
-        record(md, info[I_T0] + k * h, state, ws, smp, j, info)
+        record(md, t1, state, ws, smp, j, info)
         info[I_SLOT] = j + 1
 
 
 @hot_inline
-def _last_sample(md, h, state, ws, n_total, save_every, smp, info):
-    """After a terminal event: the step that contains it becomes the last sample (unless
-    ``accept`` already saved it)."""
+def _last_sample(md, t1, state, ws, n_total, save_every, smp, info):
+    """After a terminal event: the step that contains it (ending at ``t1``) becomes the
+    last sample (unless ``accept`` already saved it)."""
     k = int(info[I_STEPS])
     if save_every > 0 and k % save_every != 0 and k != n_total:
         j = int(info[I_SLOT])
-        record(md, info[I_T0] + k * h, state, ws, smp, j, info)
+        record(md, t1, state, ws, smp, j, info)
         info[I_SLOT] = j + 1
 
 
@@ -136,34 +139,47 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
     ``sized``: None, or True for a workspace of size markers (``integrate(...,
     specialize=True)``), whose loop has the step compiled into it
     (:data:`.step.step_inlined`).
+
+    Adaptive steps (``info[I_KR] > 0``, another run-time switch): ``h`` is then ε, step k
+    has the length of :func:`.adapt.next_step` and the run ends at ``info[I_TEND]``
+    (``n_total`` only caps the steps); each sample is saved at the time reached.
     """
     active = ev.count > 0 or ev.dense.shape[0] > 0
+    adaptive = info[I_KR] > 0.0
+    hk = h
     for _ in range(n_chunk):
         k = int(info[I_STEPS])
-        if k >= n_total:
+        if k >= n_total or finished(info):
             break
         if active:
             if not room_for_crossings(ev):
                 return EVENTS_FULL
             for a in range(state.shape[1]):
                 ev.qk[a] = state[0, a]
-        _clock(ws, info, h)
+        if adaptive:
+            hk = next_step(md, h, state, ws, info)
+        else:
+            _clock(ws, info, h)
         first = info[I_FIRST] != 0.0
         # decided when numba compiles `run` (an argument that is None is pruned before the
         # inlining): only the size-specialized loop carries the step's body
         if sized is None:
-            status = step(md, tabs, opts, h, state, ws, first, sout)
+            status = step(md, tabs, opts, hk, state, ws, first, sout)
         else:
-            status = step_inlined(md, tabs, opts, h, state, ws, first, sout)
+            status = step_inlined(md, tabs, opts, hk, state, ws, first, sout)
         status = _book(status, k, state, ws, info, sout)
         if status != 0:
             return status
         est = 0
         if active:
             est = after_step(md, tabs, h, ws.time[0], ws.time[1], k, ev.qk, ws.X, state, ev)
-        accept(md, h, state, ws, n_total, save_every, smp, info, sout)
+        if adaptive:
+            advance(md, h, hk, state, ws, info)
+            accept(md, info[I_T], finished(info), state, ws, save_every, smp, info, sout)
+        else:
+            accept(md, ws.time[1], k + 1 == n_total, state, ws, save_every, smp, info, sout)
         if est != 0:
-            _last_sample(md, h, state, ws, n_total, save_every, smp, info)
+            _last_sample(md, ws.time[1], state, ws, n_total, save_every, smp, info)
             return est
     return 0
 
@@ -225,7 +241,7 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
         est = 0
         if active:
             est = after_step(md, tabs, h, ws.time[0], ws.time[1], k, ev.qk, ws.X, state, ev)
-        accept(md, h, state, ws, n_total, stride, smp, info, sout)
+        accept(md, ws.time[1], k + 1 == n_total, state, ws, stride, smp, info, sout)
         if mode == SAVE_DIAGNOSTICS:
             e = energy(md, ws.time[1], state[0], state[1], state[2], ws.g)
             dh = max(dh, abs(e - H0 - info[I_WORK]))
@@ -233,7 +249,7 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
             gvmax = max(gvmax, sout[S_GV])
         if est != 0:
             status = est
-            _last_sample(md, h, state, ws, n_total, stride, smp, info)
+            _last_sample(md, ws.time[1], state, ws, n_total, stride, smp, info)
             break
     slot = int(info[I_SLOT])
     if mode != SAVE_STRIDE:

@@ -175,10 +175,13 @@ STEP_OUT_SIZE = 6
 # ----------------------------------------------------------------------------- run counters
 # float64 ``info`` vector of drive.run, kept across chunks
 # (I_WORK: the work of forces and time since t0, the energy balance's right-hand side;
-# I_T0: the start time of the run, so that step k starts at t0 + k h exactly)
+# I_T0: the start time of the run, so that step k starts at t0 + k h exactly; then the
+# adaptive step of kernels/adapt.py, I_KR > 0 switching it on: the energy scale K_r, the
+# energy E0 of the start, the end time, the time reached and its summation error, and the
+# step density ρ_{k+1/2} of the next step, 0 before the first)
 (I_STEPS, I_ITERS, I_WIN_G, I_WIN_GV, I_WIN_IT, I_RES, I_FAILED, I_SLOT, I_FIRST, I_MAXRES,
- I_FULL, I_WORK, I_T0) = range(13)
-INFO_SIZE = 13
+ I_FULL, I_WORK, I_T0, I_KR, I_E0, I_TEND, I_T, I_TC, I_RHO) = range(19)
+INFO_SIZE = 19
 
 # ----------------------------------------------------------------------------- ensembles
 #: save modes of ``run_ensemble``
@@ -207,7 +210,7 @@ NewtonOptions = namedtuple("NewtonOptions", ["tol", "max_iter", "mode"])
 Events = namedtuple("Events", ["fns", "count", "direction", "terminal", "g", "t", "q", "v", "n",
                                "dense", "Q", "qk", "qx", "vx", "ell", "dell", "scratch"])
 Tables = namedtuple("Tables", ["b", "L", "Ld", "Lc", "E", "tau", "Ainv", "W", "mech",
-                               "c", "d", "E2", "Am", "bL"])
+                               "c", "d", "E2", "Am", "bL", "Lw"])
 Tables.__doc__ = """Method tables read by the step kernel (see :class:`fastvi.tables.Method`).
 
 b (r,), L, Ld (s+1, r), Lc (s+1, J+1), E (s+1, s+1), tau (s+1,) as in ``Method``; the
@@ -224,7 +227,9 @@ step before, the last step's control points ``τ_μ`` and its end slope ``h v_k`
 symmetric: for a constant ``M`` the mass part of ``∂S/∂Q^ν`` is ``(1/h) M Σ_μ Am[ν−1, μ−1]
 ΔQ^μ``, and that of ``∂S/∂Q^0`` minus their sum (the mechanics residual's shortcut;
 ``fastvi.tables._mass_block``); bL (s+1,) ``bL[ν] = Σ_i b_i ℓ_ν(c_i)``: for a constant
-∇V the potential's part of ``∂S/∂Q^ν`` is ``−h bL[ν] ∇V``."""
+∇V the potential's part of ``∂S/∂Q^ν`` is ``−h bL[ν] ∇V``; Lw (2, s+1) the barycentric
+weights ``1 / Π_{k≠μ} (τ_μ − τ_k)`` (row 0) and the slopes ``ℓ'_μ(1)`` (row 1) of the
+control-point basis: the predictor of a step whose length differs from the last ones'."""
 
 Workspace = namedtuple(
     "Workspace",
@@ -261,6 +266,8 @@ Workspace = namedtuple(
         "Fg",  # (n,) −∇V of a potential linear in q (F_LINPOT), set at a trajectory's first step
         "gt",  # (m,) ∂g/∂t at the step end (stays zero for an autonomous model)
         "time",  # (2,) t_k, t_{k+1} of the step being taken (set by the driver)
+        "hist",  # (2,) the lengths of the last two steps (the predictor's: steps may vary)
+        "Ew",  # (s+2, s+2) the predictor's weights for steps of changing length
         "si",  # int64: structured-solve plan (header SI_*, permutations, patterns)
         "sb",  # float64: band storages and scratch of the structured solves
         "dims",  # (n, m, s, r, J): int64 sizes, or size markers (see :func:`specialize`)
@@ -305,7 +312,8 @@ def workspace_for(dims):
         np.zeros((Jm, Jm)), np.zeros(Jm, dtype=np.int64), np.zeros(Jm),
         np.zeros((s, n)), np.zeros((s, n)),
         np.zeros(N), np.zeros(N), np.zeros(n), np.zeros(H_SIZE, dtype=np.int64),
-        np.zeros((n, n)), np.zeros(n), np.zeros(mm), np.zeros(2),
+        np.zeros((n, n)), np.zeros(n), np.zeros(mm), np.zeros(2), np.zeros(2),
+        np.zeros((s + 2, s + 2)),
         np.zeros(SI_HEADER, dtype=np.int64), np.zeros(1),
         dims,
     )

@@ -537,6 +537,70 @@ def extrapolate(E, E2, Xp, Xpp, X, Z, s, n, two, h, vk):
                 X[nu * n + a] = Z[nu, a]
 
 
+@hot
+def extrapolate_varied(tau, Lw, Ew, Z, hist, Xp, Xpp, X, s, n, two, h, vk):
+    """:func:`extrapolate` for a step of another length than the last two (``ws.hist``):
+    the same polynomials, built for the step lengths at hand rather than read from tables.
+
+    In the last step's local time τ (length ``h1``), with its control values ``y_μ`` at
+    ``τ_μ`` and ``ω(τ) = Π_k (τ − τ_k)``: the one-step guess is the interpolant
+    ``P_s(τ) = Σ_μ ℓ_μ(τ) y_μ``; the two-step guess adds ``ω(τ) (α + β (τ − 1))``, with
+    ``α`` from the slope ``h1 v_k`` at τ = 1 (where ω vanishes, ``ω'(1) = 1 / Lw[0, s]``)
+    and ``β`` from the step before's point at ``τ_e = (τ_{s−1} − 1) h2 / h1``. Both are
+    evaluated at this step's nodes ``1 + (h / h1) τ_ν``; with equal steps they are the
+    polynomials of ``tabs.E`` and ``tabs.E2``. Weights by prefix and suffix products
+    (``ws.Ew``: column 0 the point τ_e, columns ν the new nodes, row s + 1 ω), so nothing
+    divides but the two constants of α and β. The generic kernels call it (only runs of
+    changing step length take it), with arrays rather than the named tuples a call would
+    copy; the size-specialized step inlines it."""
+    h1 = hist[0]
+    r = h / h1
+    te = (tau[s - 1] - 1.0) * hist[1] / h1
+    for col in range(s + 1):
+        x = te if col == 0 else 1.0 + r * tau[col]
+        pre = 1.0
+        for mu in range(s + 1):
+            Ew[mu, col] = pre
+            pre *= x - tau[mu]
+        Ew[s + 1, col] = pre  # ω(x)
+        suf = 1.0
+        for mu in range(s, -1, -1):
+            Ew[mu, col] *= suf * Lw[0, mu]
+            suf *= x - tau[mu]
+    inv_b = 1.0 / (Ew[s + 1, 0] * (te - 1.0)) if two else 0.0
+    gap = 0.0
+    move = 0.0
+    for a in range(n):
+        last = Xp[(s - 1) * n + a]
+        slope = 0.0  # P_s'(1)
+        for mu in range(1, s + 1):
+            slope += Lw[1, mu] * Xp[(mu - 1) * n + a]
+        alpha = (h1 * vk[a] - slope) * Lw[0, s]
+        beta = 0.0
+        if two:
+            back = -Xpp[(s - 1) * n + a]
+            if s >= 2:
+                back += Xpp[(s - 2) * n + a]
+            pe = 0.0
+            for mu in range(1, s + 1):
+                pe += Ew[mu, 0] * Xp[(mu - 1) * n + a]
+            beta = (back - pe - Ew[s + 1, 0] * alpha) * inv_b
+        for nu in range(1, s + 1):
+            acc = 0.0
+            for mu in range(1, s + 1):  # y_0 = 0
+                acc += Ew[mu, nu] * Xp[(mu - 1) * n + a]
+            X[(nu - 1) * n + a] = acc - last
+            if two:
+                corr = Ew[s + 1, nu] * (alpha + beta * r * tau[nu])
+                Z[nu - 1, a] = acc + corr - last
+                gap = max(gap, abs(corr))
+                move = max(move, abs(last))
+    if two and gap <= PREDICT_TRUST * move:
+        for nu in range(s):
+            for a in range(n):
+                X[nu * n + a] = Z[nu, a]
+
+
 @hot_inline
 def predict(tabs, n, m, h, vk, ws, order):
     """Initial guess of ``order`` 2: the polynomial of degree s + 2 through the last step's
@@ -557,7 +621,12 @@ def predict(tabs, n, m, h, vk, ws, order):
             X[k] = 0.0
         return
     sn = s * n
-    extrapolate(E, tabs.E2, Xp, ws.Xpp, X, ws.Z, s, n, order >= 2 and ws.hold[H_HIST] >= 2, h, vk)
+    two = order >= 2 and ws.hold[H_HIST] >= 2
+    if ws.hist[0] != h or (two and ws.hist[1] != h):
+        extrapolate_varied(tabs.tau, tabs.Lw, ws.Ew, ws.Z, ws.hist, Xp, ws.Xpp, X, s, n, two,
+                           h, vk)
+    else:
+        extrapolate(E, tabs.E2, Xp, ws.Xpp, X, ws.Z, s, n, two, h, vk)
     for k in range(sn, sn + J * m):
         X[k] = Xp[k]
 
@@ -1227,6 +1296,8 @@ def step(md, tabs, opts, h, state, ws, first, out):
         Xpp[k] = Xp[k]
         Xp[k] = X[k]
     ws.hold[H_HIST] = 1 if first else min(ws.hold[H_HIST] + 1, 2)
+    ws.hist[1] = ws.hist[0]
+    ws.hist[0] = h
     return OK
 
 
@@ -1412,4 +1483,5 @@ def end_momentum(md, q1, P, p1, v1, G1, ws, out):
 #: too, with the assembly (the stiff fallback, ``newton="full"`` and ``s = 1``). Defined
 #: last: the copies see the module's names as they are here.
 step_inlined = inline_copy(
-    step, newton_full=inline_copy(newton_full, assemble=hot_inline(assemble.py_func)))
+    step, newton_full=inline_copy(newton_full, assemble=hot_inline(assemble.py_func)),
+    predict=inline_copy(predict, extrapolate_varied=hot_inline(extrapolate_varied.py_func)))

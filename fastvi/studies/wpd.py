@@ -1075,6 +1075,11 @@ STIFF_REF_TOL = 1e-11
 STIFF_TARGET_REL = 1e-4
 #: the stiff panel's fastvi steps: h = T/⌈T ω / c⌉ for each c (ωh ≈ c), at most STIFF_H_MAX
 STIFF_H_MAX = 0.01
+#: the pendulum panels' adaptive contenders (label "<method> adaptive", knob ε):
+#: ``integrate(..., adaptive=PEER_ADAPTIVE_KR)``, the energy scale of the step density
+#: (docs/benchmarks.md: 3 J fits this pendulum, whose kinetic energy reaches ≈ 30 J)
+PEER_ADAPTIVE_KR = 3.0
+ADAPTIVE = " adaptive"
 
 PEERS_FULL = dict(
     repeats=3,
@@ -1090,17 +1095,25 @@ PEERS_FULL = dict(
         # 0.89–0.96 of a P4L-Q5G step here, with 0.35–1.04× its energy error; P2L-Q2G and
         # P3L-Q3G cost 0.93–0.96 of their defaults' step but leave 1.4–2.1× their energy
         # error at h = 0.02, 0.025, so they are left out (docs/benchmarks.md)
+        # The adaptive contenders (time-reversible, not symplectic) run ε where their
+        # energy errors meet the fixed steps' levels
         1000.0: {"P1L-Q2G": (0.01,), "P2L-Q3G": (0.04, 0.02, 0.01),
                  "P3L-Q4G": (0.05, 0.025, 0.0125), "P4L-Q5G": (0.05, 0.025, 0.0125),
-                 "P4L-Q4G": (0.05, 0.025, 0.0125)},
+                 "P4L-Q4G": (0.05, 0.025, 0.0125),
+                 "P2L-Q3G" + ADAPTIVE: (0.08, 0.0625, 0.05, 0.04),
+                 "P3L-Q4G" + ADAPTIVE: (0.1, 0.08, 0.0625, 0.05, 0.04),
+                 "P4L-Q4G" + ADAPTIVE: (0.0625, 0.05, 0.04, 0.03)},
         # fewer points at T = 10^4 s (cost; the finest, 8·10^5 steps, is timed once)
         10000.0: {"P3L-Q4G": (0.05, 0.025), "P4L-Q5G": (0.05, 0.025, 0.0125),
-                  "P4L-Q4G": (0.05, 0.025, 0.0125)},
+                  "P4L-Q4G": (0.05, 0.025, 0.0125),
+                  "P3L-Q4G" + ADAPTIVE: (0.08, 0.0625, 0.05),
+                  "P4L-Q4G" + ADAPTIVE: (0.0625, 0.05, 0.04)},
     },
     dop={1000.0: (1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12, 1e-13, 1e-14),
          10000.0: (1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12, 1e-13, 1e-14)},
     #: energy-error growth with T at one setting per contender
-    growth=dict(T=(100.0, 1000.0, 10000.0), fastvi=("P3L-Q4G", 0.025), tol=1e-10),
+    growth=dict(T=(100.0, 1000.0, 10000.0), fastvi=("P3L-Q4G", 0.025), tol=1e-10,
+                adaptive=("P3L-Q4G" + ADAPTIVE, 0.0625)),
     # r = s methods (P2L-Q2G, P3L-Q3G) are stable at any ωh; the defaults (r = s + 1) are not
     stiff=dict(T=10.0, ks=(1e3, 1e4, 1e5, 1e6, 1e7, 1e8),
                methods=("P2L-Q2G", "P3L-Q3G", "P2L-Q3G", "P3L-Q4G"),
@@ -1114,7 +1127,8 @@ PEERS_QUICK = dict(
     starts=2,
     specialize=False,
     T=(100.0,),
-    fastvi={100.0: {"P3L-Q4G": (0.05, 0.025), "P4L-Q5G": (0.05,)}},
+    fastvi={100.0: {"P3L-Q4G": (0.05, 0.025), "P4L-Q5G": (0.05,),
+                    "P3L-Q4G" + ADAPTIVE: (0.0625,)}},
     dop={100.0: (1e-8, 1e-10, 1e-12)},
     growth=dict(T=(10.0, 100.0), fastvi=("P3L-Q4G", 0.025), tol=1e-10),
     stiff=dict(T=1.0, ks=(1e3, 1e6), methods=("P2L-Q2G", "P3L-Q4G"), c=(4.0, 0.5),
@@ -1160,17 +1174,29 @@ def fastvi_peer_run(model, q0, v0, method, h, T, params=None, sample_dt=PEER_SAM
     """One public ``fastvi.integrate`` call as the peer panels time it, energies saved every
     ``sample_dt`` seconds: ``(cpu, info)`` with the process CPU time of the call and ``info``
     holding ``dH`` (max|H − H0| over the samples), ``g`` (max|g|), ``steps``, ``ok`` and the
-    final ``end`` configuration. Also used by ``bench/rs_methods.py``."""
+    final ``end`` configuration. ``method`` ``"<name> adaptive"`` runs the adaptive step
+    (``adaptive=PEER_ADAPTIVE_KR``, ``h`` its ε; saved every ``sample_dt / h`` steps, more
+    often than every ``sample_dt`` where the steps shrink). Also used by
+    ``bench/rs_methods.py``."""
     every = max(1, int(round(sample_dt / h)))
+    name, adaptive = _adaptive_label(method)
     c0 = time.process_time()
-    res = fastvi.integrate(model, q0, v0, h=h, t_end=T, method=method, save_every=every,
-                           params=params, on_failure="return", specialize=specialize)
+    res = fastvi.integrate(model, q0, v0, h=h, t_end=T, method=name, save_every=every,
+                           params=params, on_failure="return", specialize=specialize,
+                           adaptive=adaptive)
     cpu = time.process_time() - c0
     ok = bool(res.success) and bool(np.isclose(res.t[-1], T))
     dH = float(np.max(np.abs(res.energy - res.energy[0]))) if len(res.energy) else np.inf
     g = float(np.max(res.constraint_residual)) if len(res.energy) else np.inf
     return cpu, dict(dH=dH, g=g, steps=int(res.stats["steps"]), ok=ok and np.isfinite(dH),
                      end=res.q[-1].copy() if len(res.q) else None)
+
+
+def _adaptive_label(label: str):
+    """(method name, the ``adaptive`` argument) of a peer-panel contender's label."""
+    if label.endswith(ADAPTIVE):
+        return label[: -len(ADAPTIVE)], PEER_ADAPTIVE_KR
+    return label, None
 
 
 def _interleaved(jobs, repeats, log, budget=LONG_RUN):
@@ -1212,7 +1238,8 @@ def peer_pendulum_sweep(pcfg, log) -> list[PeerPoint]:
     model = fastvi.scenes.double_pendulum()
     q0, v0 = model.initial_state(*THETA0)
     prm = peers.DP_PARAMS
-    for method in {m for d in pcfg["fastvi"].values() for m in d} | {pcfg["growth"]["fastvi"][0]}:
+    for method in {_adaptive_label(m)[0] for d in pcfg["fastvi"].values() for m in d} | {
+            pcfg["growth"]["fastvi"][0]}:
         fastvi.integrate(model, q0, v0, h=0.01, n_steps=2, method=method,
                          specialize=pcfg["specialize"])  # compile / load
     specs = []
@@ -1221,11 +1248,10 @@ def peer_pendulum_sweep(pcfg, log) -> list[PeerPoint]:
             specs += [(method, h, T) for h in hs]
         for tol in pcfg["dop"][T]:
             specs += [(DOP_A, tol, T), (DOP_B, tol, T)]
-    gm, gh = pcfg["growth"]["fastvi"]
     for T in pcfg["growth"]["T"]:  # the growth table's settings, where the panels lack them
-        for spec in ((gm, gh, T), (DOP_A, pcfg["growth"]["tol"], T), (DOP_B, pcfg["growth"]["tol"], T)):
-            if spec not in specs:
-                specs.append(spec)
+        for label, knob in _growth_settings(pcfg):
+            if (label, knob, T) not in specs:
+                specs.append((label, knob, T))
 
     def job(label, knob, T, theta=THETA0):
         if label == DOP_A:
@@ -1253,6 +1279,13 @@ def peer_pendulum_sweep(pcfg, log) -> list[PeerPoint]:
             f"max|g| {pt.g:.1e}{'' if pt.ok else '  FAILED'}")
     log(f"peer pendulum panels: {time.perf_counter() - t0:.0f} s")
     return points
+
+
+def _growth_settings(pcfg) -> list[tuple]:
+    """The (label, knob) of each contender of the energy-growth table."""
+    g = pcfg["growth"]
+    fv = [g["fastvi"]] + ([g["adaptive"]] if "adaptive" in g else [])
+    return fv + [(DOP_A, g["tol"]), (DOP_B, g["tol"])]
 
 
 def _start_error(run) -> float:
@@ -1418,11 +1451,13 @@ def unreached_line(points, T, rival, levels=PEER_LEVELS) -> str:
             f"(rtol = atol = {floor.knob:g}).")
 
 
-def peer_ratios(points, T, rival, levels=PEER_LEVELS):
-    """[(E, fastvi-best CPU, method, rival CPU, fastvi / rival)] at each level ``E``."""
+def peer_ratios(points, T, rival, levels=PEER_LEVELS, fixed_only=False):
+    """[(E, fastvi-best CPU, method, rival CPU, fastvi / rival)] at each level ``E``;
+    ``fixed_only``: the best of the fixed-step (symplectic) contenders."""
     rows = []
     riv = [p for p in points if p.label == rival and p.T == T and p.panel == "pendulum"]
-    methods = sorted({p.label for p in points if p.is_fastvi and p.T == T and p.panel == "pendulum"})
+    methods = sorted({p.label for p in points if p.is_fastvi and p.T == T and p.panel == "pendulum"
+                      and not (fixed_only and p.label.endswith(ADAPTIVE))})
     for E in levels:
         best, which = np.nan, ""
         for m in methods:
@@ -1563,7 +1598,11 @@ def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> li
         "numbers follow the kernels) with `specialize=True` (the kernels compiled for the "
         "model's sizes, bit for bit the default kernels' trajectories: what a speed-minded "
         "user runs; compiled outside the timing); `P1L-Q2G` … `P4L-Q5G` and `P4L-Q4G` "
-        "(r = s: one quadrature point fewer than `P4L-Q5G`, the same order 8), h swept. "
+        "(r = s: one quadrature point fewer than `P4L-Q5G`, the same order 8), h swept; and "
+        f"`<method> adaptive`: the same methods with `adaptive={PEER_ADAPTIVE_KR:g}` (the "
+        "time-reversible adaptive step of `fastvi.kernels.adapt`: steps shrink where the "
+        "pendulum whips; each step variational and on the constraints, but the map reversible, "
+        "not symplectic), ε swept. "
         "Regenerate with "
         "`make wpd` (installs the `bench` extra, CyRK, into `.venv`) or `python -m fastvi wpd` "
         "with CyRK installed (`pip install -e .[bench]`); `--no-peers` skips these sections. "
@@ -1605,17 +1644,18 @@ def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> li
              "against (a) at T = 1000 s over 1e-2 … 1e-8 J.\n")
     P.append("| T (s) | max\\|ΔH\\| (J) | best fastvi | fastvi CPU (s) | DOP853 (a) CPU (s) | "
              "**fastvi / (a)** | DOP853 (b) CPU (s) | **fastvi / (b)** | fastvi / (a), nominal "
-             "start only |")
-    P.append("|---|---|---|---|---|---|---|---|---|")
+             "start only | fixed step only: fastvi / (a) |")
+    P.append("|---|---|---|---|---|---|---|---|---|---|")
     nominal = at_nominal_start(points)
     for T in pcfg["T"]:
         ra = peer_ratios(points, T, DOP_A)
         rb = peer_ratios(points, T, DOP_B)
         r0 = peer_ratios(nominal, T, DOP_A)
-        for (E, best, which, ca, xa), (_, _, _, cb, xb), row0 in zip(ra, rb, r0):
+        rf = peer_ratios(points, T, DOP_A, fixed_only=True)
+        for (E, best, which, ca, xa), (_, _, _, cb, xb), row0, rowf in zip(ra, rb, r0, rf):
             P.append(f"| {T:g} | {E:.0e} | {which or '—'} | {_fmt(best, '.4f')} | {_fmt(ca, '.4f')} | "
                      f"**{_fmt(xa)}** | {_fmt(cb, '.4f')} | **{_fmt(xb)}** | "
-                     f"{_fmt(row0[4])} ({row0[2] or '—'}) |")
+                     f"{_fmt(row0[4])} ({row0[2] or '—'}) | {_fmt(rowf[4])} ({rowf[2] or '—'}) |")
     P.append("")
     for T in pcfg["T"]:
         line = dominated_line(points, T)
@@ -1623,21 +1663,27 @@ def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> li
             P.append(line + "\n")
     T0 = pcfg["T"][0]
     xs = [r[4] for r in peer_ratios(points, T0, DOP_A) if np.isfinite(r[4])]
+    xf = [r[4] for r in peer_ratios(points, T0, DOP_A, fixed_only=True) if np.isfinite(r[4])]
     if xs:
         met = all(x <= PEER_GOAL for x in xs)
         P.append(f"Goal (fastvi within {PEER_GOAL:g}× of DOP853 (a) at T = {T0:g} s): "
                  f"**{'met' if met else 'not met'}** — fastvi is {min(xs):.3g}× to {max(xs):.3g}× "
                  "the CPU time of DOP853 (a) at the levels it reaches."
+                 + (f" With fixed steps only (symplectic): {min(xf):.3g}× to {max(xf):.3g}× "
+                    f"(**{'met' if all(x <= PEER_GOAL for x in xf) else 'not met'}**)."
+                    if xf else "")
                  + unreached_line(points, T0, DOP_A) + "\n")
     # growth with T
-    gm, gh = pcfg["growth"]["fastvi"]
+    settings = _growth_settings(pcfg)
     tol = pcfg["growth"]["tol"]
     P.append(f"### Energy error and constraint drift against T\n")
-    P.append(f"One setting per contender (fastvi `{gm}` h = {gh:g}; DOP853 rtol = atol = {tol:g}), "
-             "max over [0, T]:\n")
+    P.append("One setting per contender (fastvi " + ", ".join(
+        f"`{lab}` {'ε' if lab.endswith(ADAPTIVE) else 'h'} = {kn:g}"
+        for lab, kn in settings if lab.startswith("P"))
+        + f"; DOP853 rtol = atol = {tol:g}), max over [0, T]:\n")
     P.append("| contender | T (s) | CPU (s) | max\\|ΔH\\| (J) | max\\|g(q)\\| | steps |")
     P.append("|---|---|---|---|---|---|")
-    for label, knob in ((gm, gh), (DOP_A, tol), (DOP_B, tol)):
+    for label, knob in settings:
         for T in pcfg["growth"]["T"]:
             pt = [p for p in points if p.panel == "pendulum" and p.label == label and p.knob == knob
                   and p.T == T]
@@ -1648,7 +1694,7 @@ def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> li
     P.append("")
     growth = []
     Tg = pcfg["growth"]["T"]
-    for label, knob in ((gm, gh), (DOP_A, tol), (DOP_B, tol)):
+    for label, knob in settings:
         pts = {p.T: p for p in points if p.panel == "pendulum" and p.label == label
                and p.knob == knob and p.T in (Tg[0], Tg[-1]) and p.ok}
         if len(pts) == 2 and pts[Tg[0]].dH > 0:
@@ -1659,8 +1705,9 @@ def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> li
     if growth:
         P.append(f"Growth of max|ΔH| per decade of T ({Tg[0]:g} → {Tg[-1]:g} s): "
                  + "; ".join(growth) + ". fastvi's energy error is bounded (symplectic: its "
-                 "slow rise is the chaotic motion visiting more extreme states over longer runs) "
-                 "and its constraints stay at round-off; DOP853's energy error drifts (≈ linearly "
+                 "slow rise is the chaotic motion visiting more extreme states over longer runs; "
+                 "the adaptive step is reversible, not symplectic, and is measured here rather "
+                 "than guaranteed) and its constraints stay at round-off; DOP853's energy error drifts (≈ linearly "
                  "in T at fixed tolerance), and in Cartesian form so does its constraint "
                  "residual. Holding DOP853's error fixed as T grows costs it a tighter tolerance, "
                  "which it buys cheaply (the panels above).\n")

@@ -550,9 +550,10 @@ def extrapolate_varied(tau, Lw, Ew, Z, hist, Xp, Xpp, X, s, n, two, h, vk):
     evaluated at this step's nodes ``1 + (h / h1) τ_ν``; with equal steps they are the
     polynomials of ``tabs.E`` and ``tabs.E2``. Weights by prefix and suffix products
     (``ws.Ew``: column 0 the point τ_e, columns ν the new nodes, row s + 1 ω), so nothing
-    divides but the two constants of α and β. The generic kernels call it (only runs of
-    changing step length take it), with arrays rather than the named tuples a call would
-    copy; the size-specialized step inlines it."""
+    divides but the two constants of α and β. Called, not inlined, also by the
+    size-specialized step (only runs of changing step length take it; inlined there it
+    made the fixed step ≈ 4 % slower), with arrays rather than the named tuples a call
+    would copy."""
     h1 = hist[0]
     r = h / h1
     te = (tau[s - 1] - 1.0) * hist[1] / h1
@@ -1483,5 +1484,4 @@ def end_momentum(md, q1, P, p1, v1, G1, ws, out):
 #: too, with the assembly (the stiff fallback, ``newton="full"`` and ``s = 1``). Defined
 #: last: the copies see the module's names as they are here.
 step_inlined = inline_copy(
-    step, newton_full=inline_copy(newton_full, assemble=hot_inline(assemble.py_func)),
-    predict=inline_copy(predict, extrapolate_varied=hot_inline(extrapolate_varied.py_func)))
+    step, newton_full=inline_copy(newton_full, assemble=hot_inline(assemble.py_func)))

@@ -232,3 +232,15 @@ def test_chunks_and_grown_buffers_change_no_bit(dp, whip, monkeypatch):
     assert integ._adaptive_chunk(20.0, 0.05, 1, dp.n, False) == 16
     for f in ("t", "q", "p", "energy", "constraint_residual", "newton_iterations"):
         np.testing.assert_array_equal(getattr(small, f), getattr(ad, f))
+
+
+def test_results_keep_full_sample_buffers_and_copy_mostly_empty_ones():
+    """A result's arrays are its sample buffers when the run filled them (a fixed-step run
+    sizes them exactly), views when they are at least half full, and trimmed copies else
+    (a short run must not hold a long buffer)."""
+    integ = importlib.import_module("fastvi.integrate")
+    smp = integ._alloc(10, 3)
+    full, half, few = integ._filled(smp, 10), integ._filled(smp, 6), integ._filled(smp, 3)
+    assert all(a is b for a, b in zip(full, smp))
+    assert all(a.base is b and a.shape[0] == 6 for a, b in zip(half, smp))
+    assert all(a.base is None and a.shape[0] == 3 for a in few)

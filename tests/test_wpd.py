@@ -6,6 +6,7 @@ import os
 import numpy as np
 import pytest
 
+import fastvi
 from fastvi.studies import wpd
 from fastvi.studies.wpd import Point, compare, cost_at, crossings, fit_exponent, pareto
 
@@ -349,3 +350,18 @@ def test_a_longer_step_that_costs_more_is_named():
     assert "P3L-Q4G h = 0.05 (0.386 s" in line and "h = 0.025: 0.381 s" in line
     assert "P4L-Q4G" not in line and "DOP853" not in line
     assert wpd.dominated_line(pts[2:], 1e4) == ""
+
+
+def test_an_adaptive_contender_saves_every_sample_dt_on_average():
+    """The peer panels save an adaptive run's energies every ``sample_dt`` seconds on
+    average, as the fixed steps: its steps are ≈ ε/2.2 long on average here, so a rule of
+    ``sample_dt / ε`` steps would save twice as often (and pay for it)."""
+    model = fastvi.scenes.double_pendulum()
+    q0, v0 = model.initial_state(*wpd.THETA0)
+    T, dt, eps = 40.0, 1.0, 0.08
+    every = wpd.adaptive_sample_every(model, q0, v0, "P2L-Q3G", eps, T, sample_dt=dt)
+    res = fastvi.integrate(model, q0, v0, h=eps, t_end=T, method="P2L-Q3G",
+                           adaptive=wpd.PEER_ADAPTIVE_KR, save_every=every)
+    gaps = np.diff(res.t)[:-1]  # the last sample ends the run, whatever its gap
+    assert np.mean(gaps) == pytest.approx(dt, rel=0.05)
+    assert every > 1.5 * round(dt / eps)

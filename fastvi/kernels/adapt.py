@@ -27,7 +27,8 @@ The state of the rule lives in the ``info`` vector of :func:`.drive.run` (slots 
 import numpy as np
 
 from .._numba import hot_inline, ptr
-from .layout import F_LINPOT, H_FG, I_E0, I_KR, I_RHO, I_T, I_TC, I_TEND, PGRAD, POT
+from .layout import (H_FG, I_E0, I_KR, I_RHO, I_T, I_TC, I_TEND, PGRAD, POT,
+                     linear_potential)
 
 
 @hot_inline
@@ -38,7 +39,7 @@ def density(md, q, v, ws, E0, Kr):
     md.fns[POT](ptr(q), ptr(q), ptr(md.prm), ptr(ws.g))
     ke = max(E0 - ws.g[0], 0.0)
     rate = 0.0
-    if md.flags[F_LINPOT] != 0 and ws.hold[H_FG] != 0:
+    if linear_potential(md) and ws.hold[H_FG] != 0:
         for a in range(q.shape[0]):
             rate -= ws.Fg[a] * v[a]
     else:

@@ -282,6 +282,14 @@ def is_timed(md):
     return md.timed is not None
 
 
+@hot_inline
+def linear_potential(md):
+    """Whether ∇V is one vector over the trajectory (``ws.Fg``, set at a trajectory's first
+    step by :func:`.step.linear_force`): a potential declared linear in q
+    (``potential_hessian=0``) that does not depend on time."""
+    return md.flags[F_LINPOT] != 0 and not (is_timed(md) and md.flags[F_TIME] != 0)
+
+
 @njit
 def make_workspace(n, m, s, r, J):
     """Scratch arrays for one trajectory (allocated once, outside the time loop).

@@ -39,7 +39,7 @@ from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F
                      S_G, S_GV, S_ITERS, S_RES, S_WORK, SI_A, SI_GCOL, SI_GPTR, SI_HC_BCOL,
                      SI_HC_COLS, SI_HC_CPTR, SI_HC_NG, SI_HC_PPTR, SI_HC_ROWS, SI_S, SI_SC, SINGULAR,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, SOLVE_BANDED, SOLVE_DENSE, is_timed,
-                     make_workspace, sizes)
+                     linear_potential, make_workspace, sizes)
 from .linalg import (invert, invert_unpivoted, lu_factor, lu_factor_small, lu_solve,
                      lu_solve_small)
 
@@ -256,20 +256,13 @@ def constraint_rate(md, q, t, out, scratch):
 
 # ----------------------------------------------------------------------------- assembly
 @hot_inline
-def _linear_potential(md):
-    """Whether ∇V is one vector over the trajectory (``ws.Fg``, :func:`linear_force`): a
-    potential declared linear in q (``potential_hessian=0``) that does not depend on time."""
-    return md.flags[F_LINPOT] != 0 and not (is_timed(md) and md.flags[F_TIME] != 0)
-
-
-@hot_inline
 def linear_force(md, ws, qk):
     """``ws.Fg = −∇V(q_k)`` for a potential linear in q (else nothing): the kernels then read
     it instead of calling ``potential_grad`` at every quadrature point of every Newton
     iteration. The step calls it at a trajectory's first step (the parameters are fixed for
     a trajectory); callers of :func:`residual` and :func:`assemble` outside a step (tests,
     profiles) call it first."""
-    if _linear_potential(md):
+    if linear_potential(md):
         Fg = ws.Fg
         md.fns[PGRAD](ptr(qk), ptr(qk), ptr(md.prm), ptr(Fg))
         for a in range(Fg.shape[0]):
@@ -282,7 +275,7 @@ def _point_force(md, ws, Mi, has_mass, n):
     function, ``Mi = M(q_i)``."""
     fns, prm = md.fns, md.prm
     qi, vi, F, fa = ws.qi, ws.vi, ws.F, ws.fa
-    if _linear_potential(md):
+    if linear_potential(md):
         for a in range(n):
             fa[a] = -ws.Fg[a]
     else:
@@ -856,7 +849,7 @@ def residual(md, tabs, h, qk, pk, ws):
                     D[nu, a] = acc
     # a potential linear in q and nothing else at the quadrature points: its part of D is
     # −h Σ_i b_i ℓ_ν(c_i) ∇V, with ∇V evaluated once a trajectory (linear_force)
-    if not need_v and _linear_potential(md):
+    if not need_v and linear_potential(md):
         Fg, bL = ws.Fg, tabs.bL
         for nu in range(s + 1):
             w = h * bL[nu]

@@ -1079,6 +1079,9 @@ STIFF_H_MAX = 0.01
 #: ``integrate(..., adaptive=PEER_ADAPTIVE_KR)``, the energy scale of the step density
 #: (docs/benchmarks.md: 3 J fits this pendulum, whose kinetic energy reaches ≈ 30 J)
 PEER_ADAPTIVE_KR = 3.0
+#: the length (s) of the untimed pilot run that gives an adaptive contender's mean step
+PEER_PILOT_T = 100.0
+_NO_SAMPLES = 1 << 40  # save_every of a run whose samples are not read: the first and last
 ADAPTIVE = " adaptive"
 
 PEERS_FULL = dict(
@@ -1175,11 +1178,13 @@ def fastvi_peer_run(model, q0, v0, method, h, T, params=None, sample_dt=PEER_SAM
     ``sample_dt`` seconds: ``(cpu, info)`` with the process CPU time of the call and ``info``
     holding ``dH`` (max|H − H0| over the samples), ``g`` (max|g|), ``steps``, ``ok`` and the
     final ``end`` configuration. ``method`` ``"<name> adaptive"`` runs the adaptive step
-    (``adaptive=PEER_ADAPTIVE_KR``, ``h`` its ε; saved every ``sample_dt / h`` steps, more
-    often than every ``sample_dt`` where the steps shrink). Also used by
-    ``bench/rs_methods.py``."""
-    every = max(1, int(round(sample_dt / h)))
+    (``adaptive=PEER_ADAPTIVE_KR``, ``h`` its ε; saved every ``sample_dt`` s on average:
+    :func:`adaptive_sample_every`). Also used by ``bench/rs_methods.py``."""
     name, adaptive = _adaptive_label(method)
+    if adaptive is None:
+        every = max(1, int(round(sample_dt / h)))
+    else:  # before the clock starts
+        every = adaptive_sample_every(model, q0, v0, name, h, T, params, sample_dt, specialize)
     c0 = time.process_time()
     res = fastvi.integrate(model, q0, v0, h=h, t_end=T, method=name, save_every=every,
                            params=params, on_failure="return", specialize=specialize,
@@ -1190,6 +1195,21 @@ def fastvi_peer_run(model, q0, v0, method, h, T, params=None, sample_dt=PEER_SAM
     g = float(np.max(res.constraint_residual)) if len(res.energy) else np.inf
     return cpu, dict(dH=dH, g=g, steps=int(res.stats["steps"]), ok=ok and np.isfinite(dH),
                      end=res.q[-1].copy() if len(res.q) else None)
+
+
+def adaptive_sample_every(model, q0, v0, method, eps, T, params=None, sample_dt=PEER_SAMPLE_DT,
+                          specialize=False) -> int:
+    """``save_every`` for an adaptive run of ε = ``eps`` that saves every ``sample_dt``
+    seconds on average, as the fixed steps do: the mean step ``T_p / steps`` of a pilot run
+    over ``T_p = min(T, PEER_PILOT_T)`` (steps shrink where the pendulum whips: the mean
+    step of the double pendulum is ≈ ε/2.2, so ``sample_dt/ε`` would save 2.2× as often,
+    and a saved sample costs a fraction of a step)."""
+    Tp = min(T, PEER_PILOT_T)
+    pilot = fastvi.integrate(model, q0, v0, h=eps, t_end=Tp, method=method, params=params,
+                             save_every=_NO_SAMPLES, on_failure="return",
+                             specialize=specialize, adaptive=PEER_ADAPTIVE_KR)
+    mean_step = float(pilot.t[-1] - pilot.t[0]) / max(1, int(pilot.stats["steps"]))
+    return max(1, int(round(sample_dt / mean_step)))
 
 
 def _adaptive_label(label: str):
@@ -1614,7 +1634,9 @@ def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> li
         f"(runs longer than {PEER_LONG_RUN:g} s, in the stiff panel {STIFF_LONG_RUN:g} s, timed "
         "once), after compilation. fastvi: the whole "
         f"public call (validation, initial projection, energies of the saved steps), saving every "
-        f"{PEER_SAMPLE_DT:g} s (`save_every = {PEER_SAMPLE_DT:g}/h`; stiff panel: every "
+        f"{PEER_SAMPLE_DT:g} s (`save_every = {PEER_SAMPLE_DT:g}/h`; adaptive: every "
+        f"{PEER_SAMPLE_DT:g} s on average, `save_every` = {PEER_SAMPLE_DT:g} s / the mean step of "
+        f"an untimed {PEER_PILOT_T:g} s pilot run; stiff panel: every "
         f"{STIFF_SAMPLE_DT:g} s). CyRK: the solver call "
         "storing every accepted step (its default; no dense output, no `t_eval`) and the copy of "
         "the stored steps out of CyRK (< 1 %). Energy errors max |H − H(0)|: fastvi over its saved "

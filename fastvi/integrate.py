@@ -101,7 +101,7 @@ def _room(smp: Samples, K: int) -> Samples:
 def _filled(smp: Samples, J: int) -> Samples:
     """The first ``J`` samples of each buffer: the buffers themselves when full (a fixed-step
     run sizes them exactly), views when at least half full, else trimmed copies. Copying is
-    not free here: written into fresh memory, a copy costs ≈ 0.13 µs a sample (page faults),
+    not free here: written into fresh memory, a copy costs ≈ 0.1 µs a sample (page faults),
     a fifth of a ``P2L-Q3G`` step when every other step is saved. A view keeps its buffer's
     unwritten tail (at most as long as the view) alive with it."""
     K = smp.t.shape[0]

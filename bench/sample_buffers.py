@@ -40,8 +40,8 @@ def main(rounds=9, T=1000.0):
     print(f"{'method':<9} {'h or ε':>7} {'adaptive':>8} {'every':>5} {'samples':>7} "
           f"{'copied ms':>9} {'kept ms':>8} {'kept/copied':>11}")
     for method, h, kr in CASES:
-        every = (max(1, round(wpd.PEER_SAMPLE_DT / h)) if kr is None else
-                 wpd.adaptive_sample_every(model, q0, v0, method, h, T, specialize=True))
+        label = method if kr is None else method + wpd.ADAPTIVE
+        every = wpd.peer_save_every(model, q0, v0, label, h, T, specialize=True)
         kw = dict(h=h, t_end=T, method=method, adaptive=kr, specialize=True, save_every=every)
         fastvi.integrate(model, q0, v0, **{**kw, "t_end": 1.0})  # compile / load
         cpu = {"copied": [], "kept": []}

@@ -1181,10 +1181,7 @@ def fastvi_peer_run(model, q0, v0, method, h, T, params=None, sample_dt=PEER_SAM
     (``adaptive=PEER_ADAPTIVE_KR``, ``h`` its ε; saved every ``sample_dt`` s on average:
     :func:`adaptive_sample_every`). Also used by ``bench/rs_methods.py``."""
     name, adaptive = _adaptive_label(method)
-    if adaptive is None:
-        every = max(1, int(round(sample_dt / h)))
-    else:  # before the clock starts
-        every = adaptive_sample_every(model, q0, v0, name, h, T, params, sample_dt, specialize)
+    every = peer_save_every(model, q0, v0, method, h, T, params, sample_dt, specialize)
     c0 = time.process_time()
     res = fastvi.integrate(model, q0, v0, h=h, t_end=T, method=name, save_every=every,
                            params=params, on_failure="return", specialize=specialize,
@@ -1197,8 +1194,20 @@ def fastvi_peer_run(model, q0, v0, method, h, T, params=None, sample_dt=PEER_SAM
                      end=res.q[-1].copy() if len(res.q) else None)
 
 
+def peer_save_every(model, q0, v0, label, h, T, params=None, sample_dt=PEER_SAMPLE_DT,
+                    specialize=False) -> int:
+    """``save_every`` of a peer-panel contender ``label`` at step (or ε) ``h``: every
+    ``sample_dt`` seconds, on average for an adaptive one (:func:`adaptive_sample_every`,
+    whose pilot run is not timed: call this before the clock starts)."""
+    name, adaptive = _adaptive_label(label)
+    if adaptive is None:
+        return max(1, int(round(sample_dt / h)))
+    return adaptive_sample_every(model, q0, v0, name, h, T, params, sample_dt, specialize,
+                                 adaptive)
+
+
 def adaptive_sample_every(model, q0, v0, method, eps, T, params=None, sample_dt=PEER_SAMPLE_DT,
-                          specialize=False) -> int:
+                          specialize=False, kr=PEER_ADAPTIVE_KR) -> int:
     """``save_every`` for an adaptive run of ε = ``eps`` that saves every ``sample_dt``
     seconds on average, as the fixed steps do: the mean step ``T_p / steps`` of a pilot run
     over ``T_p = min(T, PEER_PILOT_T)`` (steps shrink where the pendulum whips: the mean
@@ -1207,7 +1216,7 @@ def adaptive_sample_every(model, q0, v0, method, eps, T, params=None, sample_dt=
     Tp = min(T, PEER_PILOT_T)
     pilot = fastvi.integrate(model, q0, v0, h=eps, t_end=Tp, method=method, params=params,
                              save_every=_NO_SAMPLES, on_failure="return",
-                             specialize=specialize, adaptive=PEER_ADAPTIVE_KR)
+                             specialize=specialize, adaptive=kr)
     mean_step = float(pilot.t[-1] - pilot.t[0]) / max(1, int(pilot.stats["steps"]))
     return max(1, int(round(sample_dt / mean_step)))
 

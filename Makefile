@@ -21,8 +21,12 @@ $(BENCH_STAMP): $(STAMP) pyproject.toml
 demo: $(STAMP)
 	$(BIN)/python -m fastvi demo
 
+# the suite's time is mostly numba compiling the kernels, one core a process: pytest-xdist
+# runs the test files in TEST_JOBS processes (docs/benchmarks.md, "Compile and set-up time")
+TEST_JOBS ?= 2
+
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_JOBS) --dist loadfile
 
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow --run-slow

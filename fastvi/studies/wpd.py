@@ -1099,18 +1099,22 @@ PEERS_FULL = dict(
         # P3L-Q3G cost 0.93–0.96 of their defaults' step but leave 1.4–2.1× their energy
         # error at h = 0.02, 0.025, so they are left out (docs/benchmarks.md)
         # The adaptive contenders (time-reversible, not symplectic) run ε where their
-        # energy errors meet the fixed steps' levels
+        # energy errors meet the fixed steps' levels. P5L-Q5G (order 10, r = s) adaptive
+        # reaches 1e-6 J at ≈ 0.94–0.97 of P4L-Q4G adaptive's cost and 1e-8 J at the same
+        # cost; at 1e-4 J it costs ≈ 1.15× P3L-Q4G adaptive (docs/benchmarks.md)
         1000.0: {"P1L-Q2G": (0.01,), "P2L-Q3G": (0.04, 0.02, 0.01),
                  "P3L-Q4G": (0.05, 0.025, 0.0125), "P4L-Q5G": (0.05, 0.025, 0.0125),
                  "P4L-Q4G": (0.05, 0.025, 0.0125),
                  "P2L-Q3G" + ADAPTIVE: (0.08, 0.0625, 0.05, 0.04),
                  "P3L-Q4G" + ADAPTIVE: (0.1, 0.08, 0.0625, 0.05, 0.04),
-                 "P4L-Q4G" + ADAPTIVE: (0.0625, 0.05, 0.04, 0.03)},
+                 "P4L-Q4G" + ADAPTIVE: (0.0625, 0.05, 0.04, 0.03),
+                 "P5L-Q5G" + ADAPTIVE: (0.1, 0.08, 0.0625, 0.05)},
         # fewer points at T = 10^4 s (cost; the finest, 8·10^5 steps, is timed once)
         10000.0: {"P3L-Q4G": (0.05, 0.025), "P4L-Q5G": (0.05, 0.025, 0.0125),
                   "P4L-Q4G": (0.05, 0.025, 0.0125),
                   "P3L-Q4G" + ADAPTIVE: (0.08, 0.0625, 0.05),
-                  "P4L-Q4G" + ADAPTIVE: (0.0625, 0.05, 0.04)},
+                  "P4L-Q4G" + ADAPTIVE: (0.0625, 0.05, 0.04),
+                  "P5L-Q5G" + ADAPTIVE: (0.08, 0.0625)},
     },
     dop={1000.0: (1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12, 1e-13, 1e-14),
          10000.0: (1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12, 1e-13, 1e-14)},
@@ -1628,7 +1632,8 @@ def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> li
         "model's sizes, bit for bit the default kernels' trajectories: what a speed-minded "
         "user runs; compiled outside the timing); `P1L-Q2G` … `P4L-Q5G` and `P4L-Q4G` "
         "(r = s: one quadrature point fewer than `P4L-Q5G`, the same order 8), h swept; and "
-        f"`<method> adaptive`: the same methods with `adaptive={PEER_ADAPTIVE_KR:g}` (the "
+        f"`<method> adaptive`: these methods and `P5L-Q5G` (order 10, r = s) with "
+        f"`adaptive={PEER_ADAPTIVE_KR:g}` (the "
         "time-reversible adaptive step of `fastvi.kernels.adapt`: steps shrink where the "
         "pendulum whips; each step variational and on the constraints, but the map reversible, "
         "not symplectic), ε swept. "

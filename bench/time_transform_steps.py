@@ -103,7 +103,7 @@ def potential_grad(q, p, out):
 
 def sigma(q, p):
     """dt/dτ at the configurations ``q`` (..., 4)."""
-    return 1.0 / np.sqrt(1.0 + (p[5] - p[4] * (p[0] * q[..., 1] + p[1] * q[..., 3])) / p[6])
+    return 1.0 / np.sqrt(1.0 + _ke.py_func(np.moveaxis(q, -1, 0), p) / p[6])
 
 
 def transformed(E0: float, Kr: float) -> fastvi.Model:

@@ -248,7 +248,7 @@ def integrate(
         fresh install: ≈ 3.5 min of CPU and ≈ 4 GB of peak memory (the double pendulum's
         ``P2L-Q3G``: 209 s, the process's peak resident memory 4.8 GB against 1 GB for the
         generic kernels, ≈ 3 GB of it still held after the compile). Then it is cached on
-        disk like the generic kernels: a new process loads it in ≈ 0.1 s and ≈ 15 MB.
+        disk like the generic kernels: a new process loads it in ≈ 0.1 s and ≈ 12 MB.
         Worth it for long runs of one model. :func:`fastvi.integrate_ensemble` takes the
         same option.
     adaptive : float, optional

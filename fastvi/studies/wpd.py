@@ -1100,7 +1100,7 @@ PEERS_FULL = dict(
         # error at h = 0.02, 0.025, so they are left out (docs/benchmarks.md)
         # The adaptive contenders (time-reversible, not symplectic) run ε where their
         # energy errors meet the fixed steps' levels. P5L-Q5G (order 10, r = s) adaptive
-        # reaches 1e-6 J at ≈ 0.94–0.97 of P4L-Q4G adaptive's cost and 1e-8 J at the same
+        # reaches 1e-6 J at 0.94–1.0 of P4L-Q4G adaptive's cost and 1e-8 J at the same
         # cost; at 1e-4 J it costs ≈ 1.15× P3L-Q4G adaptive (docs/benchmarks.md)
         1000.0: {"P1L-Q2G": (0.01,), "P2L-Q3G": (0.04, 0.02, 0.01),
                  "P3L-Q4G": (0.05, 0.025, 0.0125), "P4L-Q5G": (0.05, 0.025, 0.0125),
@@ -1223,6 +1223,13 @@ def adaptive_sample_every(model, q0, v0, method, eps, T, params=None, sample_dt=
                              specialize=specialize, adaptive=kr)
     mean_step = float(pilot.t[-1] - pilot.t[0]) / max(1, int(pilot.stats["steps"]))
     return max(1, int(round(sample_dt / mean_step)))
+
+
+def _adaptive_methods(pcfg) -> str:
+    """The methods the pendulum panels of ``pcfg`` run adaptive, for the page: "`A`, `B`"."""
+    names = sorted({_adaptive_label(m)[0] for d in pcfg["fastvi"].values() for m in d
+                    if m.endswith(ADAPTIVE)})
+    return ", ".join(f"`{n}`" for n in names)
 
 
 def _adaptive_label(label: str):
@@ -1632,7 +1639,7 @@ def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> li
         "model's sizes, bit for bit the default kernels' trajectories: what a speed-minded "
         "user runs; compiled outside the timing); `P1L-Q2G` … `P4L-Q5G` and `P4L-Q4G` "
         "(r = s: one quadrature point fewer than `P4L-Q5G`, the same order 8), h swept; and "
-        f"`<method> adaptive`: these methods and `P5L-Q5G` (order 10, r = s) with "
+        f"`<method> adaptive` ({_adaptive_methods(pcfg)}) with "
         f"`adaptive={PEER_ADAPTIVE_KR:g}` (the "
         "time-reversible adaptive step of `fastvi.kernels.adapt`: steps shrink where the "
         "pendulum whips; each step variational and on the constraints, but the map reversible, "

@@ -1,15 +1,18 @@
 """What the first compile of the kernels costs in time and memory (docs/benchmarks.md,
 "Compile and set-up time").
 
-    .venv/bin/python bench/compile_memory.py [--methods=P2L-Q3G,P3L-Q4G] [--warm]
+    .venv/bin/python bench/compile_memory.py [--methods=P2L-Q3G,P3L-Q4G] [--warm] [--time]
+    NUMBA_OPT=2 .venv/bin/python bench/compile_memory.py --time   # LLVM at -O2 (default 3)
 
 Runs in a fresh numba cache (a temporary ``NUMBA_CACHE_DIR``, so nothing is loaded and
 nothing this run compiles is kept) unless ``--warm`` (the repository's own cache: what a
 process pays once the kernels are cached). The double pendulum, the generic kernels first,
 then ``specialize=True`` for each method; after each: wall and process CPU time, resident
 memory and its peak (``/proc/self/status``), and at the end the resident memory after
-``gc.collect()`` and glibc's ``malloc_trim(0)``. Linux only (``/proc``). Takes ≈ 2.5 min
-for the generic kernels and ≈ 3.5 min a method cold; seconds warm.
+``gc.collect()`` and glibc's ``malloc_trim(0)``. ``--time``: then the CPU time a step of
+each sized method (h = 0.01, 20 000 steps, best of 7), to compare the code that other
+compile settings (``NUMBA_OPT``) produce. Linux only (``/proc``). Takes ≈ 2.5 min for the
+generic kernels and ≈ 3.5 min a method cold; seconds warm.
 """
 import ctypes
 import gc
@@ -61,6 +64,15 @@ def main() -> None:
         _report("after malloc_trim(0)", 0.0, 0.0)
     except (OSError, AttributeError):
         print("malloc_trim: not glibc")
+    if "time" in ARGS:
+        for m in methods:
+            best = float("inf")
+            for _ in range(7):
+                c = time.process_time()
+                fastvi.integrate(model, q0, v0, h=0.01, n_steps=20000, method=m,
+                                 specialize=True, save_every=20000)
+                best = min(best, time.process_time() - c)
+            print(f"sized {m}: {best / 20000 * 1e6:.3f} µs a step (best of 7, whole call)")
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@
 
     .venv/bin/python bench/compile_memory.py [--methods=P2L-Q3G,P3L-Q4G] [--warm] [--time]
     NUMBA_OPT=2 .venv/bin/python bench/compile_memory.py --time   # LLVM at -O2 (default 3)
+    .venv/bin/python bench/compile_memory.py --events   # where each compile's time goes
 
 Runs in a fresh numba cache (a temporary ``NUMBA_CACHE_DIR``, so nothing is loaded and
 nothing this run compiles is kept) unless ``--warm`` (the repository's own cache: what a
@@ -12,7 +13,9 @@ memory and its peak (``/proc/self/status``), and at the end the resident memory 
 ``gc.collect()`` and glibc's ``malloc_trim(0)``. ``--time``: then the CPU time a step of
 each sized method (h = 0.01, 20 000 steps, best of 7), to compare the code that other
 compile settings (``NUMBA_OPT``) produce. Linux only (``/proc``). Takes ≈ 2.5 min for the
-generic kernels and ≈ 3.5 min a method cold; seconds warm.
+generic kernels and ≈ 3.5 min a method cold; seconds warm. ``--events``: after each
+stage, the time numba's event log puts in LLVM (``numba:llvm_lock``, summed) and the
+longest compiles by function (nested: a caller's time includes its callees').
 """
 import ctypes
 import gc
@@ -24,6 +27,8 @@ import time
 ARGS = dict(a.lstrip("-").split("=", 1) if "=" in a else (a.lstrip("-"), "1") for a in sys.argv[1:])
 if "warm" not in ARGS:
     os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="fastvi-cold-")  # before numba loads
+
+import numba.core.event  # noqa: E402
 
 import fastvi  # noqa: E402
 
@@ -41,10 +46,42 @@ def _report(what: str, wall: float, cpu: float) -> None:
           f"  peak {_status('VmHWM'):6d} MB", flush=True)
 
 
+class _CompileLog(numba.core.event.Listener):
+    """numba's compile events, (kind, function, seconds, depth), while ``--events``."""
+
+    def __init__(self):
+        self.records = []
+        self._open = []
+        for kind in ("numba:compile", "numba:llvm_lock"):
+            numba.core.event.register(kind, self)
+
+    def on_start(self, event):
+        self._open.append((event, time.perf_counter()))
+
+    def on_end(self, event):
+        e, t = self._open.pop()
+        d = e.data.get("dispatcher") if isinstance(e.data, dict) else None
+        name = f"{d.py_func.__module__}.{d.py_func.__qualname__}" if d is not None else ""
+        self.records.append((e.kind, name, time.perf_counter() - t, len(self._open)))
+
+    def report(self):
+        llvm = sum(r[2] for r in self.records if r[0] == "numba:llvm_lock")
+        print(f"    LLVM (numba:llvm_lock) {llvm:.1f} s in all; longest compiles:")
+        top = sorted((r for r in self.records if r[0] == "numba:compile"), key=lambda r: -r[2])
+        for _, name, secs, depth in top[:5]:
+            print(f"    {secs:7.1f} s  depth {depth}  {name}")
+        self.records.clear()
+
+
+_LOG = _CompileLog() if "events" in ARGS else None
+
+
 def _timed(what: str, fn) -> None:
     w, c = time.perf_counter(), time.process_time()
     fn()
     _report(what, time.perf_counter() - w, time.process_time() - c)
+    if _LOG is not None:
+        _LOG.report()
 
 
 def main() -> None:

@@ -23,15 +23,15 @@ REPEATS = 5
 
 def main(argv) -> None:
     count = int(argv[0]) if argv and argv[0].isdigit() else 4
-    specs = [(name + wpd.ADAPTIVE, float(e)) for a in argv if "=" in a
+    specs = [(name, float(e)) for a in argv if "=" in a
              for name, eps in [a.split("=", 1)] for e in eps.split(",")]
     if not specs:
         raise SystemExit(__doc__)
     model = fastvi.scenes.double_pendulum()
     starts = wpd.peer_starts(count)
     q0, v0 = model.initial_state(*starts[0])
-    for label, eps in specs:
-        name = label[: -len(wpd.ADAPTIVE)]
+    for name, eps in specs:
+        label = name + wpd.ADAPTIVE
         fastvi.integrate(model, q0, v0, h=0.01, n_steps=2, method=name, specialize=True)
         cpus = [wpd.fastvi_peer_run(model, q0, v0, label, eps, T, specialize=True)
                 for _ in range(REPEATS)]

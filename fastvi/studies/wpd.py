@@ -1225,11 +1225,10 @@ def adaptive_sample_every(model, q0, v0, method, eps, T, params=None, sample_dt=
     return max(1, int(round(sample_dt / mean_step)))
 
 
-def _adaptive_methods(pcfg) -> str:
-    """The methods the pendulum panels of ``pcfg`` run adaptive, for the page: "`A`, `B`"."""
-    names = sorted({_adaptive_label(m)[0] for d in pcfg["fastvi"].values() for m in d
-                    if m.endswith(ADAPTIVE)})
-    return ", ".join(f"`{n}`" for n in names)
+def _panel_methods(pcfg, adaptive_only: bool = False) -> set:
+    """The method names the pendulum panels of ``pcfg`` run (only those run adaptive)."""
+    return {_adaptive_label(m)[0] for d in pcfg["fastvi"].values() for m in d
+            if not adaptive_only or m.endswith(ADAPTIVE)}
 
 
 def _adaptive_label(label: str):
@@ -1278,7 +1277,7 @@ def peer_pendulum_sweep(pcfg, log) -> list[PeerPoint]:
     model = fastvi.scenes.double_pendulum()
     q0, v0 = model.initial_state(*THETA0)
     prm = peers.DP_PARAMS
-    for method in {_adaptive_label(m)[0] for d in pcfg["fastvi"].values() for m in d} | {
+    for method in _panel_methods(pcfg) | {
             pcfg["growth"]["fastvi"][0]}:
         fastvi.integrate(model, q0, v0, h=0.01, n_steps=2, method=method,
                          specialize=pcfg["specialize"])  # compile / load
@@ -1626,6 +1625,7 @@ def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> li
 
     import CyRK
 
+    adaptive = ", ".join(f"`{n}`" for n in sorted(_panel_methods(pcfg, adaptive_only=True)))
     P.append(
         f"The solver a speed-minded user would pick instead of fastvi: **DOP853 from CyRK "
         f"{CyRK.__version__}** (`CyRK.nbsolve2_ivp`, C++ solver, right-hand side a numba "
@@ -1639,7 +1639,7 @@ def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> li
         "model's sizes, bit for bit the default kernels' trajectories: what a speed-minded "
         "user runs; compiled outside the timing); `P1L-Q2G` … `P4L-Q5G` and `P4L-Q4G` "
         "(r = s: one quadrature point fewer than `P4L-Q5G`, the same order 8), h swept; and "
-        f"`<method> adaptive` ({_adaptive_methods(pcfg)}) with "
+        f"`<method> adaptive` ({adaptive}) with "
         f"`adaptive={PEER_ADAPTIVE_KR:g}` (the "
         "time-reversible adaptive step of `fastvi.kernels.adapt`: steps shrink where the "
         "pendulum whips; each step variational and on the constraints, but the map reversible, "

@@ -1647,8 +1647,8 @@ def peer_markdown(points, pcfg, figs, elapsed, missing: str | None = None) -> li
         "Regenerate with "
         "`make wpd` (installs the `bench` extra, CyRK, into `.venv`) or `python -m fastvi wpd` "
         "with CyRK installed (`pip install -e .[bench]`); `--no-peers` skips these sections. "
-        "The same comparison at one setting under pytest-benchmark: "
-        "`bench/test_bench_peers.py` (`make bench`).\n")
+        "The same comparison at the 1e-2 and 1e-4 J levels, in a minute, under "
+        "pytest-benchmark: `bench/test_bench_peers.py` (`make bench`).\n")
     P.append(
         f"**Measurements.** CPU time of the process (`time.process_time`), median of "
         f"{pcfg['repeats']} runs, every contender and setting run round-robin in one process "

@@ -9,7 +9,8 @@ issue 11: ≥ 10 at k = 1e8). Minutes, not the hour of the whole study.
 
     .venv/bin/python bench/stiff_panel.py [k ...] [--h-max=H]   (default: 1e7 1e8)
 
-``--h-max`` replaces the study's cap of fastvi's step (``wpd.STIFF_H_MAX``, 0.01): at large k
+``--h-max`` replaces the study's cap of fastvi's step (``wpd.STIFF_H_MAX``, 0.01; the stiff
+configuration's ``h_max``): at large k
 the cap, not the grid ωh ≈ c, sets fastvi's cheapest run (``docs/benchmarks.md``). Each
 run's rod-angle error against the tight reference is printed with it.
 
@@ -26,13 +27,14 @@ from fastvi.studies import wpd
 def main(argv: list[str]) -> None:
     opts = [a for a in argv if a.startswith("--")]
     ks = tuple(float(a) for a in argv if not a.startswith("--")) or (1e7, 1e8)
+    h_max = wpd.STIFF_H_MAX
     for o in opts:
         if o.startswith("--h-max="):
-            wpd.STIFF_H_MAX = float(o.split("=", 1)[1])
+            h_max = float(o.split("=", 1)[1])
         else:
             raise SystemExit(f"unknown option {o!r}: the options are --h-max=H")
     pcfg = dict(wpd.PEERS_FULL)
-    pcfg["stiff"] = dict(pcfg["stiff"], ks=ks)
+    pcfg["stiff"] = dict(pcfg["stiff"], ks=ks, h_max=h_max)
     points = wpd.peer_stiff_sweep(pcfg, lambda s: print(s, file=sys.stderr))
     for p in points:
         print(f"  {p.label:12s} k {p.k:g} knob {p.knob:.3g}  CPU {1e3 * p.cpu:.3f} ms  "

@@ -365,3 +365,28 @@ def test_an_adaptive_contender_saves_every_sample_dt_on_average():
     gaps = np.diff(res.t)[:-1]  # the last sample ends the run, whatever its gap
     assert np.mean(gaps) == pytest.approx(dt, rel=0.05)
     assert every > 1.5 * round(dt / eps)
+
+
+def test_a_level_looser_than_a_front_takes_the_cheaper_tighter_run_as_its_bound():
+    """A longer step that costs more than a shorter one (the front drops it) still shows
+    that the method reaches its looser level: the shorter step's run, which reaches it too,
+    bounds the cost there. A level no run of the method is that loose stays unreached."""
+    # the rival: cost = 1e-4 E^(−1/8) over 1e-1 … 1e-9
+    E = np.logspace(-1, -9, 9)
+    pts = [wpd.PeerPoint("pendulum", wpd.DOP_A, 0.0, 1.0, 1e-4 * e ** -0.125, dH=e, work=100)
+           for e in E]
+    # fastvi: ε = 0.08 reaches 2e-2 J in 27.1 ms, ε = 0.0625 3e-3 J in 27.0 ms, 0.05 1e-3 in 31
+    for knob, cpu, dH, work in ((0.08, 0.0271, 2e-2, 300), (0.0625, 0.0270, 3e-3, 400),
+                                (0.05, 0.031, 1e-3, 500)):
+        pts.append(wpd.PeerPoint("pendulum", "P2L-Q3G adaptive", knob, 1.0, cpu, dH=dH,
+                                 work=work))
+    (E1, best, which, riv, x), (E2, best2, _, _, x2) = wpd.peer_ratios(
+        pts, 1.0, wpd.DOP_A, levels=(1e-2, 1e-1))
+    assert which == "P2L-Q3G adaptive" and best == 0.0270
+    assert x == pytest.approx(0.0270 / (1e-4 * 1e-2 ** -0.125), rel=1e-12)
+    assert np.isnan(best2) and np.isnan(x2)  # no run of it is as loose as 1e-1 J
+    (_, _, xs, xc), = wpd.peer_split(pts, 1.0, wpd.DOP_A, levels=(1e-2,))
+    assert xs == pytest.approx(4.0) and xs * xc == pytest.approx(x, rel=1e-12)
+    # between two front runs nothing changes: interpolation
+    (_, best3, _, _, _), = wpd.peer_ratios(pts, 1.0, wpd.DOP_A, levels=(2e-3,))
+    assert 0.0270 < best3 < 0.031

@@ -3,7 +3,7 @@
 The rod–slider of ``docs/wpd.md`` ("Stiff rod–slider") with the study's full settings
 (``wpd.PEERS_FULL["stiff"]``: fastvi's four methods over ωh ≈ 64 … 0.5 with
 ``specialize=True``, CyRK DOP853 / LSODA / Radau over their tolerances, every contender
-round-robin in one process, median of 3), at the given k only, and its table: CPU time of
+round-robin in one process, median of ``repeats``), at the given k only, and its table: CPU time of
 each contender to reach max|ΔH| ≤ 1e-4 J and the ratio best peer / best fastvi (goal of
 issue 11: ≥ 10 at k = 1e8). Minutes, not the hour of the whole study.
 

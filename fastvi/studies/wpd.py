@@ -1086,7 +1086,9 @@ _NO_SAMPLES = 1 << 40  # save_every of a run whose samples are not read: the fir
 ADAPTIVE = " adaptive"
 
 PEERS_FULL = dict(
-    repeats=3,
+    #: the host's load slows single runs by up to 40 %: a median of 5 interleaved runs
+    #: keeps one slow stretch from moving a contender's point (3 did not, 2026-11-27)
+    repeats=5,
     starts=8,
     #: fastvi as a speed-minded user runs it against a compiled peer: the kernels compiled
     #: for the model's sizes (bit for bit the default kernels' trajectories; one compile per

@@ -3,16 +3,16 @@
 The rod–slider of ``docs/wpd.md`` ("Stiff rod–slider") with the study's full settings
 (``wpd.PEERS_FULL["stiff"]``: fastvi's four methods over ωh ≈ 64 … 0.5 with
 ``specialize=True``, CyRK DOP853 / LSODA / Radau over their tolerances, every contender
-round-robin in one process, median of ``repeats``), at the given k only, and its table: CPU time of
-each contender to reach max|ΔH| ≤ 1e-4 J and the ratio best peer / best fastvi (goal of
-issue 11: ≥ 10 at k = 1e8). Minutes, not the hour of the whole study.
+round-robin in one process, median of ``repeats``), at the given k only, and its table:
+CPU time of each contender to reach max|ΔH| ≤ 1e-4 J and the ratio best peer / best fastvi
+(goal of issue 11: ≥ 10 at k = 1e8). Minutes, not the hour of the whole study.
 
     .venv/bin/python bench/stiff_panel.py [k ...] [--h-max=H]   (default: 1e7 1e8)
 
-``--h-max`` replaces the study's cap of fastvi's step (``wpd.STIFF_H_MAX``, 0.01; the stiff
-configuration's ``h_max``): at large k
-the cap, not the grid ωh ≈ c, sets fastvi's cheapest run (``docs/benchmarks.md``). Each
-run's rod-angle error against the tight reference is printed with it.
+``--h-max`` sets the stiff configuration's ``h_max``, the cap of fastvi's step (the study's:
+``wpd.STIFF_H_MAX``, 0.01): at large k the cap, not the grid ωh ≈ c, sets fastvi's cheapest
+run (``docs/benchmarks.md``). Each run's rod-angle error against the tight reference is
+printed with it.
 
 Needs the ``bench`` extra (CyRK).
 """

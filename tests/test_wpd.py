@@ -390,3 +390,18 @@ def test_a_level_looser_than_a_front_takes_the_cheaper_tighter_run_as_its_bound(
     # between two front runs nothing changes: interpolation
     (_, best3, _, _, _), = wpd.peer_ratios(pts, 1.0, wpd.DOP_A, levels=(2e-3,))
     assert 0.0270 < best3 < 0.031
+
+
+def test_the_adaptive_pilot_runs_once_per_model_and_setting(monkeypatch):
+    """The study times a setting several times; its (deterministic) pilot runs once."""
+    model = fastvi.scenes.pendulum()
+    q0, v0 = model.initial_state(1.0)
+    calls = []
+    real = wpd.fastvi.integrate
+    monkeypatch.setattr(wpd.fastvi, "integrate", lambda *a, **k: calls.append(k["h"]) or real(*a, **k))
+    first = wpd.adaptive_sample_every(model, q0, v0, "P2L-Q3G", 0.1, 20.0)
+    again = wpd.adaptive_sample_every(model, q0, v0, "P2L-Q3G", 0.1, 20.0)
+    other = wpd.adaptive_sample_every(model, q0, v0, "P2L-Q3G", 0.05, 20.0)
+    assert first == again and calls == [0.1, 0.05] and other >= first
+    assert wpd.adaptive_sample_every(fastvi.scenes.pendulum(), q0, v0, "P2L-Q3G", 0.1, 20.0) == first
+    assert calls == [0.1, 0.05, 0.1]  # a new model runs its own pilot

@@ -63,6 +63,7 @@ import os
 import platform
 import sys
 import time
+import weakref
 from dataclasses import dataclass, field, replace
 
 import numba as nb
@@ -1219,13 +1220,27 @@ def adaptive_sample_every(model, q0, v0, method, eps, T, params=None, sample_dt=
     seconds on average, as the fixed steps do: the mean step ``T_p / steps`` of a pilot run
     over ``T_p = min(T, PEER_PILOT_T)`` (steps shrink where the pendulum whips: the mean
     step of the double pendulum is ≈ ε/2.2, so ``sample_dt/ε`` would save 2.2× as often,
-    and a saved sample costs a fraction of a step)."""
-    Tp = min(T, PEER_PILOT_T)
-    pilot = fastvi.integrate(model, q0, v0, h=eps, t_end=Tp, method=method, params=params,
-                             save_every=_NO_SAMPLES, on_failure="return",
-                             specialize=specialize, adaptive=kr)
-    mean_step = float(pilot.t[-1] - pilot.t[0]) / max(1, int(pilot.stats["steps"]))
-    return max(1, int(round(sample_dt / mean_step)))
+    and a saved sample costs a fraction of a step).
+
+    The pilot is deterministic, so its answer is kept per model and arguments: the study
+    and the bench scripts time the same setting 5–7 times, and each pilot is a tenth of the
+    timed run. ``specialize`` is not part of the key (the same trajectory bit for bit)."""
+    key = (np.asarray(q0, float).tobytes(), np.asarray(v0, float).tobytes(), method,
+           float(eps), float(T), None if params is None else np.asarray(params, float).tobytes(),
+           float(sample_dt), float(kr))
+    known = _PILOTS.setdefault(model, {})
+    if key not in known:
+        Tp = min(T, PEER_PILOT_T)
+        pilot = fastvi.integrate(model, q0, v0, h=eps, t_end=Tp, method=method, params=params,
+                                 save_every=_NO_SAMPLES, on_failure="return",
+                                 specialize=specialize, adaptive=kr)
+        mean_step = float(pilot.t[-1] - pilot.t[0]) / max(1, int(pilot.stats["steps"]))
+        known[key] = max(1, int(round(sample_dt / mean_step)))
+    return known[key]
+
+
+#: :func:`adaptive_sample_every`'s answers, per model (dropped with the model)
+_PILOTS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 def _panel_methods(pcfg, adaptive_only: bool = False) -> set:

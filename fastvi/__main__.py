@@ -12,6 +12,7 @@ import sys
 
 #: command -> (module, one-line description)
 COMMANDS = {
+    "compile": ("fastvi.warmup", "compile the kernels into the cache, or time a cold first session (--report)"),
     "demo": ("fastvi.studies.demo", "integrate the double pendulum and print a summary"),
     "paper-b": ("fastvi.studies.paper_b", "reproduce paper B's tables and figures"),
     "orders": ("fastvi.studies.orders", "measure convergence orders of every combination (docs/orders.md)"),

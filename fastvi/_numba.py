@@ -8,8 +8,9 @@ from pathlib import Path
 
 import numba as nb
 from numba import types
-from numba.core import caching
+from numba.core import caching, cgutils
 from numba.core.extending import intrinsic
+from numba.core.imputils import impl_ret_borrowed
 
 # First-class function values (our cfunc callbacks) are "experimental" in numba's words;
 # they are the documented way to pass compiled callbacks and we test them, so the warning
@@ -194,3 +195,57 @@ def ptr(typingctx, arr):
         return context.make_array(signature.args[0])(context, builder, value=args[0]).data
 
     return types.CPointer(arr.dtype)(arr), codegen
+
+
+# ----------------------------------------------------------------------------- by reference
+@intrinsic
+def byref(typingctx, x):
+    """A pointer to a copy of the value ``x`` (a named tuple of arrays) in the caller's frame.
+
+    numba passes a tuple to a function that it does not inline as its flattened fields: the
+    workspace alone is some 370 machine words, copied at every call (a step of the double
+    pendulum spent half its time so). A kernel passes ``byref(ws)`` instead, one word, and
+    the callee reads the fields it needs through :func:`own`. Only arrays and scalars are
+    copied into the slot, never array data, so writes through the callee's views land in
+    the caller's arrays. The slot lives as long as the calling function's frame: pass the
+    pointer down, never return it.
+    """
+    if isinstance(x, types.CPointer):
+        return None
+    sig = types.CPointer(x)(x)
+
+    def codegen(context, builder, signature, args):
+        dm = context.data_model_manager[signature.args[0]]
+        slot = cgutils.alloca_once(builder, dm.get_data_type())
+        builder.store(dm.as_data(builder, args[0]), slot)
+        return slot
+
+    return sig, codegen
+
+
+@intrinsic
+def own(typingctx, x):
+    """The value behind a :func:`byref` pointer, or ``x`` itself when it is a value: kernels
+    take either (tests call them with the named tuples themselves). An intrinsic, so that
+    it is code in its caller, not a call: a function returning the workspace would copy all
+    its fields through numba's return slot at every use."""
+    if not isinstance(x, types.CPointer):
+        # a borrowed reference: counted where numba counts references (not in hot kernels)
+        return x(x), lambda context, builder, sig, args: impl_ret_borrowed(
+            context, builder, sig.return_type, args[0])
+    sig = x.dtype(x)
+
+    def codegen(context, builder, signature, args):
+        ty = signature.return_type
+        dmm = context.data_model_manager
+        if not isinstance(ty, types.BaseTuple):
+            value = dmm[ty].load_from_data_pointer(builder, args[0])
+        else:
+            # field by field rather than one load of the whole aggregate: LLVM then drops
+            # the loads of the fields a callee never reads
+            fields = [dmm[t].load_from_data_pointer(builder, cgutils.gep_inbounds(builder, args[0], 0, i))
+                      for i, t in enumerate(ty.types)]
+            value = context.make_tuple(builder, ty, fields)
+        return impl_ret_borrowed(context, builder, ty, value)
+
+    return sig, codegen

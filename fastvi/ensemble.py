@@ -25,6 +25,7 @@ from ._launch import Launcher
 from .integrate import Result, _timed
 from .kernels import drive
 from .kernels import layout as lay
+from .kernels.step import step_kernel
 from .model import Model
 from .results import ResultBase, _finish_figure, _new_figure
 from .status import MESSAGES, Status
@@ -579,10 +580,18 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
             dims = (model.n, model.m, meth.s, meth.r, meth.J)
             if opts.get("specialize", False):
                 dims = lay.parallel_markers(dims)
-            args = (fns, flags, Mc, KP, model.kernel_data().timed, meth.kernel_tables,
+            # the members' step: the one integrate compiles for a workspace of this type
+            t_step = time.perf_counter()
+            ws = structure.workspace(model, meth, None, opts.get("solver", "auto"))
+            if opts.get("specialize", False):
+                ws = lay.specialize(ws)
+            stepk = step_kernel(model.kernel_data(), meth.kernel_tables,
+                                opts["newton"], ws)
+            compile_time += time.perf_counter() - t_step
+            args = (fns, flags, Mc, KP, meth.kernel_tables,
                     opts["newton"], h, t0, dims, plan.si, plan.sb, X0, total, mode, every, H0,
                     Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, ev.fns, ev.count, ev.direction,
-                    ev.terminal, Te, Qe, Ve, Ne)
+                    ev.terminal, Te, Qe, Ve, Ne, stepk)
             run, seconds = _RUN_ENSEMBLE.bind(*args)
             compile_time += seconds
             t_loop = time.perf_counter()

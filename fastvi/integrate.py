@@ -20,6 +20,7 @@ from ._numba import quiet
 from .kernels import drive
 from .kernels import layout as lay
 from .kernels.layout import Samples
+from .kernels.step import step_kernel
 from .model import Model
 from .results import ProgressBar, Result
 from .status import MESSAGES, Status
@@ -343,9 +344,11 @@ def integrate(
         event_values(md, ev, t0, q0, v0)
 
     sout = np.zeros(lay.STEP_OUT_SIZE)
-    sized = True if specialize else None
+    t_step = time.perf_counter()
+    stepk = step_kernel(md, tabs, opts, ws)
+    compile_time += time.perf_counter() - t_step
     run, seconds = _RUN.bind(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout,
-                             ev, sized)
+                             ev, stepk)
     compile_time += seconds
     span = None if adaptive is None else float(t_end) - t0
     bar = None
@@ -360,11 +363,11 @@ def integrate(
             smp = _room(smp, _samples_after_chunk(int(info[lay.I_SLOT]), chunk, every))
         with quiet():
             status = run(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout, ev,
-                         sized)
+                         stepk)
         if status == lay.EVENTS_FULL:
             ev = events_.grow(ev)
             run = _RUN.bind(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout, ev,
-                            sized)[0]
+                            stepk)[0]
             status = 0
             continue
         if status == lay.EVENT_TERMINAL:  # the step containing the event is the last sample
@@ -473,7 +476,7 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
         with quiet():
             st = _RUN(md, tabs, opts, h / sub, trial, ws_sub, sub, sub, sub, smp_sub, info_sub,
                       np.zeros(lay.STEP_OUT_SIZE), events_.prepare(model, meth, None, 0),
-                      True if specialize else None)
+                      step_kernel(md, tabs, opts, ws_sub))
         if st == 0:
             state[:3] = trial[:3]
             info[lay.I_ITERS] += info_sub[lay.I_ITERS]

@@ -597,11 +597,8 @@ class Model:
 
     def kernel_data(self, params=None, t: float = 0.0):
         """The :class:`fastvi.kernels.layout.ModelData` the kernels receive: the callbacks,
-        flags, constant mass, :meth:`kernel_params` and the kind marker (``None`` for a
-        conservative, autonomous model: its kernels are compiled without any force or time
-        code)."""
-        return lay.ModelData(*self._compile(), self.kernel_params(params, t),
-                             True if self.timed else None)
+        flags, constant mass and :meth:`kernel_params` (one type for every model)."""
+        return lay.ModelData(*self._compile(), self.kernel_params(params, t))
 
     def _compile(self):
         if self._compiled is None:

@@ -21,7 +21,7 @@ a plain numba loop needs no function pointer baked into a cached kernel.
 
 import numpy as np
 
-from .._numba import hot, hot_inline
+from .._numba import hot, hot_inline, own
 from .layout import (NONFINITE, OK, S_GV, SI_A_BAND, SI_A_KL, SI_A_KU, SI_A_PERM, SI_GCOL, SI_GPTR,
                      SI_RHS, SI_S, SI_S_BAND, SI_S_DST, SI_S_IPERM, SI_S_KL, SI_S_KU, SI_S_LEN, SI_S_LU, SI_S_PERM,
                      SI_SC, SI_SC_BAND, SI_SC_DST, SI_SC_KL, SI_SC_KU, SI_SC_LEN, SI_SC_LU,
@@ -122,9 +122,10 @@ def band_pack(A, perm, ab, N, kl, ku):
 
 
 @hot
-def newton_banded(ws, N):
+def newton_banded(ws_, N):
     """Full Newton: ``ws.R`` ← ``A⁻¹ ws.R`` through the banded LU of the permuted ``ws.A``.
     Returns 0, or non-zero when a pivot vanished."""
+    ws = own(ws_)
     si, sb = ws.si, ws.sb
     kl = si[SI_A_KL]
     ku = si[SI_A_KU]
@@ -170,10 +171,11 @@ def gt_times(si, Gj, y, out, scale, m):
 
 
 @hot
-def schur_structured(ws, W, h, m, J):
+def schur_structured(ws_, W, h, m, J):
     """Build ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` over the pattern of ``G Gᵀ`` straight into its
     banded or sparse factor storage (diagonal ``M̄``: ``ws.Y[j']`` holds ``G_{j'} M̄⁻¹`` on the
     pattern of G) and factor it. Returns 0, or non-zero when a pivot vanished."""
+    ws = own(ws_)
     si, G, Y = ws.si, ws.G, ws.Y
     Jm = J * m
     st = ws.sb[si[SI_SC_BAND]: si[SI_SC_BAND] + si[SI_SC_LEN]]
@@ -235,9 +237,10 @@ def g_sub(si, Gj, x, R, off, m):
 
 
 @hot
-def mech_rows_sparse(ws, j, m):
+def mech_rows_sparse(ws_, j, m):
     """``ws.Y[j]`` = ``G_j M̄⁻¹`` on the pattern of G (diagonal ``M̄``; the rest of ``Y``
     stays zero in a structured workspace)."""
+    ws = own(ws_)
     si = ws.si
     gp = si[SI_GPTR]
     gc = si[SI_GCOL]
@@ -292,13 +295,14 @@ def gmg_solve(si, sb, x, m, piv):
 
 
 @hot
-def project_structured(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic, out):
+def project_structured(Mc, q1, P, p1, v1, G1, ws_, n, m, rheonomic, out):
     """The end projection of :func:`.step.end_momentum` for a diagonal constant mass with
     ``G M⁻¹ Gᵀ`` built over the pattern of ``G Gᵀ`` and factored banded or sparse
     (:func:`gmg_factor`): ``p1 = P − G1ᵀ η``, ``(G M⁻¹ Gᵀ) η = G M⁻¹ P (+ g_t in ws.gt if
     rheonomic)``, ``v1 = M⁻¹ p1``; then, over the pattern of G as well, ``out[S_GV]`` =
     max|G1 v1 + g_t| and ``ws.G[0]`` = G1 (the next step's start; zero outside the pattern
     in both)."""
+    ws = own(ws_)
     si, sb = ws.si, ws.sb
     gp = si[SI_GPTR]
     gc = si[SI_GCOL]
@@ -337,12 +341,13 @@ def project_structured(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic, out):
 
 
 @hot
-def mech_impulses_structured(ws, Lc, Ainv, h, n, m, s, J):
+def mech_impulses_structured(ws_, Lc, Ainv, h, n, m, s, J):
     """The impulse part of :func:`.step._mech_solve` with the pattern of G: from the stage
     increments ``ws.U`` (``h (A⁻¹ ⊗ M̄⁻¹) r_E``), subtract ``C U`` from the constraint rows of
     ``ws.R``, solve the structured Schur complement for ``δη``, and add
     ``h (A⁻¹ ⊗ M̄⁻¹) B δη`` to ``ws.U``. Not inlined, so that the step of small models
     compiles to the code it had before."""
+    ws = own(ws_)
     R, Z, U, Y, G = ws.R, ws.Z, ws.U, ws.Y, ws.G
     T = ws.fa
     sn = s * n

@@ -10,18 +10,17 @@ ensemble equals :func:`fastvi.integrate` of that member bit for bit by construct
 import numpy as np
 from numba import prange
 
-from .._numba import hot, hot_inline, njit, ptr
+from .._numba import byref, hot, hot_inline, njit, ptr
 from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_ITERS,
                      F_MAXRES, F_RES, F_TSLOT, I_FAILED, I_FIRST, I_FULL, I_ITERS, I_MAXRES,
                      I_KR, I_RES, I_SLOT, I_STEPS, I_T, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK,
                      INFO_SIZE,
                      POT, S_FULL, S_G, S_GV, S_ITERS, S_RES, S_WORK, SAVE_DIAGNOSTICS, SAVE_FINAL,
                      SAVE_STRIDE, STEP_OUT_SIZE, EVENT_SLOTS, EVENTS_FULL, Events, ModelData,
-                     Samples, dim, is_timed, member_sizes, sized_flag, sizes, with_plan,
+                     Samples, dim, is_timed, member_sizes, sizes, with_plan,
                      workspace_for)
 from .adapt import advance, finished, next_step
 from .events import after_step, event_values, room_for_crossings
-from .step import step, step_inlined
 
 __all__ = ["run", "run_member", "run_ensemble", "energy", "accept", "record", "INFO_SIZE"]
 
@@ -117,12 +116,12 @@ def _book(status, k, state, ws, info, sout):
 
 @hot
 def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, sout, ev,
-        sized=None):
+        stepk):
     """Advance ``state`` (rows q, p, v, then scratch) by up to ``n_chunk`` steps, step k
     running from ``info[I_T0] + k h``; ``sout`` is the step's output scratch
     (``STEP_OUT_SIZE``); ``ev`` the :class:`.layout.Events` of the run (no events and no
     dense rows: the event code is skipped by one test per chunk). Events are a run-time
-    switch, not a type-level one like ``ModelData.timed``: every kernel variant costs ≈ 45 s
+    switch: every kernel variant costs ≈ 45 s
     of compile on an empty cache, and one test a chunk costs nothing measurable.
 
     The time loop is ``hot`` (no reference counting) with the bookkeeping inlined: with
@@ -136,9 +135,8 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
     ``EVENT_TERMINAL`` after the step in which a terminal event fired, ``EVENTS_FULL``
     before a step when an event record has no room left.
 
-    ``sized``: None, or True for a workspace of size markers (``integrate(...,
-    specialize=True)``), whose loop has the step compiled into it
-    (:data:`.step.step_inlined`).
+    ``stepk``: the compiled step for these argument types (:func:`.step.step_kernel`),
+    called through its address with pointers to the named tuples (:func:`.byref`).
 
     Adaptive steps (``info[I_KR] > 0``, another run-time switch): ``h`` is then ε, step k
     has the length of :func:`.adapt.next_step` and the run ends at ``info[I_TEND]``
@@ -146,6 +144,10 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
     """
     active = ev.count > 0 or ev.dense.shape[0] > 0
     adaptive = info[I_KR] > 0.0
+    # the step reads the model, tables and workspace through pointers: one word each
+    # instead of their flattened fields copied at every call (_numba.byref)
+    mdp, tabp, optp, wsp = byref(md), byref(tabs), byref(opts), byref(ws)
+    statep, soutp = byref(state), byref(sout)
     hk = h
     for _ in range(n_chunk):
         k = int(info[I_STEPS])
@@ -161,12 +163,7 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
         else:
             _clock(ws, info, h)
         first = info[I_FIRST] != 0.0
-        # decided when numba compiles `run` (an argument that is None is pruned before the
-        # inlining): only the size-specialized loop carries the step's body
-        if sized is None:
-            status = step(md, tabs, opts, hk, state, ws, first, sout)
-        else:
-            status = step_inlined(md, tabs, opts, hk, state, ws, first, sout)
+        status = stepk(mdp, tabp, optp, hk, statep, wsp, first, soutp)
         status = _book(status, k, state, ws, info, sout)
         if status != 0:
             return status
@@ -187,7 +184,7 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
 # ----------------------------------------------------------------------------- ensembles
 @hot
 def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, ist, fst, sout,
-               info, ev, sized=None):
+               info, ev, stepk):
     """Advance one member (rows q, p, v, then scratch of ``state``) through ``n_total`` steps.
 
     ``mode`` is ``SAVE_FINAL`` (the final state into slot 0 of ``smp``), ``SAVE_STRIDE``
@@ -204,9 +201,8 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
     the step that contains it (status ``EVENT_TERMINAL``); in stride mode that step is then
     the last sample, as in :func:`fastvi.integrate`.
 
-    ``sized``: None, or True for a workspace of size markers, whose member loop has the
-    step compiled into it (:data:`.step.step_inlined`), as :func:`run` does for
-    ``integrate(..., specialize=True)``: the same step, bit for bit.
+    ``stepk``: the compiled step (:func:`.step.step_kernel`), the very one
+    :func:`fastvi.integrate` of that member calls: the same step, bit for bit.
     """
     for k in range(INFO_SIZE):
         info[k] = 0.0
@@ -222,6 +218,8 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
     active = ev.count > 0
     if active:
         event_values(md, ev, t0, state[0], state[2])
+    mdp, tabp, optp, wsp = byref(md), byref(tabs), byref(opts), byref(ws)
+    statep, soutp = byref(state), byref(sout)
     while int(info[I_STEPS]) < n_total:
         k = int(info[I_STEPS])
         if active:
@@ -229,10 +227,7 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
                 ev.qk[a] = state[0, a]
         _clock(ws, info, h)
         first = info[I_FIRST] != 0.0
-        if sized is None:  # pruned when numba compiles run_member, as in run
-            status = step(md, tabs, opts, h, state, ws, first, sout)
-        else:
-            status = step_inlined(md, tabs, opts, h, state, ws, first, sout)
+        status = stepk(mdp, tabp, optp, h, statep, wsp, first, soutp)
         status = _book(status, k, state, ws, info, sout)
         fst[F_RES] = sout[S_RES]
         if status != 0:
@@ -268,9 +263,9 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
 
 
 @njit(parallel=True)
-def run_ensemble(fns, flags, Mc, P, timed, tabs, opts, h, t0, dims, si, sb, X0, n_total, mode, every,
+def run_ensemble(fns, flags, Mc, P, tabs, opts, h, t0, dims, si, sb, X0, n_total, mode, every,
                  H0, Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, efns, ecount, edir, eterm, Te, Qe,
-                 Ve, Ne):
+                 Ve, Ne, stepk):
     """``run_member`` for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in parallel.
 
     ``dims`` = (n, m, s, r, J), integers (the generic kernels) or parallel markers
@@ -279,7 +274,7 @@ def run_ensemble(fns, flags, Mc, P, timed, tabs, opts, h, t0, dims, si, sb, X0, 
     ``sb`` are the structured-solve plan of the model and method (:func:`fastvi.structure.plan`;
     each member solves with its own copy of ``sb``). ``P``
     (N, k + 1) holds each member's kernel parameters (the kernels write the time into the
-    last entry of a member's own row) and ``timed`` the kind marker of ``ModelData``; the
+    last entry of a member's own row); the
     outputs are indexed by
     member first (``Qs`` (N, K, n), ``En``, ``Wk`` (N, K), ``ist`` (N, E_SIZE), ``fst``
     (N, F_SIZE)). Each member gets its own workspace and state, allocated inside the loop
@@ -288,7 +283,8 @@ def run_ensemble(fns, flags, Mc, P, timed, tabs, opts, h, t0, dims, si, sb, X0, 
     Events: ``efns`` (EVENT_SLOTS callbacks, the first ``ecount`` used), ``edir``, ``eterm``
     as in :class:`.layout.Events`; member ``i`` keeps its first ``Te.shape[2]`` crossings of
     each event in ``Te[i]`` (E, K), ``Qe[i]``, ``Ve[i]`` (E, K, n) and counts all of them in
-    ``Ne[i]`` (EVENT_SLOTS,).
+    ``Ne[i]`` (EVENT_SLOTS,). ``stepk`` is the compiled step for a member's workspace
+    (:func:`.step.step_kernel`).
     """
     n = dim(dims[0])
     s = dim(dims[2])
@@ -305,6 +301,6 @@ def run_ensemble(fns, flags, Mc, P, timed, tabs, opts, h, t0, dims, si, sb, X0, 
         ev = Events(efns, ecount, edir, eterm, np.zeros(EVENT_SLOTS), Te[i], Qe[i], Ve[i], Ne[i],
                     np.zeros((0, s + 1, n)), np.zeros((s + 1, n)), np.zeros(n), np.zeros(n),
                     np.zeros(n), np.zeros(s + 1), np.zeros(s + 1), np.zeros(1))
-        run_member(ModelData(fns, flags, Mc, P[i], timed), tabs, opts, h, t0, state, ws, n_total,
+        run_member(ModelData(fns, flags, Mc, P[i]), tabs, opts, h, t0, state, ws, n_total,
                    mode, every, H0[i], smp, ist[i], fst[i], np.zeros(STEP_OUT_SIZE),
-                   np.zeros(INFO_SIZE), ev, sized_flag(dims))
+                   np.zeros(INFO_SIZE), ev, stepk)

@@ -6,17 +6,15 @@ imported by :mod:`fastvi.model`, the step and drive kernels, the RK4 baseline an
 yardstick in ``bench/``. Kernels receive a handful of named tuples instead of long
 positional argument lists:
 
-``ModelData(fns, flags, Mc, prm, timed)``
+``ModelData(fns, flags, Mc, prm)``
     the model's compiled callbacks (tuple in :data:`SLOTS` order), its int64 flags vector
     (indices ``F_*``), the constant mass matrix (zeros when ``M`` is a function) and the
     parameter vector of this trajectory, always built by
     :meth:`fastvi.Model.kernel_params` (k + 1 entries: the kernels write the time into the
-    last one, so a bare ``model.params`` would be written past its end), and ``timed``:
-    ``None`` for a conservative, autonomous model, ``True`` for one with forces or time.
-    ``timed`` is a *type-level* switch: numba compiles the kernels once for each kind and
-    removes the force and time code from the conservative ones (:func:`is_timed`; a
-    run-time flag there cost 6–10 % of a conservative step, measured side by side). Build
-    it with :meth:`fastvi.Model.kernel_data`;
+    last one, so a bare ``model.params`` would be written past its end). Every model has
+    this one type, so one compiled step serves conservative models and models with forces
+    or time alike (which code runs is the flags' choice, :func:`is_timed`). Build it with
+    :meth:`fastvi.Model.kernel_data`;
 ``NewtonOptions(tol, max_iter, mode)``
     the stopping tolerance, the iteration cap and the Newton variant (``NEWTON_*``);
 ``Tables`` (:meth:`fastvi.tables.Method.kernel_tables`)
@@ -199,7 +197,7 @@ F_SIZE = 6
 #: |g|, |G v| and the sum of Newton iterations over the steps since the previous sample, and
 #: the work of forces and time since the start (zero for a conservative model)
 Samples = namedtuple("Samples", ["t", "q", "v", "p", "energy", "g", "gv", "iters", "work"])
-ModelData = namedtuple("ModelData", ["fns", "flags", "Mc", "prm", "timed"])
+ModelData = namedtuple("ModelData", ["fns", "flags", "Mc", "prm"])
 NewtonOptions = namedtuple("NewtonOptions", ["tol", "max_iter", "mode"])
 #: dense output and events of one trajectory (kernels/events.py): the event callbacks
 #: (EVENT_SLOTS, the first ``count`` used), per event ``direction`` and ``terminal`` (int64),
@@ -277,9 +275,12 @@ Workspace = namedtuple(
 
 @hot_inline
 def is_timed(md):
-    """Whether the model reads the time or has a force: a compile-time constant (see
-    ``ModelData.timed``), so the branches it guards vanish from conservative kernels."""
-    return md.timed is not None
+    """Whether the model reads the time or has a force (its flags ``F_TIME``, ``F_FORCE``).
+
+    A run-time test: a type-level switch compiled every kernel twice, once without the
+    force and time code, for a conservative step a few per cent cheaper
+    (``docs/decisions/0001-kernel-shape.md``)."""
+    return md.flags[F_FORCE] != 0 or md.flags[F_TIME] != 0
 
 
 @hot_inline

@@ -27,9 +27,12 @@ Model, method, options and scratch arrive as the named tuples of :mod:`.layout`;
 here allocates.
 """
 
+import numba
 import numpy as np
+from numba.core import types
 
-from .._numba import hot, hot_inline, inline_copy, ptr
+from .._launch import _key
+from .._numba import hot, hot_inline, own, ptr
 from .banded import (gt_times, mech_impulses_structured, mech_rows_sparse, newton_banded,
                      project_structured, schur_structured)
 from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
@@ -43,7 +46,7 @@ from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F
 from .linalg import (invert, invert_unpivoted, lu_factor, lu_factor_small, lu_solve,
                      lu_solve_small)
 
-__all__ = ["make_workspace", "assemble", "residual", "linear_force", "step", "step_inlined",
+__all__ = ["make_workspace", "assemble", "residual", "linear_force", "step", "step_kernel",
            "end_momentum", "velocity_residual", "hidden_residual", "constraint_rate"]
 
 _FD_REL = 6.0554544523933395e-06  # cbrt(machine epsilon): central differences' best step
@@ -296,12 +299,13 @@ def _point_force(md, ws, Mi, has_mass, n):
 
 
 @hot
-def assemble(md, tabs, h, qk, pk, ws, jac):
+def assemble(md_, tabs_, h, qk, pk, ws_, jac):
     """Residual (and, if ``jac``, the Newton matrix) at the unknowns ``ws.X``.
 
     Also leaves ``ws.D`` (∂S_u/∂Q^ν) and ``ws.G[j]`` (G at the constraint points j ≥ 1).
     Returns 0, or ``NONFINITE`` when a callback produced NaN/inf.
     """
+    md, tabs, ws = own(md_), own(tabs_), own(ws_)
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     b, L, Ld, Lc = tabs.b, tabs.L, tabs.Ld, tabs.Lc
     X, R, A = ws.X, ws.R, ws.A
@@ -595,13 +599,14 @@ def extrapolate_varied(tau, Lw, Ew, Z, hist, Xp, Xpp, X, s, n, two, h, vk):
                 X[nu * n + a] = Z[nu, a]
 
 
-@hot_inline
-def predict(tabs, n, m, h, vk, ws, order):
+@hot
+def predict(tabs_, n, m, h, vk, ws_, order):
     """Initial guess of ``order`` 2: the polynomial of degree s + 2 through the last step's
     control points and the nearest one of the step before, with slope ``v_k`` at ``t_k``
     (error O(h^(s+3))), extrapolated onto this step; 1 (or 2 with only one step known): of
     the last step alone (degree s); 0: the straight line with ``v_k``. The impulses are the
     last step's (zero for order 0)."""
+    tabs, ws = own(tabs_), own(ws_)
     E, tau = tabs.E, tabs.tau
     _, _, s, _, J = sizes(ws)
     X = ws.X
@@ -645,7 +650,7 @@ def _apply_increment(X, R, N, sn, qscale):
 
 
 @hot
-def newton_full(md, tabs, opts, h, qk, pk, ws, out):
+def newton_full(md_, tabs_, opts, h, qk, pk, ws_, out):
     """Newton's method with the exact Newton matrix, from the unknowns in ``ws.X``.
 
     Stops on the increment of the control points, scaled by ``max(1, |q_k|)``: converged
@@ -661,6 +666,7 @@ def newton_full(md, tabs, opts, h, qk, pk, ws, out):
     this function with the assembly (:data:`step_inlined`), and every call site would be
     another copy of the assembly to compile.
     """
+    md, tabs, ws = own(md_), own(tabs_), own(ws_)
     X, R, A, piv = ws.X, ws.R, ws.A, ws.piv
     n, m, s, _, J = sizes(ws)
     sn = s * n
@@ -676,13 +682,13 @@ def newton_full(md, tabs, opts, h, qk, pk, ws, out):
         if not final:
             it += 1
             out[S_ITERS] = it
-        st = assemble(md, tabs, h, qk, pk, ws, not final)
+        st = assemble(md_, tabs_, h, qk, pk, ws_, not final)
         if st != OK:
             return st
         if final:
             break
         if ws.si[SI_A] == SOLVE_BANDED:  # large sparse models (banded.py)
-            if newton_banded(ws, N) != 0:
+            if newton_banded(ws_, N) != 0:
                 return SINGULAR
         else:
             if lu_factor(A, piv, N) != 0:
@@ -769,8 +775,8 @@ def _mech_rows(md, ws, j, n, m):
         _minv(md, ws, Yc, n)
 
 
-@hot_inline
-def residual(md, tabs, h, qk, pk, ws):
+@hot
+def residual(md_, tabs_, h, qk, pk, ws_):
     """The residual alone at ``ws.X``, into ``ws.R`` (with ``ws.D`` and ``ws.G[1:]``).
 
     The same equations as :func:`assemble` without the Newton matrix, with the loops
@@ -779,6 +785,7 @@ def residual(md, tabs, h, qk, pk, ws):
     latency of their additions. It differs from ``assemble(jac=False)`` at round-off.
     Returns 0, or ``NONFINITE`` when a callback produced NaN/inf.
     """
+    md, tabs, ws = own(md_), own(tabs_), own(ws_)
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     b, L, Ld, Lc = tabs.b, tabs.L, tabs.Ld, tabs.Lc
     X, R, D, G = ws.X, ws.R, ws.D, ws.G
@@ -952,23 +959,25 @@ def _schur_build(tabs, h, ws, n, m, J):
 
 
 @hot
-def _schur_pivoted(tabs, h, ws, n, m, J):
+def _schur_pivoted(tabs_, h, ws_, n, m, J):
     """The Schur complement rebuilt and inverted with partial pivoting: the rare fallback of
     :func:`_schur`, called rather than inlined (a second build and a pivoted inverse inlined
     into every kernel cost compile time, not speed). Returns a status code."""
+    tabs, ws = own(tabs_), own(ws_)
     _schur_build(tabs, h, ws, n, m, J)
     if invert(ws.Sc, ws.pivs, J * m) != 0:
         return SINGULAR
     return OK
 
 
-@hot_inline
-def _schur(tabs, h, ws, n, m, J, inverse):
+@hot
+def _schur(tabs_, h, ws_, n, m, J, inverse):
     """Build the Schur complement ``[h W_{jj'} G_j M̄⁻¹ G_{j'}ᵀ]`` on the impulses from
     ``ws.G`` and ``ws.Y``, and factor it, or with ``inverse`` invert it. Returns a status
     code."""
+    tabs, ws = own(tabs_), own(ws_)
     if ws.si[SI_SC] != SOLVE_DENSE:  # large sparse models (banded.py)
-        if schur_structured(ws, tabs.W, h, m, J) != 0:
+        if schur_structured(ws_, tabs.W, h, m, J) != 0:
             return SINGULAR
         return OK
     _schur_build(tabs, h, ws, n, m, J)
@@ -981,14 +990,14 @@ def _schur(tabs, h, ws, n, m, J, inverse):
         # pivot (another placement, a near-singular configuration) rebuilds it for
         # partial pivoting
         if invert_unpivoted(ws.Sc, J * m) != 0:
-            return _schur_pivoted(tabs, h, ws, n, m, J)
+            return _schur_pivoted(tabs_, h, ws_, n, m, J)
     elif lu_factor_small(ws.Sc, ws.pivs, J * m) != 0:
         return SINGULAR
     return OK
 
 
-@hot_inline
-def _mech_solve(md, tabs, h, ws, n, m, s, J, inverse):
+@hot
+def _mech_solve(md_, tabs_, h, ws_, n, m, s, J, inverse):
     r"""Overwrite the residual ``ws.R`` with ``K̃⁻¹ R`` for the mechanics matrix
 
         K̃ = [ (1/h) A ⊗ M̄    −B ]      (B δη)_ν = Σ_{j<J} ℓ_ν(d_j) G_jᵀ δη_j
@@ -999,6 +1008,7 @@ def _mech_solve(md, tabs, h, ws, n, m, s, J, inverse):
     ``inverse`` inverted) solved for ``δη``, then ``δQ = t + h (A⁻¹ ⊗ M̄⁻¹) B δη``. ``C``
     uses the current ``G_j``. Returns a status code.
     """
+    md, tabs, ws = own(md_), own(tabs_), own(ws_)
     R, Z, U, Y, G = ws.R, ws.Z, ws.U, ws.Y, ws.G
     Ainv, Lc = tabs.Ainv, tabs.Lc
     T = ws.fa
@@ -1017,7 +1027,7 @@ def _mech_solve(md, tabs, h, ws, n, m, s, J, inverse):
                 U[mu, a] += c * Z[nu, a]
     if m > 0 and ws.si[SI_SC] != SOLVE_DENSE:
         # the same with the pattern of G, not inlined: small models' code stays as it was
-        mech_impulses_structured(ws, Lc, Ainv, h, n, m, s, J)
+        mech_impulses_structured(ws_, Lc, Ainv, h, n, m, s, J)
     elif m > 0:
         Jm = J * m
         for j in range(1, J + 1):
@@ -1077,8 +1087,8 @@ def _exact_mechanics(md):
             and not (is_timed(md) and flags[F_FORCE] != 0))
 
 
-@hot_inline
-def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
+@hot
+def newton_mech(md_, tabs_, opts, h, qk, pk, ws_, out):
     """Newton-like iteration with the mechanics matrix (see :func:`_mech_solve`).
 
     Stops when the scaled increment of the control points is below ``tol`` (or at the
@@ -1099,6 +1109,7 @@ def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
     ``P1L-Q2G`` on the double pendulum, against 5.5 with the Schur complement of the
     predictor's G(q_{k+1}) and the strict stop (docs/benchmarks.md).
     """
+    md, tabs, ws = own(md_), own(tabs_), own(ws_)
     X, R = ws.X, ws.R
     n, m, s, _, J = sizes(ws)
     sn = s * n
@@ -1111,7 +1122,7 @@ def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
     while it < opts.max_iter:
         it += 1
         out[S_ITERS] = it
-        st = residual(md, tabs, h, qk, pk, ws)
+        st = residual(md_, tabs_, h, qk, pk, ws_)
         if st != OK:
             return st
         res = 0.0
@@ -1125,10 +1136,10 @@ def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
             # is dropped (exact) that lag alone made the convergence linear: rebuilt then
             for j in range(1, J):
                 _mech_rows(md, ws, j, n, m)
-            st = _schur(tabs, h, ws, n, m, J, not exact)
+            st = _schur(tabs_, h, ws_, n, m, J, not exact)
             if st != OK:
                 return st
-        _mech_solve(md, tabs, h, ws, n, m, s, J, not exact)
+        _mech_solve(md_, tabs_, h, ws_, n, m, s, J, not exact)
         dn = _apply_increment(X, R, N, sn, qscale)
         if not np.isfinite(dn):
             return NONFINITE
@@ -1146,8 +1157,8 @@ def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
     return NEWTON_FAILED
 
 
-@hot_inline
-def _finish_mech(md, tabs, h, qk, ws, q1, n, m, s, J):
+@hot
+def _finish_mech(md_, tabs_, h, qk, ws_, q1, n, m, s, J):
     """After :func:`newton_mech`: q1, g(q1), G(q1) and ``D_s`` at the final unknowns.
 
     ``ws.D`` was assembled one increment ``δ = ws.R`` earlier; instead of a second full
@@ -1156,6 +1167,7 @@ def _finish_mech(md, tabs, h, qk, ws, q1, n, m, s, J):
     the residual's own mass block). The force part moves by
     O(h |∂F/∂q| |δ|), below round-off of the momentum. Returns max|g(q1)|.
     """
+    md, tabs, ws = own(md_), own(tabs_), own(ws_)
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     X, R, D, G = ws.X, ws.R, ws.D, ws.G
     Ks = tabs.Am[s - 1]
@@ -1193,13 +1205,14 @@ def _finish_mech(md, tabs, h, qk, ws, q1, n, m, s, J):
 
 # ----------------------------------------------------------------------------- one step
 @hot
-def step(md, tabs, opts, h, state, ws, first, out):
+def step(md_, tabs_, opts, h, state, ws_, first, out):
     """Advance ``state`` rows (q_k, p_k, v_k) by one step into rows 3–5 (q1, p1, v1).
 
     ``out`` (float64, ``STEP_OUT_SIZE``) receives the Newton iterations, max|g(q1)|,
     max|G(q1) v1|, the max-norm of the last residual and 1 if the step used the full
     Newton as a fallback. Returns a status code (0 on success).
     """
+    md, tabs, ws = own(md_), own(tabs_), own(ws_)
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     qk, pk, vk, q1, p1, v1 = state[0], state[1], state[2], state[3], state[4], state[5]
     X, R, D, G = ws.X, ws.R, ws.D, ws.G
@@ -1231,10 +1244,10 @@ def step(md, tabs, opts, h, state, ws, first, out):
         if st == OK:
             if m > 0:
                 _mech_rows(md, ws, 0, n, m)
-            predict(tabs, n, m, h, vk, ws, 0 if first else ws.hold[H_HIST])
-            st = newton_mech(md, tabs, opts, h, qk, pk, ws, out)
+            predict(tabs_, n, m, h, vk, ws_, 0 if first else ws.hold[H_HIST])
+            st = newton_mech(md_, tabs_, opts, h, qk, pk, ws_, out)
         if st == OK:
-            gmax = _finish_mech(md, tabs, h, qk, ws, q1, n, m, s, J)
+            gmax = _finish_mech(md_, tabs_, h, qk, ws_, q1, n, m, s, J)
         else:
             # too slow a contraction (stiff forces) or a failure: the full Newton, which
             # then stays on for a while rather than paying this detour at every step
@@ -1249,8 +1262,8 @@ def step(md, tabs, opts, h, state, ws, first, out):
             # sudden turn, a long step: the two-step one first): start again from a guess
             # of lower degree, down to the straight line through q_k with velocity v_k.
             # (One call site of newton_full: the sized step inlines it, assembly and all.)
-            predict(tabs, n, m, h, vk, ws, order)
-            st = newton_full(md, tabs, opts, h, qk, pk, ws, out)
+            predict(tabs_, n, m, h, vk, ws_, order)
+            st = newton_full(md_, tabs_, opts, h, qk, pk, ws_, out)
             if st == OK or order == 0:
                 break
             used += out[S_ITERS]
@@ -1277,13 +1290,13 @@ def step(md, tabs, opts, h, state, ws, first, out):
                 for c in range(m):
                     acc += G[j, c, a] * X[sn + j * m + c]
                 P[a] -= cl * acc
-    st = end_momentum(md, q1, P, p1, v1, G[J], ws, out)
+    st = end_momentum(md_, q1, P, p1, v1, G[J], ws_, out)
     if st != OK:
         return st
     out[S_G] = gmax
     out[S_WORK] = 0.0
     if is_timed(md):
-        out[S_WORK] = _step_work(md, tabs, h, qk, q1, ws, n, m, s, J)
+        out[S_WORK] = _step_work(md_, tabs_, h, qk, q1, ws_, n, m, s, J)
     # keep this step's unknowns (and the last step's) for the next predictor
     Xp, Xpp = ws.Xprev, ws.Xpp
     for k in range(N):
@@ -1320,7 +1333,7 @@ def hidden_residual(G1, v1, gt, n, m):
 
 
 @hot
-def _step_work(md, tabs, h, qk, q1, ws, n, m, s, J):
+def _step_work(md_, tabs_, h, qk, q1, ws_, n, m, s, J):
     r"""The work done on the system over the step (``docs/api.md``, energy balance)::
 
         W = h Σ_i b_i [F(t_i, q_i, v_i)·v_i + ∂V/∂t(t_i, q_i)] + Σ_{j≤J} η_j·g_t(t_j, q(d_j))
@@ -1329,6 +1342,7 @@ def _step_work(md, tabs, h, qk, q1, ws, n, m, s, J):
     time-dependent potential, and the constraint impulses (``η_J`` the projection's) for
     driving constraints: the constraint force ``−Gᵀλ`` has power ``−λ·Gv = λ·g_t``.
     """
+    md, tabs, ws = own(md_), own(tabs_), own(ws_)
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     b, L, Ld, Lc = tabs.b, tabs.L, tabs.Ld, tabs.Lc
     X, qi, vi, fb = ws.X, ws.qi, ws.vi, ws.fb
@@ -1379,8 +1393,8 @@ def _step_work(md, tabs, h, qk, q1, ws, n, m, s, J):
     return w
 
 
-@hot_inline
-def end_momentum(md, q1, P, p1, v1, G1, ws, out):
+@hot
+def end_momentum(md_, q1, P, p1, v1, G1, ws_, out):
     """p1 = P − G1ᵀ η with (G M⁻¹ Gᵀ) η = G M⁻¹ P (+ g_t at t_{k+1} for a rheonomic
     constraint), and v1 = M⁻¹ p1: the hidden constraint G v1 + g_t = 0.
 
@@ -1389,13 +1403,14 @@ def end_momentum(md, q1, P, p1, v1, G1, ws, out):
     pattern of G inside :func:`.banded.project_structured` (O(nnz), not O(m n)), so a small
     model's step has no code for it (a branch and a call for it in the step cost the
     generic double-pendulum step 9–19 %, measured side by side)."""
+    md, ws = own(md_), own(ws_)
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     n, m, _, _, _ = sizes(ws)
     if ws.si[SI_S] != SOLVE_DENSE:  # large sparse models, diagonal mass (banded.py)
         rheonomic = is_timed(md) and flags[F_TIME] != 0
         if rheonomic:
             constraint_rate(md, q1, ws.time[1], ws.gt, ws.g)
-        return project_structured(Mc, q1, P, p1, v1, G1, ws, n, m, rheonomic, out)
+        return project_structured(Mc, q1, P, p1, v1, G1, ws_, n, m, rheonomic, out)
     Mlu = ws.Ma
     pivn = ws.pivp
     Y = ws.Gp
@@ -1469,12 +1484,35 @@ def end_momentum(md, q1, P, p1, v1, G1, ws, out):
     return OK
 
 
-#: the same step compiled into its caller: the time loop of the size-specialized kernels
-#: (``drive.run(..., sized=True)``). A call copies the flattened named tuples (hundreds of
-#: machine words): 0.77× / 0.92× of a sized step without the call (P2L-Q3G / P3L-Q4G), but
-#: inlined into every generic loop it cost ≈ 33 s more compile of the first ``integrate``
-#: and as much again for each other loop (docs/benchmarks.md). Its full Newton is inlined
-#: too, with the assembly (the stiff fallback, ``newton="full"`` and ``s = 1``). Defined
-#: last: the copies see the module's names as they are here.
-step_inlined = inline_copy(
-    step, newton_full=inline_copy(newton_full, assemble=hot_inline(assemble.py_func)))
+# ----------------------------------------------------------------------------- entry point
+def _step_entry(md, tabs, opts, h, state, ws, first, out):
+    return step(md, tabs, own(opts), h, own(state), ws, first, own(out))
+
+
+#: the compiled entry points of the step, one per kernel type (model kind, sizes)
+_ENTRIES: dict = {}
+
+
+def step_kernel(md, tabs, opts, ws):
+    """The step for these kinds of model, method, options and workspace, compiled once as a
+    C function (cached on disk) that the time loops call through its address.
+
+    Its arguments are pointers (:func:`fastvi._numba.byref`) to ``md``, ``tabs``, ``opts``,
+    ``state``, ``ws`` and ``out``, with ``h`` and ``first`` by value; it returns the step's
+    status code. Every time loop — :func:`.drive.run`, the ensemble's members, a recovery's
+    substeps — calls this one compiled step: numba links a callee's code into each of its
+    callers and optimises it again there, so a step called directly would be compiled once
+    more in every loop. The workspace's sizes (integers, or size markers with
+    ``specialize=True``) are part of its type: one generic step serves every model.
+    """
+    key = (_key(md), _key(opts), _key(ws.dims), type(ws.si), ws.si.ndim)
+    k = _ENTRIES.get(key)
+    if k is None:
+        P = types.CPointer
+        arg = numba.typeof
+        sig = types.int64(P(arg(md)), P(arg(tabs)), P(arg(opts)), types.float64,
+                          P(arg(np.zeros((1, 1)))), P(arg(ws)), types.boolean,
+                          P(arg(np.zeros(1))))
+        k = _ENTRIES[key] = numba.cfunc(sig, cache=True, error_model="numpy",
+                                        boundscheck=False)(_step_entry)
+    return k

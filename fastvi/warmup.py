@@ -1,0 +1,153 @@
+"""The first calls a new user makes, timed: what compiling the kernels costs.
+
+``python -m fastvi compile`` runs them once so that numba's on-disk cache holds every
+kernel (later processes load them in a fraction of a second);
+``python -m fastvi compile --report`` runs them in a fresh process with an empty,
+temporary numba cache and prints, for each first call, its wall and CPU time and the
+process's peak resident memory so far — the cost a user pays on a new machine.
+
+The four first calls are the four kinds of kernel a session uses:
+
+1. ``integrate`` of the double pendulum (the conservative kernel);
+2. ``integrate`` of the damped double pendulum (forces and time);
+3. ``integrate`` with terminal events and dense output;
+4. ``integrate_ensemble`` of 8 members (the parallel driver).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+__all__ = ["FIRST_CALLS", "first_calls", "main"]
+
+
+def _peak_mb() -> float:
+    """Peak resident memory of this process so far (MB), from ``/proc`` (Linux) or
+    ``getrusage``."""
+    try:
+        with open(f"/proc/{os.getpid()}/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _conservative():
+    import fastvi
+
+    model = fastvi.scenes.double_pendulum()
+    q0, v0 = model.initial_state(np.pi / 2, np.pi / 2)
+    return fastvi.integrate(model, q0, v0, h=0.01, n_steps=100)
+
+
+def _forces():
+    import fastvi
+
+    model = fastvi.scenes.double_pendulum(damping=0.1)
+    q0, v0 = model.initial_state(np.pi / 2, np.pi / 2)
+    return fastvi.integrate(model, q0, v0, h=0.01, n_steps=100)
+
+
+def _events():
+    import fastvi
+
+    model = fastvi.scenes.double_pendulum()
+    q0, v0 = model.initial_state(np.pi / 2, np.pi / 2, 0.0, 6.0)
+    return fastvi.integrate(model, q0, v0, h=0.01, n_steps=200, events=model.flips,
+                            dense_output=True)
+
+
+def _ensemble():
+    import fastvi
+
+    model = fastvi.scenes.double_pendulum()
+    states = [model.initial_state(np.pi / 2, a) for a in np.linspace(1.0, 2.0, 8)]
+    Q0 = np.array([q for q, _ in states])
+    V0 = np.array([v for _, v in states])
+    return fastvi.integrate_ensemble(model, Q0, V0, h=0.01, n_steps=100)
+
+
+#: name -> the first call of one kind of kernel
+FIRST_CALLS = {
+    "integrate": _conservative,
+    "forces": _forces,
+    "events+dense": _events,
+    "ensemble": _ensemble,
+}
+
+
+def first_calls(names=None) -> list[dict]:
+    """Run the first calls ``names`` (default: all of :data:`FIRST_CALLS`) in this process.
+
+    Returns one record per call: ``name``, ``wall`` and ``cpu`` seconds (process CPU time,
+    all threads) and ``peak_mb``, the process's peak resident memory after the call."""
+    out = []
+    for name in names or FIRST_CALLS:
+        w, c = time.perf_counter(), time.process_time()
+        FIRST_CALLS[name]()
+        out.append(dict(name=name, wall=time.perf_counter() - w, cpu=time.process_time() - c,
+                        peak_mb=_peak_mb()))
+    return out
+
+
+def _child(names) -> list[dict]:
+    """:func:`first_calls` in a fresh interpreter with an empty, temporary numba cache."""
+    with tempfile.TemporaryDirectory(prefix="fastvi-cold-") as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        code = ("import json, sys; from fastvi.warmup import first_calls; "
+                f"print(json.dumps(first_calls({list(names)!r})))")
+        w = time.perf_counter()
+        run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                             text=True, check=False)
+        if run.returncode != 0:
+            raise RuntimeError(f"the cold first calls failed:\n{run.stderr}")
+        records = json.loads(run.stdout.strip().splitlines()[-1])
+        records.append(dict(name="process", wall=time.perf_counter() - w, cpu=float("nan"),
+                            peak_mb=records[-1]["peak_mb"]))
+        return records
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m fastvi compile",
+        description="Compile fastvi's kernels into numba's on-disk cache, or (--report) time "
+                    "the first calls of a new session in a fresh process with an empty cache.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--report", action="store_true",
+                        help="time each first call cold (fresh process, empty temporary cache)")
+    parser.add_argument("--only", default=",".join(FIRST_CALLS),
+                        help="comma-separated first calls: " + ", ".join(FIRST_CALLS))
+    parser.add_argument("--json", metavar="FILE", help="with --report: also write the records here")
+    args = parser.parse_args(argv)
+    names = [x for x in args.only.split(",") if x]
+    unknown = sorted(set(names) - set(FIRST_CALLS))
+    if unknown:
+        parser.error(f"--only: unknown first call(s) {unknown}; choose from {list(FIRST_CALLS)}")
+    records = _child(names) if args.report else first_calls(names)
+    print(f"{'first call':14s} {'wall s':>8s} {'CPU s':>8s} {'peak MB':>8s}")
+    for r in records:
+        print(f"{r['name']:14s} {r['wall']:8.2f} {r['cpu']:8.2f} {r['peak_mb']:8.0f}")
+    if args.report:
+        calls = [r for r in records if r["name"] != "process"]
+        print(f"{'all calls':14s} {sum(r['wall'] for r in calls):8.2f} "
+              f"{sum(r['cpu'] for r in calls):8.2f} {max(r['peak_mb'] for r in calls):8.0f}")
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(records, f, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -182,9 +182,9 @@ def test_kernels_compile_once_for_all_models(pendulum, double_pendulum):
         Q0, V0 = _states(model, a)
         for save in ("final", 3, "diagnostics"):
             fastvi.integrate_ensemble(model, Q0, V0, h=H, n_steps=5, save=save)
-    # one signature per kind of model: conservative (timed = none), and forces or time (bool)
-    kinds = [str(sig[4]) for sig in drive.run_ensemble.signatures]
-    assert kinds.count("none") == 1 and len(kinds) <= 2, kinds
+    # one signature for every model (size-specialized members compile once per size)
+    generic = [sig for sig in drive.run_ensemble.signatures if "UniTuple(int64 x 5)" in str(sig[8])]
+    assert len(generic) == 1, drive.run_ensemble.signatures
 
 
 def test_projection_of_members_is_reported_in_one_warning(pendulum):

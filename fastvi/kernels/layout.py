@@ -29,6 +29,7 @@ numba compiles named tuples to plain structs: attribute access costs nothing.
 
 from collections import namedtuple
 
+import numba as nb
 import numpy as np
 
 from numba.core import types
@@ -291,41 +292,46 @@ def linear_potential(md):
     return md.flags[F_LINPOT] != 0 and not (is_timed(md) and md.flags[F_TIME] != 0)
 
 
-@njit
+#: the shape of each workspace field in terms of the sizes (and ``N = s n + J m``,
+#: ``mm = max(m, 1)``, ``Jm = max(J m, 1)``), and which are int64; ``dims`` is the sizes.
+#: One table for the two ways a workspace is made: in NumPy by :func:`make_workspace`
+#: (``integrate``: no compile) and inside an ensemble's parallel loop by
+#: :func:`workspace_for`, whose source is generated from it.
+_WS_SHAPES = dict(
+    X="N", R="N", A="(N, N)", piv="N", D="(s + 1, n)", G="(J + 1, mm, n)",
+    qi="n", vi="n", F="n", Pm="n", fa="n", fb="n", Mi="(n, n)",
+    Aq="(n, n)", Cq="(n, n)", Hc="(n, n)", Ma="(n, n)", Y="(J + 1, mm, n)",
+    Gp="(mm, n)", Gm="(mm, n)", g="mm", etaJ="mm", S="(mm, mm)", pivm="mm",
+    Mb="(n, n)", pivn="n", pivp="n", minv="n", Sc="(Jm, Jm)", pivs="Jm", w="Jm",
+    Z="(s, n)", U="(s, n)", Xprev="N", Xpp="N", P="n", hold="H_SIZE", Fv="(n, n)", Fg="n",
+    gt="mm", time="2", hist="2", Ew="(s + 2, s + 2)", si="SI_HEADER", sb="1",
+)
+_WS_INT = {"piv", "pivm", "pivn", "pivp", "pivs", "hold", "si"}
+assert tuple(_WS_SHAPES) + ("dims",) == Workspace._fields
+
+
 def make_workspace(n, m, s, r, J):
-    """Scratch arrays for one trajectory (allocated once, outside the time loop).
+    """Scratch arrays for one trajectory (allocated once, outside the time loop), in NumPy.
 
     Every linear system is solved densely; :func:`fastvi.structure.workspace` replaces
     ``si``/``sb`` with a structured plan for large models."""
-    return workspace_for((n, m, s, r, J))
+    env = dict(n=int(n), m=int(m), s=int(s), r=int(r), J=int(J), H_SIZE=H_SIZE, SI_HEADER=SI_HEADER)
+    env.update(N=env["s"] * env["n"] + env["J"] * env["m"], mm=max(env["m"], 1),
+               Jm=max(env["J"] * env["m"], 1))
+    fields = [np.zeros(eval(shape, {}, env), dtype=np.int64 if name in _WS_INT else np.float64)  # noqa: S307
+              for name, shape in _WS_SHAPES.items()]
+    return Workspace(*fields, (env["n"], env["m"], env["s"], env["r"], env["J"]))
 
 
-@njit
-def workspace_for(dims):
-    """:func:`make_workspace` for the sizes ``dims = (n, m, s, r, J)``, integers or size
-    markers (:func:`size_markers`), kept in the workspace's ``dims``."""
-    n, m, s, r, J = dim(dims[0]), dim(dims[1]), dim(dims[2]), dim(dims[3]), dim(dims[4])
-    N = s * n + J * m
-    mm = max(m, 1)
-    Jm = max(J * m, 1)
-    return Workspace(
-        np.zeros(N), np.zeros(N), np.zeros((N, N)), np.zeros(N, dtype=np.int64),
-        np.zeros((s + 1, n)), np.zeros((J + 1, mm, n)),
-        np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n),
-        np.zeros((n, n)),
-        np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n)),
-        np.zeros((J + 1, mm, n)),
-        np.zeros((mm, n)), np.zeros((mm, n)),
-        np.zeros(mm), np.zeros(mm), np.zeros((mm, mm)), np.zeros(mm, dtype=np.int64),
-        np.zeros((n, n)), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64), np.zeros(n),
-        np.zeros((Jm, Jm)), np.zeros(Jm, dtype=np.int64), np.zeros(Jm),
-        np.zeros((s, n)), np.zeros((s, n)),
-        np.zeros(N), np.zeros(N), np.zeros(n), np.zeros(H_SIZE, dtype=np.int64),
-        np.zeros((n, n)), np.zeros(n), np.zeros(mm), np.zeros(2), np.zeros(2),
-        np.zeros((s + 2, s + 2)),
-        np.zeros(SI_HEADER, dtype=np.int64), np.zeros(1),
-        dims,
-    )
+def _workspace_for_source():
+    args = ", ".join(f"np.zeros({shape}{', dtype=np.int64' if name in _WS_INT else ''})"
+                     for name, shape in _WS_SHAPES.items())
+    return ("def workspace_for(dims):\n"
+            "    n, m, s, r, J = dim(dims[0]), dim(dims[1]), dim(dims[2]), dim(dims[3]), dim(dims[4])\n"
+            "    N = s * n + J * m\n    mm = max(m, 1)\n    Jm = max(J * m, 1)\n"
+            f"    return Workspace({args}, dims)\n")
+
+
 
 
 #: the structured-solve plan's fields come last in a Workspace: si, sb, then dims
@@ -363,6 +369,16 @@ def _dim(x):
         k = x.ndim
         return lambda x: k
     return None
+
+
+_scope = dict(np=np, dim=dim, Workspace=Workspace, H_SIZE=H_SIZE, SI_HEADER=SI_HEADER)
+exec(_workspace_for_source(), _scope)  # noqa: S102 - generated from the table above
+# not cached itself (generated source has no file): it is compiled into run_ensemble,
+# whose cache holds it
+workspace_for = nb.njit(nogil=True, error_model="numpy", boundscheck=False)(_scope["workspace_for"])
+workspace_for.__doc__ = """:func:`make_workspace` compiled, for the sizes ``dims = (n, m, s, r, J)``,
+integers or size markers (:func:`size_markers`), kept in the workspace's ``dims``: what a
+member of an ensemble allocates inside the parallel loop."""
 
 
 #: the largest size a parallel marker carries (NumPy's limit on an array's dimensions)

@@ -1205,7 +1205,7 @@ def _finish_mech(md_, tabs_, h, qk, ws_, q1, n, m, s, J):
 
 # ----------------------------------------------------------------------------- one step
 @hot
-def step(md_, tabs_, opts, h, state, ws_, first, out):
+def step(md_, tabs_, opts_, h, state_, ws_, first, out_):
     """Advance ``state`` rows (q_k, p_k, v_k) by one step into rows 3–5 (q1, p1, v1).
 
     ``out`` (float64, ``STEP_OUT_SIZE``) receives the Newton iterations, max|g(q1)|,
@@ -1213,6 +1213,7 @@ def step(md_, tabs_, opts, h, state, ws_, first, out):
     Newton as a fallback. Returns a status code (0 on success).
     """
     md, tabs, ws = own(md_), own(tabs_), own(ws_)
+    opts, state, out = own(opts_), own(state_), own(out_)
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     qk, pk, vk, q1, p1, v1 = state[0], state[1], state[2], state[3], state[4], state[5]
     X, R, D, G = ws.X, ws.R, ws.D, ws.G
@@ -1485,10 +1486,6 @@ def end_momentum(md_, q1, P, p1, v1, G1, ws_, out):
 
 
 # ----------------------------------------------------------------------------- entry point
-def _step_entry(md, tabs, opts, h, state, ws, first, out):
-    return step(md, tabs, own(opts), h, own(state), ws, first, own(out))
-
-
 #: the compiled entry points of the step, one per kernel type (model kind, sizes)
 _ENTRIES: dict = {}
 
@@ -1513,6 +1510,8 @@ def step_kernel(md, tabs, opts, ws):
         sig = types.int64(P(arg(md)), P(arg(tabs)), P(arg(opts)), types.float64,
                           P(arg(np.zeros((1, 1)))), P(arg(ws)), types.boolean,
                           P(arg(np.zeros(1))))
-        k = _ENTRIES[key] = numba.cfunc(sig, cache=True, error_model="numpy",
-                                        boundscheck=False)(_step_entry)
+        # the step's own body becomes the C function (not a call of the njit `step`, whose
+        # code numba would compile once more into the wrapper)
+        k = _ENTRIES[key] = numba.cfunc(sig, cache=True, error_model="numpy", boundscheck=False,
+                                        _nrt=False)(step.py_func)
     return k

@@ -219,7 +219,7 @@ def integrate(
         Keep every step's control points and return ``Result.sol``, a
         :class:`fastvi.events.DenseSolution`: ``sol(t) -> (q, v)`` at any time(s) of the run
         from the step polynomials (``8 (s+1) n`` bytes a step; interior accuracy in
-        ``docs/api.md``).
+        ``docs/events.md``).
     events : callable or list of callables, optional
         ``event(t, q, v, params) -> float`` (numba's nopython subset, compiled once like the
         model's callbacks), at most 8, with SciPy's optional attributes ``terminal`` (bool or
@@ -275,9 +275,10 @@ def integrate(
 
     References
     ----------
-    Paper A: variational integrators in holonomic mechanics (constraint points, split
-    action). Paper B: higher-order variational Galerkin integrators for multibody systems
-    with constraints. Both in ``shared/seeds``; the method is written out in
+    Paper A: S. Man, Q. Gao, W. Zhong, Variational integrators in holonomic mechanics,
+    Mathematics 8 (2020) 1358 (constraint points, split action). Paper B: J. Ding, Z. Pan,
+    Higher order variational integrators for multibody system dynamics with constraints,
+    Advances in Mechanical Engineering 6 (2014) 383680. The method is written out in
     ``docs/method.md``.
     """
     t_start = time.perf_counter()

@@ -83,7 +83,7 @@ F_EX_GT = 12  # exact ∂g/∂t given
 #: time to the callbacks (= k, the number of user parameters; every model has the entry,
 #: so that writing the time needs no branch). One callback signature serves every model:
 #: the kernels write the time of each evaluation there, the wrappers of time-aware
-#: callbacks read it, the others never look (docs/api.md).
+#: callbacks read it, the others never look (docs/method.md §11).
 F_TSLOT = 13
 #: ∇V does not depend on q (``potential_hessian=0``: uniform gravity in Cartesian
 #: coordinates). An autonomous potential's gradient is then evaluated once a trajectory
@@ -168,7 +168,7 @@ H_SIZE = 4
 # float64 vector filled by step(): Newton iterations, max|g(q1)|, max|G v1|, last residual,
 # and whether the step fell back from the mechanics matrix to the full Newton
 # and the work done on the system over the step by the forces, the time-dependent potential
-# and driving constraints (docs/api.md, energy balance)
+# and driving constraints (Result.energy_balance; docs/method.md §11)
 S_ITERS, S_G, S_GV, S_RES, S_FULL, S_WORK = range(6)
 STEP_OUT_SIZE = 6
 

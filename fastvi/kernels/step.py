@@ -383,7 +383,7 @@ def assemble(md, tabs, h, qk, pk, ws, jac):
             else:
                 _fd_momentum_jacobian(fns[MASS], qi, vi, prm, Cq, fa, Ma, n)
         if has_force:
-            # ∂F_nc/∂q joins the force block, ∂F_nc/∂v the mixed block (forces.md §2)
+            # ∂F_nc/∂q joins the force block, ∂F_nc/∂v the mixed block (docs/method.md §11)
             if flags[F_EX_FJQ] != 0:
                 fns[FJQ](ptr(qi), ptr(vi), ptr(prm), ptr(Hc))
             else:
@@ -1321,7 +1321,7 @@ def hidden_residual(G1, v1, gt, n, m):
 
 @hot
 def _step_work(md, tabs, h, qk, q1, ws, n, m, s, J):
-    r"""The work done on the system over the step (``docs/api.md``, energy balance)::
+    r"""The work done on the system over the step (``Result.energy_balance``; ``docs/method.md`` §11)::
 
         W = h Σ_i b_i [F(t_i, q_i, v_i)·v_i + ∂V/∂t(t_i, q_i)] + Σ_{j≤J} η_j·g_t(t_j, q(d_j))
 
@@ -1432,7 +1432,7 @@ def end_momentum(md, q1, P, p1, v1, G1, ws, out):
         eta = ws.etaJ
         rheonomic = is_timed(md) and flags[F_TIME] != 0
         if rheonomic:
-            # G v1 + g_t = 0 at t_{k+1}: (G M⁻¹ Gᵀ) η = G M⁻¹ P + g_t (forces.md §3)
+            # G v1 + g_t = 0 at t_{k+1}: (G M⁻¹ Gᵀ) η = G M⁻¹ P + g_t (docs/method.md §11)
             constraint_rate(md, q1, ws.time[1], ws.gt, ws.g)
         for c in range(m):
             acc = ws.gt[c] if rheonomic else 0.0

@@ -47,7 +47,7 @@ def _package_stamp() -> str:
 
 
 #: a module-level name that opts a module outside the package into the package stamp
-#: (``bench/yardstick.py``: it compiles ``fastvi.kernels.linalg`` into its own kernels)
+#: (``tests/yardstick.py``: it compiles ``fastvi.kernels.linalg`` into its own kernels)
 STAMP_OPT_IN = "FASTVI_CACHE_STAMP"
 
 

@@ -232,7 +232,7 @@ def test_kernel_cache_is_stamped_with_every_compiled_source():
     assert loc is not None and loc.get_source_stamp() == stamp
     assert _numba._InTree.from_function(test_kernel_cache_is_stamped_with_every_compiled_source, __file__) is None
     # a module outside the package that compiles fastvi's kernels into its own opts in
-    # (bench/yardstick.py): the package's stamp and its own file's, so that either edit counts
+    # (tests/yardstick.py): the package's stamp and its own file's, so that either edit counts
     scope = {_numba.STAMP_OPT_IN: True}
     exec("def kernel(x):\n    return x", scope)
     loc = _numba._InTree.from_function(scope["kernel"], __file__)

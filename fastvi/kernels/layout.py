@@ -3,7 +3,7 @@
 Every layout a kernel reads — the callback slots of a model, the flags vector, the status
 integers, the counters of a run, the workspace of one trajectory — is defined here and
 imported by :mod:`fastvi.model`, the step and drive kernels, the RK4 baseline and the
-yardstick in ``bench/``. Kernels receive a handful of named tuples instead of long
+yardstick kernel in ``tests/yardstick.py``. Kernels receive a handful of named tuples instead of long
 positional argument lists:
 
 ``ModelData(fns, flags, Mc, prm, timed)``

@@ -1,7 +1,7 @@
 """Fixed cost and cost per Newton iteration of a step, from a tolerance sweep.
 
-    .venv/bin/python bench/tolerance_sweep.py [--specialize]
-    .venv/bin/python bench/tolerance_sweep.py --accuracy
+    .venv/bin/python docs/decisions/scripts/tolerance_sweep.py [--specialize]
+    .venv/bin/python docs/decisions/scripts/tolerance_sweep.py --accuracy
 
 Loosening ``tol`` changes only how many iterations a step takes, so a straight-line fit of
 time per step against iterations per step splits a step into the part that each iteration

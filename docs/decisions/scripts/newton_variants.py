@@ -1,6 +1,6 @@
 """How many iterations a step needs with other Newton matrices and stopping rules (a twin).
 
-    .venv/bin/python bench/newton_variants.py [METHOD H [STEPS]]   (default: the four below)
+    .venv/bin/python docs/decisions/scripts/newton_variants.py [METHOD H [STEPS]]   (default: the four below)
 
 Replays the double pendulum from θ1 = θ2 = π/2 at rest with the step kernel, and at every
 step (from the fourth) restarts the step's equations in NumPy from the kernel's own

@@ -21,7 +21,6 @@ rounds of each contender and prints the ratio of the pooled medians per method. 
 
 from __future__ import annotations
 
-import sys
 import time
 
 import numpy as np

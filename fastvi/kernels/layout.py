@@ -443,6 +443,6 @@ def specialize(ws):
     the generic ones), with every loop over coordinates, constraints, control points and
     quadrature points of known length, which LLVM unrolls (no loop set-up, vector-remainder
     code or run-time alias checks around loops of length 2–4): a double-pendulum step
-    1.55–1.75× cheaper from this alone (``docs/benchmarks.md``). The arithmetic and its
+    1.55–1.75× cheaper from this alone (``docs/decisions/0007-size-specialized-kernels.md``). The arithmetic and its
     order are unchanged, so the trajectory equals the generic kernel's bit for bit."""
     return ws._replace(dims=size_markers(ws.dims))

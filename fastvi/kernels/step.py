@@ -52,12 +52,12 @@ _FD_REL = 6.0554544523933395e-06  # cbrt(machine epsilon): central differences' 
 _FD_T = 7.4009597974140505e-04
 #: the mechanics matrix is abandoned for the full Newton when successive increments shrink
 #: by less than this factor: each of its iterations costs a residual, and at θ = 0.25 it
-#: needs about as many as the full Newton costs in assembly and LU (docs/benchmarks.md)
+#: needs about as many as the full Newton costs in assembly and LU (docs/decisions/0001-mechanics-newton.md)
 MECH_THETA_MAX = 0.25
 #: steps the full Newton stays on after the mechanics matrix failed (then it is tried again)
 FULL_HOLD = 32
 #: the two-step predictor is used while it differs from the one-step one by at most this
-#: fraction of the last step's displacement (its asymptotic range; docs/benchmarks.md)
+#: fraction of the last step's displacement (its asymptotic range; docs/decisions/0008-predictor.md)
 PREDICT_TRUST = 1e-1
 #: up to this many coordinates the constant-mass part of the residual is formed coordinate
 #: by coordinate, above it with vectorised loops over the coordinates (the same arithmetic)
@@ -1097,7 +1097,7 @@ def newton_mech(md, tabs, opts, h, qk, pk, ws, out):
     its Schur complement (m × m) is rebuilt at every iteration, the iteration is Newton's
     method, and it stops with the full Newton's early exit: 3.0 iterations a step for
     ``P1L-Q2G`` on the double pendulum, against 5.5 with the Schur complement of the
-    predictor's G(q_{k+1}) and the strict stop (docs/benchmarks.md).
+    predictor's G(q_{k+1}) and the strict stop (docs/decisions/0001-mechanics-newton.md).
     """
     X, R = ws.X, ws.R
     n, m, s, _, J = sizes(ws)
@@ -1473,7 +1473,7 @@ def end_momentum(md, q1, P, p1, v1, G1, ws, out):
 #: (``drive.run(..., sized=True)``). A call copies the flattened named tuples (hundreds of
 #: machine words): 0.77× / 0.92× of a sized step without the call (P2L-Q3G / P3L-Q4G), but
 #: inlined into every generic loop it cost ≈ 33 s more compile of the first ``integrate``
-#: and as much again for each other loop (docs/benchmarks.md). Its full Newton is inlined
+#: and as much again for each other loop (docs/decisions/0007-size-specialized-kernels.md). Its full Newton is inlined
 #: too, with the assembly (the stiff fallback, ``newton="full"`` and ``s = 1``). Defined
 #: last: the copies see the module's names as they are here.
 step_inlined = inline_copy(

@@ -172,7 +172,8 @@ def integrate(
         the constraints to round-off. A looser ``tol`` saves iterations — 1e-10 took 0.82×
         the time on the double pendulum at h = 0.025, with ``max|g|`` ≈ 1e-12 — but only
         where the step's own error is far larger: with ``"P4L-Q4G"`` at h = 0.0125 it
-        multiplied the energy and position errors by ≈ 20 (``docs/benchmarks.md``).
+        multiplied the energy and position errors by ≈ 20
+        (``docs/decisions/0001-mechanics-newton.md``).
     max_iter : int, default 30
         Newton iterations per step before giving up.
     newton : {"auto", "full"}, default "auto"
@@ -244,7 +245,7 @@ def integrate(
         compile-time constants (:func:`fastvi.kernels.layout.specialize`): every small loop
         of the step is unrolled, and the step is compiled into the time loop. The
         trajectory is the generic kernels' bit for bit; a step of the double pendulum costs
-        2.0–2.9× less (``docs/benchmarks.md``). The price is one compile per size on a
+        2.0–2.9× less (``docs/decisions/0007-size-specialized-kernels.md``). The price is one compile per size on a
         fresh install: ≈ 3.5 min of CPU and ≈ 4 GB of peak memory (the double pendulum's
         ``P2L-Q3G``: 209 s, the process's peak resident memory 4.8 GB against 1 GB for the
         generic kernels, ≈ 3 GB of it still held after the compile). Then it is cached on
@@ -263,7 +264,7 @@ def integrate(
         time-reversible, *not* symplectic: no modified energy bounds its energy error
         (reversibility does near quasi-periodic motion), and a chaotic motion's may creep
         (measured in
-        ``docs/benchmarks.md``: on the double pendulum 1.34–1.40× fewer steps than the
+        ``docs/decisions/0002-adaptive-step.md``: on the double pendulum 1.34–1.40× fewer steps than the
         fixed step at equal maximum energy error over 1000 s, and no faster growth up to
         10⁴ s for orders 6 and 8). ``Result.t`` then holds the times of the saved steps.
         Needs ``t_end`` and a conservative, autonomous model; not with ``events``,

@@ -24,7 +24,7 @@ def test_double_pendulum_acceptance_run(double_pendulum, dp_start):
     assert np.max(r.velocity_residual) <= 1e-10  # measured 2e-15
     assert np.max(np.abs(r.energy_error)) <= 1e-3  # measured 6e-5
     # measured 4.0 with the default mechanics matrix (linear convergence, cheaper iterations;
-    # docs/benchmarks.md), 2.7 with newton="full"
+    # docs/decisions/0001-mechanics-newton.md), 2.7 with newton="full"
     assert 1.0 <= r.stats["newton_iterations"] / 10_000 <= 4.5
 
 

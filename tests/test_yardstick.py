@@ -62,7 +62,7 @@ def test_yardstick_keeps_constraints_at_newton_tolerance(double_pendulum, dp_sta
 
 
 _STALE = ("fastvi.integrate did not take the straight-line retry: if fastvi/kernels/step.py changed "
-          "after drive.run was cached, numba loads a stale drive.run (see docs/benchmarks.md)")
+          "after drive.run was cached, numba loads a stale drive.run (see docs/decisions/0005-cache-stamp.md)")
 
 
 def test_yardstick_retries_like_fastvi(double_pendulum, dp_start):

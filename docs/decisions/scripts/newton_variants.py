@@ -20,7 +20,7 @@ For each: iterations a step with the kernel's stopping rule for the mechanics it
 (``θ/(1−θ)·|δ| ≤ tol``, θ the ratio of the last two increments) together with the error
 that exit leaves (max-norm distance of the control points from the step's converged ones,
 relative): an exit that leaves more than round-off lets conserved momenta drift
-(``docs/benchmarks.md``, 2026-11-25 afternoon). The first line is the kernel's own count.
+(``docs/decisions/0001-mechanics-newton.md. The first line is the kernel's own count.
 """
 
 import sys

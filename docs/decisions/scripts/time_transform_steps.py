@@ -29,7 +29,7 @@ prints the steps each needs at the study's levels (log–log along each front) a
 ratio. Then the cost a step of each (generic kernels, no saving): the model-level
 transform runs through the general mass path, so the ratio says how cheap a dedicated
 kernel path (a scalar factor on a constant mass) would have to be to pay
-(docs/benchmarks.md, 2026-11-26 evening).
+(docs/decisions/0002-adaptive-step.md).
 
 ``cost`` measures that dedicated path: ``docs/decisions/scripts/time_transform_kernel.patch`` is a prototype
 of it (double pendulum only: linear potential, diagonal constant mass; the mass part of the

@@ -51,10 +51,9 @@ def markdown_files() -> list[Path]:
 
 def text_files() -> list[Path]:
     # this file's own examples of broken citations are left out
-    return [p for p in markdown_files() + _files(["fastvi/**/*.py", "tests/**/*.py", "bench/**/*.py",
-                                      "examples/**/*.py", "docs/**/*.py", "docs/**/*.rst",
-                                      "Makefile", ".ci/run", "pyproject.toml"])
-            if p != Path(__file__).resolve()]
+    sources = _files(["fastvi/**/*.py", "tests/**/*.py", "bench/**/*.py", "examples/**/*.py",
+                      "docs/**/*.py", "docs/**/*.rst", "Makefile", ".ci/run", "pyproject.toml"])
+    return [p for p in markdown_files() + sources if p != Path(__file__).resolve()]
 
 
 def slug(heading: str) -> str:

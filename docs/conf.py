@@ -59,7 +59,9 @@ sphinx_gallery_conf = {
     "filename_pattern": r"^$",
     "download_all_examples": False,
     "show_signature": False,
-    "default_thumb_file": str(ROOT / "docs" / "figures" / "flip_map.png"),
+    # an example's thumbnail is the figure it draws (its `sphinx_gallery_thumbnail_path`
+    # comment, a path from docs/), and that comment is left out of the rendered code
+    "remove_config_comments": True,
 }
 
 html_theme = "furo"

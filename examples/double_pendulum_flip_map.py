@@ -26,6 +26,8 @@ map and prints the speed-up.
    :alt: the figure this script draws
 """
 
+# sphinx_gallery_thumbnail_path = "figures/flip_map.png"
+
 import argparse
 import os
 import tempfile

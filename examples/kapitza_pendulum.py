@@ -18,6 +18,8 @@ With ``FASTVI_QUICK=1`` the run is shorter and the figure goes to a temporary di
    :alt: the figure this script draws
 """
 
+# sphinx_gallery_thumbnail_path = "figures/kapitza_pendulum.png"
+
 import os
 import sys
 import tempfile

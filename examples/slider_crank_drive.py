@@ -15,6 +15,8 @@ Run ``python examples/slider_crank_drive.py [figure.png]`` (default
    :alt: the figure this script draws
 """
 
+# sphinx_gallery_thumbnail_path = "figures/slider_crank_drive.png"
+
 import os
 import sys
 import tempfile

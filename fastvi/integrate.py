@@ -245,8 +245,8 @@ def integrate(
         compile-time constants (:func:`fastvi.kernels.layout.specialize`): every small loop
         of the step is unrolled, and the step is compiled into the time loop. The
         trajectory is the generic kernels' bit for bit; a step of the double pendulum costs
-        2.0–2.9× less (``docs/decisions/0007-size-specialized-kernels.md``). The price is one compile per size on a
-        fresh install: ≈ 3.5 min of CPU and ≈ 4 GB of peak memory (the double pendulum's
+        2.0–2.9× less (``docs/decisions/0007-size-specialized-kernels.md``). The price is
+        one compile per size on a fresh install: ≈ 3.5 min of CPU and ≈ 4 GB of peak memory (the double pendulum's
         ``P2L-Q3G``: 209 s, the process's peak resident memory 4.8 GB against 1 GB for the
         generic kernels, ≈ 3 GB of it still held after the compile). Then it is cached on
         disk like the generic kernels: a new process loads it in ≈ 0.1 s and ≈ 12 MB.
@@ -263,9 +263,8 @@ def integrate(
         so constraints hold to round-off as with a fixed step, but the map is
         time-reversible, *not* symplectic: no modified energy bounds its energy error
         (reversibility does near quasi-periodic motion), and a chaotic motion's may creep
-        (measured in
-        ``docs/decisions/0002-adaptive-step.md``: on the double pendulum 1.34–1.40× fewer steps than the
-        fixed step at equal maximum energy error over 1000 s, and no faster growth up to
+        (measured in ``docs/decisions/0002-adaptive-step.md``: on the double pendulum
+        1.34–1.40× fewer steps than the fixed step at equal maximum energy error over 1000 s, and no faster growth up to
         10⁴ s for orders 6 and 8). ``Result.t`` then holds the times of the saved steps.
         Needs ``t_end`` and a conservative, autonomous model; not with ``events``,
         ``dense_output`` or ``recover``.

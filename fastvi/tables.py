@@ -327,7 +327,8 @@ class Method:
         invertible = bool(np.linalg.cond(A) < 1e12)  # r < s Gauss points make A singular
         Ainv = np.linalg.inv(A) if invertible else np.zeros((s, s))
         # s = 1 too: for a linear potential and a constant mass its mechanics iteration is
-        # Newton's method at a fraction of the full Newton's cost (docs/decisions/0001-mechanics-newton.md)
+        # Newton's method at a fraction of the full Newton's cost
+        # (docs/decisions/0001-mechanics-newton.md)
         mech = invertible
         W = self.Lc[1:, 1:].T @ Ainv @ self.Lc[:s, :J]
         E2 = hermite_predictor(self.tau)

@@ -3,8 +3,8 @@
 Every layout a kernel reads — the callback slots of a model, the flags vector, the status
 integers, the counters of a run, the workspace of one trajectory — is defined here and
 imported by :mod:`fastvi.model`, the step and drive kernels, the RK4 baseline and the
-yardstick kernel in ``tests/yardstick.py``. Kernels receive a handful of named tuples instead of long
-positional argument lists:
+yardstick kernel in ``tests/yardstick.py``. Kernels receive a handful of named tuples
+instead of long positional argument lists:
 
 ``ModelData(fns, flags, Mc, prm, timed)``
     the model's compiled callbacks (tuple in :data:`SLOTS` order), its int64 flags vector
@@ -443,6 +443,7 @@ def specialize(ws):
     the generic ones), with every loop over coordinates, constraints, control points and
     quadrature points of known length, which LLVM unrolls (no loop set-up, vector-remainder
     code or run-time alias checks around loops of length 2–4): a double-pendulum step
-    1.55–1.75× cheaper from this alone (``docs/decisions/0007-size-specialized-kernels.md``). The arithmetic and its
-    order are unchanged, so the trajectory equals the generic kernel's bit for bit."""
+    1.55–1.75× cheaper from this alone (``docs/decisions/0007-size-specialized-kernels.md``).
+    The arithmetic and its order are unchanged, so the trajectory equals the generic
+    kernel's bit for bit."""
     return ws._replace(dims=size_markers(ws.dims))

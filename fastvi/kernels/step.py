@@ -52,12 +52,14 @@ _FD_REL = 6.0554544523933395e-06  # cbrt(machine epsilon): central differences' 
 _FD_T = 7.4009597974140505e-04
 #: the mechanics matrix is abandoned for the full Newton when successive increments shrink
 #: by less than this factor: each of its iterations costs a residual, and at θ = 0.25 it
-#: needs about as many as the full Newton costs in assembly and LU (docs/decisions/0001-mechanics-newton.md)
+#: needs about as many as the full Newton costs in assembly and LU
+#: (docs/decisions/0001-mechanics-newton.md)
 MECH_THETA_MAX = 0.25
 #: steps the full Newton stays on after the mechanics matrix failed (then it is tried again)
 FULL_HOLD = 32
 #: the two-step predictor is used while it differs from the one-step one by at most this
-#: fraction of the last step's displacement (its asymptotic range; docs/decisions/0008-predictor.md)
+#: fraction of the last step's displacement (its asymptotic range;
+#: docs/decisions/0008-predictor.md)
 PREDICT_TRUST = 1e-1
 #: up to this many coordinates the constant-mass part of the residual is formed coordinate
 #: by coordinate, above it with vectorised loops over the coordinates (the same arithmetic)
@@ -1321,7 +1323,7 @@ def hidden_residual(G1, v1, gt, n, m):
 
 @hot
 def _step_work(md, tabs, h, qk, q1, ws, n, m, s, J):
-    r"""The work done on the system over the step (``Result.energy_balance``; ``docs/method.md`` §11)::
+    r"""The work done on the system over the step (``docs/method.md`` §11, energy balance)::
 
         W = h Σ_i b_i [F(t_i, q_i, v_i)·v_i + ∂V/∂t(t_i, q_i)] + Σ_{j≤J} η_j·g_t(t_j, q(d_j))
 
@@ -1473,8 +1475,8 @@ def end_momentum(md, q1, P, p1, v1, G1, ws, out):
 #: (``drive.run(..., sized=True)``). A call copies the flattened named tuples (hundreds of
 #: machine words): 0.77× / 0.92× of a sized step without the call (P2L-Q3G / P3L-Q4G), but
 #: inlined into every generic loop it cost ≈ 33 s more compile of the first ``integrate``
-#: and as much again for each other loop (docs/decisions/0007-size-specialized-kernels.md). Its full Newton is inlined
-#: too, with the assembly (the stiff fallback, ``newton="full"`` and ``s = 1``). Defined
-#: last: the copies see the module's names as they are here.
+#: and as much again for each other loop (docs/decisions/0007-size-specialized-kernels.md).
+#: Its full Newton is inlined too, with the assembly (the stiff fallback, ``newton="full"``
+#: and ``s = 1``). Defined last: the copies see the module's names as they are here.
 step_inlined = inline_copy(
     step, newton_full=inline_copy(newton_full, assemble=hot_inline(assemble.py_func)))

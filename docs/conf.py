@@ -36,17 +36,18 @@ extensions = [
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 root_doc = "index"
-exclude_patterns = ["_build", "decisions/scripts", "auto_examples/*.ipynb", "**.ipynb",
+exclude_patterns = ["_build", "_templates", "decisions/scripts", "auto_examples/*.ipynb", "**.ipynb",
                     "**.py", "**.zip", "**.md5", "**.json"]
 
 # Markdown: `#anchor` links to headings (`benchmarks.md#compile-and-set-up-time`)
 myst_heading_anchors = 3
 myst_enable_extensions = ["dollarmath"]
 
-# API reference: one generated page per public object
+# API reference: one generated page per public object; a class's page documents its
+# public methods and properties too (docs/_templates/autosummary/class.rst)
+templates_path = ["_templates"]
 autosummary_generate = True
 autosummary_imported_members = True
-autodoc_default_options = {"members": False}
 numpydoc_show_class_members = False  # autosummary lists the members; numpydoc would repeat them
 numpydoc_class_members_toctree = False
 numpydoc_xref_param_type = False

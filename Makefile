@@ -3,10 +3,12 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+# the docs extra (Sphinx) only for `make docs`
+DOCS_STAMP := $(VENV)/.docs-installed
 # the bench extra (CyRK, the compiled peer) only for `make bench` / `make wpd`, not `make test`
 BENCH_STAMP := $(VENV)/.bench-installed
 
-.PHONY: demo test test-slow bench paper-b orders wpd clean
+.PHONY: demo test test-slow bench paper-b orders wpd docs clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -17,6 +19,10 @@ $(STAMP): pyproject.toml
 $(BENCH_STAMP): $(STAMP) pyproject.toml
 	$(BIN)/python -m pip install --quiet -e ".[bench]"
 	touch $(BENCH_STAMP)
+
+$(DOCS_STAMP): $(STAMP) pyproject.toml
+	$(BIN)/python -m pip install --quiet -e ".[docs]"
+	touch $(DOCS_STAMP)
 
 demo: $(STAMP)
 	$(BIN)/python -m fastvi demo
@@ -43,6 +49,13 @@ orders: $(STAMP)
 wpd: $(BENCH_STAMP)
 	$(BIN)/python -m fastvi wpd --out docs
 
+# the site in docs/_build/html; -W: a warning (a broken link, a bad docstring) fails the build.
+# The examples are not executed (each compiles kernels for minutes): docs/conf.py.
+docs: $(DOCS_STAMP)
+	rm -rf docs/_build docs/generated docs/auto_examples
+	$(BIN)/python -m sphinx -b html -W --keep-going -q docs docs/_build/html
+	@echo "open docs/_build/html/index.html"
+
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache
+	rm -rf $(VENV) build *.egg-info .pytest_cache docs/_build docs/generated docs/auto_examples
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +

@@ -116,7 +116,7 @@ TREES = ((8, 8), (16, 8), (16, 16))
 @pytest.mark.parametrize("shape", TREES, ids=lambda s: f"tree{s[0]}x{s[1]}")
 def test_tree_sparse_against_banded(benchmark, print_uncaptured, shape):
     """A tree (a hub with branches: no narrow band) steps faster on the sparse LU than on the
-    banded one (``bench/solver_crossover.py`` has the whole crossover table)."""
+    banded one (``docs/decisions/scripts/solver_crossover.py`` has the whole crossover table)."""
     b, L = shape
     model = fastvi.scenes.tree(b, L)
     N = 1 + b * L

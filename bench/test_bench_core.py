@@ -7,7 +7,7 @@ h = 0.01, for ``P1L-Q2G``, ``P2L-Q3G``, ``P3L-Q4G``:
   the compiled loop with cfunc callbacks, every step saved, the ``Result``);
 * ``sized``: the same public call with ``specialize=True`` (the generic kernels compiled for
   the model's sizes: still cfunc callbacks and dense generic assembly);
-* ``specialized``: ``bench/yardstick.py``, the same algorithm with the model inlined, driven
+* ``specialized``: ``tests/yardstick.py``, the same algorithm with the model inlined, driven
   from Python the same way (every step saved).
 
 Each method is one pytest-benchmark group. The shared machine's load changes within
@@ -21,17 +21,14 @@ rounds of each contender and prints the ratio of the pooled medians per method. 
 
 from __future__ import annotations
 
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import fastvi
 
-sys.path.append(str(Path(__file__).resolve().parent))
-import yardstick  # noqa: E402  (bench/ is not a package)
+from tests import yardstick  # the repository root is on sys.path (pyproject: pythonpath)
 
 RATIO_KEY = "fastvi_yardstick"  # the tag bench/conftest.py builds its ratio table from
 

@@ -1,4 +1,5 @@
-"""Writing your own model: a pendulum on a spring-loaded cart, by hand and symbolically.
+"""Writing your own model: a pendulum on a spring-loaded cart, by hand and symbolically
+====================================================================================
 
 A cart of mass ``M`` on a horizontal rail, tied to a wall by a spring of stiffness ``k``,
 carries a pendulum (bob mass ``m``, massless rod ``l``). The walk-through is in

@@ -1,4 +1,5 @@
-"""The double pendulum's flip map: time to the first flip over a grid of initial angles.
+"""The double pendulum's flip map: time to the first flip over a grid of initial angles
+====================================================================================
 
 Each pixel is one member of an ensemble: the double pendulum (unit masses and rods,
 g = 9.81) released at rest from angles (θ1, θ2) ∈ (−π, π)², integrated with P2L-Q3G at
@@ -20,7 +21,12 @@ polynomial and stops that member there, keeping nothing but the event. ``--compa
 runs the way this example worked before events (every step saved, the flip found by
 unwrapping the sampled angles and interpolating linearly), checks that both give the same
 map and prints the speed-up.
+
+.. image:: /figures/flip_map.png
+   :alt: the figure this script draws
 """
+
+# sphinx_gallery_thumbnail_path = "figures/flip_map.png"
 
 import argparse
 import os

@@ -1,4 +1,5 @@
-"""Kapitza's pendulum: an inverted pendulum held up by shaking its pivot.
+"""Kapitza's pendulum: an inverted pendulum held up by shaking its pivot
+=====================================================================
 
 A pendulum whose pivot moves vertically, ``y_p(t) = a cos(ω t)``, is a rheonomic
 (time-dependent) constraint: ``fastvi.scenes.kapitza_pendulum`` writes it as
@@ -12,7 +13,12 @@ in and out; ``H − H0 − W`` stays at the integrator's error) and draws the an
 
 Run ``python examples/kapitza_pendulum.py [figure.png]`` (default ``kapitza_pendulum.png``).
 With ``FASTVI_QUICK=1`` the run is shorter and the figure goes to a temporary directory.
+
+.. image:: /figures/kapitza_pendulum.png
+   :alt: the figure this script draws
 """
+
+# sphinx_gallery_thumbnail_path = "figures/kapitza_pendulum.png"
 
 import os
 import sys

@@ -1,4 +1,5 @@
-"""A slider–crank driven at constant crank speed, and the motor torque it takes.
+"""A slider–crank driven at constant crank speed, and the motor torque it takes
+============================================================================
 
 ``fastvi.scenes.slider_crank(drive=Ω)`` adds the rheonomic constraint ``φ(t) = Ω t`` to the
 mechanism's five geometric ones: no degree of freedom is left, and the multiplier of the
@@ -9,7 +10,12 @@ in, so ``fastvi.Result.work`` (the work of driving constraints) gives the torque
 
 Run ``python examples/slider_crank_drive.py [figure.png]`` (default
 ``slider_crank_drive.png``). With ``FASTVI_QUICK=1`` the figure goes to a temporary directory.
+
+.. image:: /figures/slider_crank_drive.png
+   :alt: the figure this script draws
 """
+
+# sphinx_gallery_thumbnail_path = "figures/slider_crank_drive.png"
 
 import os
 import sys

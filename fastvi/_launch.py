@@ -3,8 +3,8 @@
 A numba dispatcher types every argument of every call to find the compiled version. For
 scalars and arrays its C fast path is quick, but the kernels take named tuples of arrays and a
 tuple of ``cfunc`` callbacks, which fall back to numba's Python ``typeof``: ≈ 0.8 ms of a
-1 ms ``integrate`` call of 2 steps went there (``docs/benchmarks.md``, "the fixed cost of a
-call"). A :class:`Launcher` keys the arguments by numba's own C type fingerprint
+1 ms ``integrate`` call of 2 steps went there (``docs/decisions/0009-launcher.md``). A
+:class:`Launcher` keys the arguments by numba's own C type fingerprint
 (``numba._dispatcher.compute_fingerprint``, the key of the dispatcher's type cache; a callback
 by its signature, a named tuple by its class) and calls the compiled entry point it found for
 that key before, which still unboxes the arguments but no longer types them.

@@ -48,7 +48,7 @@ def _package_stamp() -> str:
 
 
 #: a module-level name that opts a module outside the package into the package stamp
-#: (``bench/yardstick.py``: it compiles ``fastvi.kernels.linalg`` into its own kernels)
+#: (``tests/yardstick.py``: it compiles ``fastvi.kernels.linalg`` into its own kernels)
 STAMP_OPT_IN = "FASTVI_CACHE_STAMP"
 
 
@@ -131,7 +131,8 @@ def hot(fn):
 
     numba counts references to every array it extracts from a tuple or slices (an atomic
     increment and decrement per view): measured 0.9 µs of the 1.25 µs a residual of the
-    double pendulum cost, several times its arithmetic (``docs/benchmarks.md``). The kernels
+    double pendulum cost, several times its arithmetic
+    (``docs/decisions/0006-kernels-without-reference-counting.md``). The kernels
     of the time loop allocate nothing and only borrow arrays that their caller keeps alive,
     so they need no reference counting. numba refuses to compile an allocation in such a
     function, which also enforces the no-allocation rule.
@@ -145,7 +146,8 @@ def hot_inline(fn):
     A kernel's named tuples travel as flattened arguments (the workspace alone is some 300
     machine words), so a helper that LLVM does not inline pays for copying them at every
     call: factoring the forces at a quadrature point into a plain ``hot`` helper made the
-    default step 1.4× slower (6.0 against 4.3 µs, ``docs/benchmarks.md``)."""
+    default step 1.4× slower (6.0 against 4.3 µs,
+    ``docs/decisions/0006-kernels-without-reference-counting.md``)."""
     return nb.njit(**_OPTIONS, _nrt=False, inline="always")(fn)
 
 

@@ -459,7 +459,7 @@ def integrate_ensemble(
     specialize : bool, default False
         Run every member with the kernels compiled for the model's and method's sizes, as
         :func:`fastvi.integrate` does with ``specialize=True``: the same trajectories bit
-        for bit, a member's step cheaper on small models (``docs/benchmarks.md``), and one
+        for bit, a member's step cheaper on small models (``docs/benchmarks.md``, "Ensembles"), and one
         more compile of the parallel loop per set of sizes (minutes on a fresh install, then
         cached on disk). Sizes above 64 stay run-time integers.
 

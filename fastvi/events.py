@@ -43,7 +43,7 @@ class DenseSolution:
     ``q(t) = Σ_ν Q_k^ν ℓ_ν(τ)`` and ``v(t) = (1/h) Σ_ν Q_k^ν ℓ'_ν(τ)`` with the step's control
     points ``Q_k^ν`` (``Q_k^0 = q_k``, ``Q_k^s = q_{k+1}``). At the grid points ``q`` is the
     integrator's ``q_k`` (order ``2s``); between them the interpolant is less accurate: the
-    measured orders are in ``docs/api.md`` (order ``s + 1`` for ``q`` and ``s`` for ``v``
+    measured orders are in ``docs/events.md`` (order ``s + 1`` for ``q`` and ``s`` for ``v``
     inside a step). ``v`` at a grid point is the polynomial's, not the projected
     ``Result.v``.
 

@@ -173,7 +173,8 @@ def integrate(
         the constraints to round-off. A looser ``tol`` saves iterations — 1e-10 took 0.82×
         the time on the double pendulum at h = 0.025, with ``max|g|`` ≈ 1e-12 — but only
         where the step's own error is far larger: with ``"P4L-Q4G"`` at h = 0.0125 it
-        multiplied the energy and position errors by ≈ 20 (``docs/benchmarks.md``).
+        multiplied the energy and position errors by ≈ 20
+        (``docs/decisions/0001-mechanics-newton.md``).
     max_iter : int, default 30
         Newton iterations per step before giving up.
     newton : {"auto", "full"}, default "auto"
@@ -220,7 +221,7 @@ def integrate(
         Keep every step's control points and return ``Result.sol``, a
         :class:`fastvi.events.DenseSolution`: ``sol(t) -> (q, v)`` at any time(s) of the run
         from the step polynomials (``8 (s+1) n`` bytes a step; interior accuracy in
-        ``docs/api.md``).
+        ``docs/events.md``).
     events : callable or list of callables, optional
         ``event(t, q, v, params) -> float`` (numba's nopython subset, compiled once like the
         model's callbacks), at most 8, with SciPy's optional attributes ``terminal`` (bool or
@@ -245,8 +246,8 @@ def integrate(
         compile-time constants (:func:`fastvi.kernels.layout.specialize`): every small loop
         of the step is unrolled, and the step is compiled into the time loop. The
         trajectory is the generic kernels' bit for bit; a step of the double pendulum costs
-        2.0–2.9× less (``docs/benchmarks.md``). The price is one compile per size on a
-        fresh install: ≈ 3.5 min of CPU and ≈ 4 GB of peak memory (the double pendulum's
+        2.0–2.9× less (``docs/decisions/0007-size-specialized-kernels.md``). The price is
+        one compile per size on a fresh install: ≈ 3.5 min of CPU and ≈ 4 GB of peak memory (the double pendulum's
         ``P2L-Q3G``: 209 s, the process's peak resident memory 4.8 GB against 1 GB for the
         generic kernels, ≈ 3 GB of it still held after the compile). Then it is cached on
         disk like the generic kernels: a new process loads it in ≈ 0.1 s and ≈ 12 MB.
@@ -263,9 +264,8 @@ def integrate(
         so constraints hold to round-off as with a fixed step, but the map is
         time-reversible, *not* symplectic: no modified energy bounds its energy error
         (reversibility does near quasi-periodic motion), and a chaotic motion's may creep
-        (measured in
-        ``docs/benchmarks.md``: on the double pendulum 1.34–1.40× fewer steps than the
-        fixed step at equal maximum energy error over 1000 s, and no faster growth up to
+        (measured in ``docs/decisions/0002-adaptive-step.md``: on the double pendulum
+        1.34–1.40× fewer steps than the fixed step at equal maximum energy error over 1000 s, and no faster growth up to
         10⁴ s for orders 6 and 8). ``Result.t`` then holds the times of the saved steps.
         Needs ``t_end`` and a conservative, autonomous model; not with ``events``,
         ``dense_output`` or ``recover``.
@@ -276,9 +276,10 @@ def integrate(
 
     References
     ----------
-    Paper A: variational integrators in holonomic mechanics (constraint points, split
-    action). Paper B: higher-order variational Galerkin integrators for multibody systems
-    with constraints. Both in ``shared/seeds``; the method is written out in
+    Paper A: S. Man, Q. Gao, W. Zhong, Variational integrators in holonomic mechanics,
+    Mathematics 8 (2020) 1358 (constraint points, split action). Paper B: J. Ding, Z. Pan,
+    Higher order variational integrators for multibody system dynamics with constraints,
+    Advances in Mechanical Engineering 6 (2014) 383680. The method is written out in
     ``docs/method.md``.
     """
     t_start = time.perf_counter()

@@ -385,7 +385,8 @@ class Model:
         potential linear in q, ``∇²V = 0`` (uniform gravity in Cartesian coordinates): the
         kernels then evaluate ``∇V`` once a trajectory instead of at every quadrature
         point of every Newton iteration (0.83–0.89× the time of a double-pendulum step,
-        ``docs/benchmarks.md``), and Newton's matrix has no potential-Hessian block.
+        ``docs/decisions/0007-size-specialized-kernels.md``), and Newton's matrix has no
+        potential-Hessian block.
         :meth:`check` verifies the declaration (finite differences of ``potential_grad``
         against zero).
     force : callable, optional

@@ -22,7 +22,7 @@ Once per model, method and parameter vector, in NumPy:
    the Schur complement and the projection — the sparse LU with static pivots
    (:mod:`fastvi.kernels.sparse_lu`), the one of fewest flops, the sparse one's weighted by
    ``SPARSE_COST`` and every structured one only from ``BAND_MIN_ROWS`` rows (the measured
-   crossovers, ``docs/benchmarks.md``): every small model keeps the dense path, bit for
+   crossovers, ``docs/decisions/0004-sparse-lu.md``): every small model keeps the dense path, bit for
    bit, and is not even analysed. A chain is banded (its band is as thin as its fill);
    a tree of bodies or a ladder of loops is sparse (a hub or a rung widens the band, not
    the fill). The Schur complement and the projection use the pattern
@@ -72,7 +72,7 @@ BAND_MIN_ROWS = dict(newton=36, schur=16, projection=8)
 #: the dense one's ``N³/3`` by this factor (a pattern that fills the band stays dense)
 BAND_GAIN = 1.0
 #: the sparse LU's flop count is weighted by this against the banded and dense ones (its
-#: indirect addressing): measured on chain(N) and tree(b, L), docs/benchmarks.md
+#: indirect addressing): measured on chain(N) and tree(b, L), docs/decisions/0004-sparse-lu.md
 SPARSE_COST = 4.0
 #: the ``solver`` choices: automatic, or forced for every system (for tests and benchmarks)
 SOLVERS = ("auto", "dense", "banded", "sparse")

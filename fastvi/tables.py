@@ -327,7 +327,8 @@ class Method:
         invertible = bool(np.linalg.cond(A) < 1e12)  # r < s Gauss points make A singular
         Ainv = np.linalg.inv(A) if invertible else np.zeros((s, s))
         # s = 1 too: for a linear potential and a constant mass its mechanics iteration is
-        # Newton's method at a fraction of the full Newton's cost (docs/benchmarks.md)
+        # Newton's method at a fraction of the full Newton's cost
+        # (docs/decisions/0001-mechanics-newton.md)
         mech = invertible
         W = self.Lc[1:, 1:].T @ Ainv @ self.Lc[:s, :J]
         E2 = hermite_predictor(self.tau)
@@ -350,7 +351,7 @@ def hermite_predictor(tau: np.ndarray) -> np.ndarray:
     the end projection made exact to the method's order. On the chaotic double pendulum its
     guesses are closer in the median by 1.7× (s = 2, h = 0.02) and 10× (s = 4, h = 0.025)
     and at the 90th percentile by 1.3–5×; for s = 3, whose degree-6 guess was already
-    good, about as close (docs/benchmarks.md, 2026-11-26 afternoon). The value rows of each column sum to 1
+    good, about as close (docs/decisions/0008-predictor.md). The value rows of each column sum to 1
     exactly and its slope row is untouched (a guess of increments from ``q_k``).
     """
     s = len(tau) - 1

@@ -1,4 +1,4 @@
-"""Forces and time (docs/custom-model.md, "Forces and time"; shared/forces.md).
+"""Forces and time (docs/custom-model.md, "Forces and time"; docs/method.md §11).
 
 References are independent of fastvi's kernels: the exact solution of a damped oscillator,
 SciPy's DOP853 at tight tolerance on the minimal-coordinate equations (the damped double
@@ -107,7 +107,7 @@ def test_damped_double_pendulum_converges_at_order_2s(damped_dp, name, order):
     """With unit masses the force −c ṙ_i on each mass is −c θ̇ in the angle equations.
 
     This is also the test that tells the quadratured force from end-point lumping
-    (``f_d± = h/2 F(t_k or k+1)``), which is order 2 whatever s (shared/forces.md §2): the
+    (``f_d± = h/2 F(t_k or k+1)``), which is order 2 whatever s (docs/method.md §11): the
     slopes 4 and 6 asserted here fail for a lumped force.
     """
     th0, T = (np.pi / 2, np.pi / 2), 2.0

@@ -25,7 +25,7 @@ def test_double_pendulum_acceptance_run(double_pendulum, dp_start):
     assert np.max(r.velocity_residual) <= 1e-10  # measured 2e-15
     assert np.max(np.abs(r.energy_error)) <= 1e-3  # measured 6e-5
     # measured 4.0 with the default mechanics matrix (linear convergence, cheaper iterations;
-    # docs/benchmarks.md), 2.7 with newton="full"
+    # docs/decisions/0001-mechanics-newton.md), 2.7 with newton="full"
     assert 1.0 <= r.stats["newton_iterations"] / 10_000 <= 4.5
 
 
@@ -230,7 +230,7 @@ def test_kernel_cache_is_stamped_with_every_compiled_source():
     assert loc is not None and loc.get_source_stamp() == stamp
     assert _numba._InTree.from_function(test_kernel_cache_is_stamped_with_every_compiled_source, __file__) is None
     # a module outside the package that compiles fastvi's kernels into its own opts in
-    # (bench/yardstick.py): the package's stamp and its own file's, so that either edit counts
+    # (tests/yardstick.py): the package's stamp and its own file's, so that either edit counts
     scope = {_numba.STAMP_OPT_IN: True}
     exec("def kernel(x):\n    return x", scope)
     loc = _numba._InTree.from_function(scope["kernel"], __file__)

@@ -1,4 +1,4 @@
-"""The benchmark yardstick (``bench/yardstick.py``) runs the generic kernel's algorithm.
+"""The benchmark yardstick (``tests/yardstick.py``) runs the generic kernel's algorithm.
 
 The yardstick inlines the double pendulum into the step kernel; the speed ratio reported by
 ``make bench`` only means something if both kernels compute the same trajectory. The
@@ -9,16 +9,11 @@ steps.
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 import fastvi
-
-sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))
-import yardstick  # noqa: E402
+from tests import yardstick
 
 # the yardstick is a benchmark tool: compiling it costs ≈ 13 s of a cold `make test`, whose
 # 8-minute budget the kernels' own compile nearly fills; `make test-slow` runs these
@@ -67,7 +62,7 @@ def test_yardstick_keeps_constraints_at_newton_tolerance(double_pendulum, dp_sta
 
 
 _STALE = ("fastvi.integrate did not take the straight-line retry: if fastvi/kernels/step.py changed "
-          "after drive.run was cached, numba loads a stale drive.run (see docs/benchmarks.md)")
+          "after drive.run was cached, numba loads a stale drive.run (see docs/decisions/0005-cache-stamp.md)")
 
 
 def test_yardstick_retries_like_fastvi(double_pendulum, dp_start):

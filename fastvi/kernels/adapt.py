@@ -15,7 +15,7 @@ The rule is explicit (no extra equations in a step) and symmetric: with a symmet
 (every Lobatto–Gauss method of fastvi) and G odd in v, the map (q_k, v_k, ρ_{k−1/2}) →
 (q_{k+1}, v_{k+1}, ρ_{k+1/2}) is time-reversible. It is *not* symplectic: no modified
 Hamiltonian bounds its energy error (reversibility does near quasi-periodic motion; on a
-chaotic one it may random-walk), so docs/benchmarks.md measures it.
+chaotic one it may random-walk), so docs/decisions/0002-adaptive-step.md measures it.
 Steps shrink like 1/|v| where the motion is fast (a pendulum whipping over): at equal
 maximum energy error over T = 1000 s of the chaotic double pendulum, 1.34–1.40× fewer steps
 than the fixed step.

@@ -127,7 +127,7 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
     The time loop is ``hot`` (no reference counting) with the bookkeeping inlined: with
     reference counting on, the inlined helpers' array views cost 15 % of a step; without
     it, inlining saves the flattened-argument copies of two calls a step (7–10 % on
-    ``P2L-Q3G``/``P3L-Q4G``, docs/benchmarks.md).
+    ``P2L-Q3G``/``P3L-Q4G``, docs/decisions/0006-kernels-without-reference-counting.md).
 
     Saves every ``save_every``-th step and the last one into the :class:`Samples` ``smp``,
     the residuals and iterations being the maxima/sums over the steps since the previous

@@ -3,8 +3,8 @@
 Every layout a kernel reads — the callback slots of a model, the flags vector, the status
 integers, the counters of a run, the workspace of one trajectory — is defined here and
 imported by :mod:`fastvi.model`, the step and drive kernels, the RK4 baseline and the
-yardstick in ``bench/``. Kernels receive a handful of named tuples instead of long
-positional argument lists:
+yardstick kernel in ``tests/yardstick.py``. Kernels receive a handful of named tuples
+instead of long positional argument lists:
 
 ``ModelData(fns, flags, Mc, prm)``
     the model's compiled callbacks (tuple in :data:`SLOTS` order), its int64 flags vector
@@ -82,7 +82,7 @@ F_EX_GT = 12  # exact ∂g/∂t given
 #: time to the callbacks (= k, the number of user parameters; every model has the entry,
 #: so that writing the time needs no branch). One callback signature serves every model:
 #: the kernels write the time of each evaluation there, the wrappers of time-aware
-#: callbacks read it, the others never look (docs/api.md).
+#: callbacks read it, the others never look (docs/method.md §11).
 F_TSLOT = 13
 #: ∇V does not depend on q (``potential_hessian=0``: uniform gravity in Cartesian
 #: coordinates). An autonomous potential's gradient is then evaluated once a trajectory
@@ -167,7 +167,7 @@ H_SIZE = 4
 # float64 vector filled by step(): Newton iterations, max|g(q1)|, max|G v1|, last residual,
 # and whether the step fell back from the mechanics matrix to the full Newton
 # and the work done on the system over the step by the forces, the time-dependent potential
-# and driving constraints (docs/api.md, energy balance)
+# and driving constraints (Result.energy_balance; docs/method.md §11)
 S_ITERS, S_G, S_GV, S_RES, S_FULL, S_WORK = range(6)
 STEP_OUT_SIZE = 6
 
@@ -460,6 +460,7 @@ def specialize(ws):
     the generic ones), with every loop over coordinates, constraints, control points and
     quadrature points of known length, which LLVM unrolls (no loop set-up, vector-remainder
     code or run-time alias checks around loops of length 2–4): a double-pendulum step
-    1.55–1.75× cheaper from this alone (``docs/benchmarks.md``). The arithmetic and its
-    order are unchanged, so the trajectory equals the generic kernel's bit for bit."""
+    1.55–1.75× cheaper from this alone (``docs/decisions/0007-size-specialized-kernels.md``).
+    The arithmetic and its order are unchanged, so the trajectory equals the generic
+    kernel's bit for bit."""
     return ws._replace(dims=size_markers(ws.dims))

@@ -55,12 +55,14 @@ _FD_REL = 6.0554544523933395e-06  # cbrt(machine epsilon): central differences' 
 _FD_T = 7.4009597974140505e-04
 #: the mechanics matrix is abandoned for the full Newton when successive increments shrink
 #: by less than this factor: each of its iterations costs a residual, and at θ = 0.25 it
-#: needs about as many as the full Newton costs in assembly and LU (docs/benchmarks.md)
+#: needs about as many as the full Newton costs in assembly and LU
+#: (docs/decisions/0001-mechanics-newton.md)
 MECH_THETA_MAX = 0.25
 #: steps the full Newton stays on after the mechanics matrix failed (then it is tried again)
 FULL_HOLD = 32
 #: the two-step predictor is used while it differs from the one-step one by at most this
-#: fraction of the last step's displacement (its asymptotic range; docs/benchmarks.md)
+#: fraction of the last step's displacement (its asymptotic range;
+#: docs/decisions/0008-predictor.md)
 PREDICT_TRUST = 1e-1
 #: up to this many coordinates the constant-mass part of the residual is formed coordinate
 #: by coordinate, above it with vectorised loops over the coordinates (the same arithmetic)
@@ -387,7 +389,7 @@ def assemble(md_, tabs_, h, qk, pk, ws_, jac):
             else:
                 _fd_momentum_jacobian(fns[MASS], qi, vi, prm, Cq, fa, Ma, n)
         if has_force:
-            # ∂F_nc/∂q joins the force block, ∂F_nc/∂v the mixed block (forces.md §2)
+            # ∂F_nc/∂q joins the force block, ∂F_nc/∂v the mixed block (docs/method.md §11)
             if flags[F_EX_FJQ] != 0:
                 fns[FJQ](ptr(qi), ptr(vi), ptr(prm), ptr(Hc))
             else:
@@ -1107,7 +1109,7 @@ def newton_mech(md_, tabs_, opts, h, qk, pk, ws_, out):
     its Schur complement (m × m) is rebuilt at every iteration, the iteration is Newton's
     method, and it stops with the full Newton's early exit: 3.0 iterations a step for
     ``P1L-Q2G`` on the double pendulum, against 5.5 with the Schur complement of the
-    predictor's G(q_{k+1}) and the strict stop (docs/benchmarks.md).
+    predictor's G(q_{k+1}) and the strict stop (docs/decisions/0001-mechanics-newton.md).
     """
     md, tabs, ws = own(md_), own(tabs_), own(ws_)
     X, R = ws.X, ws.R
@@ -1335,7 +1337,7 @@ def hidden_residual(G1, v1, gt, n, m):
 
 @hot
 def _step_work(md_, tabs_, h, qk, q1, ws_, n, m, s, J):
-    r"""The work done on the system over the step (``docs/api.md``, energy balance)::
+    r"""The work done on the system over the step (``docs/method.md`` §11, energy balance)::
 
         W = h Σ_i b_i [F(t_i, q_i, v_i)·v_i + ∂V/∂t(t_i, q_i)] + Σ_{j≤J} η_j·g_t(t_j, q(d_j))
 
@@ -1448,7 +1450,7 @@ def end_momentum(md_, q1, P, p1, v1, G1, ws_, out):
         eta = ws.etaJ
         rheonomic = is_timed(md) and flags[F_TIME] != 0
         if rheonomic:
-            # G v1 + g_t = 0 at t_{k+1}: (G M⁻¹ Gᵀ) η = G M⁻¹ P + g_t (forces.md §3)
+            # G v1 + g_t = 0 at t_{k+1}: (G M⁻¹ Gᵀ) η = G M⁻¹ P + g_t (docs/method.md §11)
             constraint_rate(md, q1, ws.time[1], ws.gt, ws.g)
         for c in range(m):
             acc = ws.gt[c] if rheonomic else 0.0

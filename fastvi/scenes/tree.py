@@ -125,6 +125,15 @@ def tree(branches: int = 3, links: int = 3, m=1.0, l=1.0, g: float = 9.81, dampi
         With exact second derivatives, its declared pattern of ``G``,
         ``initial_state(thetas, omegas=None) -> (q0, v0)`` (link angles from the downward
         vertical in body order, a consistent state) and ``angles(q) -> thetas`` (..., N).
+
+    Notes
+    -----
+    The ``branches + 1`` constraints at the hub share its coordinates, so no narrow band
+    fits ``G M⁻¹ Gᵀ``, while eliminating the branches from their tips creates no fill: the
+    scene where the sparse LU beats the banded one (``docs/decisions/0004-sparse-lu.md``).
+    ``tree(1, L)`` is ``chain(L + 1)``. The pattern of ``G`` is
+    ``fastvi.scenes.tree.pattern(b, L)``, the body each body hangs from
+    ``fastvi.scenes.tree.parents(b, L)``.
     """
     branches = _count("branches", branches)
     links = _count("links", links)

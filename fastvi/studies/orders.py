@@ -696,7 +696,7 @@ def _findings(study: dict) -> str:
         + (f"; from the milder start {mild_default}" if mild_default else "")
         + ": order 2s." + _s5_note(study) + " With the constraint at the "
         f"step ends only (paper B's `-NE-CE`) it is {ends}: order 2 whatever s, as the "
-        "trap in `shared/method.md` §7 predicts for these scenes. Interior points other than "
+        "trap in [method.md](method.md) §7 predicts for these scenes. Interior points other than "
         f"Lobatto's lose order: s − 1 Gauss points plus the ends (paper A's `-CG<s−1>`) give "
         f"{gauss}, i.e. 2s − 2; constraints at equidistant nodes (`-NE-CN`) {equi}; at "
         f"Chebyshev nodes (`-NC-CN`) {cheb}. The momentum and the energy error follow the "

@@ -4,7 +4,7 @@
 the whole step (both Newton variants) and of its parts — the residual, the residual with the
 full Newton matrix, the dense LU and solve of that matrix, the mechanics-matrix solve, the end
 projection, one model callback — together with the calls per step, so that the parts can be
-added up and compared with the step (``docs/benchmarks.md``, "Profile of a step").
+added up and compared with the step (``docs/benchmarks.md``, "The step").
 """
 
 from __future__ import annotations
@@ -28,7 +28,8 @@ __all__ = ["profile_step", "main", "loop_step", "loop_residual", "loop_assemble"
 # The loops are compiled like the kernels they time (``hot``: no reference counting, so
 # the caller passes every scratch array): a loop that counts references to the views it
 # takes times numba's atomic counts, not the kernel (a sized residual measured 0.76 µs in
-# such a loop against 0.066 µs in a ``hot`` one; docs/benchmarks.md, 2026-11-25 late night).
+# such a loop against 0.066 µs in a ``hot`` one;
+# docs/decisions/0006-kernels-without-reference-counting.md).
 @hot
 def loop_step(md, tabs, opts, h, state, ws, out, K):
     """``K`` steps from ``state``, each continuing from the last (``out``: the step's output)."""

@@ -1056,7 +1056,7 @@ PEER_LEVELS = (1e-2, 1e-4, 1e-6, 1e-8)
 PEER_GOAL = 2.0  # issue 11: fastvi's best within 2× of DOP853 (a) at equal max|ΔH|, T = 1000 s
 #: the double pendulum from π/2 is chaotic: starts 1e-12 rad apart follow different paths
 #: after a few tens of seconds, and max|ΔH| over T = 1000 s, an extreme of the path, then
-#: differs by up to 4× for the same method and h (docs/benchmarks.md, 2026-11-26 afternoon).
+#: differs by up to 4× for the same method and h (docs/benchmarks.md, "Against a compiled DOP853").
 #: Each setting's max|ΔH| is the median over the nominal start and ``starts − 1`` starts of
 #: the panel's configuration perturbed by PEER_START_SPREAD (rad, the same for every
 #: contender: peer_starts); the CPU time is the nominal start's (it does not depend on the
@@ -1187,7 +1187,7 @@ def fastvi_peer_run(model, q0, v0, method, h, T, params=None, sample_dt=PEER_SAM
     holding ``dH`` (max|H − H0| over the samples), ``g`` (max|g|), ``steps``, ``ok`` and the
     final ``end`` configuration. ``method`` ``"<name> adaptive"`` runs the adaptive step
     (``adaptive=PEER_ADAPTIVE_KR``, ``h`` its ε; saved every ``sample_dt`` s on average:
-    :func:`adaptive_sample_every`). Also used by ``bench/rs_methods.py``."""
+    :func:`adaptive_sample_every`)."""
     name, adaptive = _adaptive_label(method)
     every = peer_save_every(model, q0, v0, method, h, T, params, sample_dt, specialize)
     c0 = time.process_time()

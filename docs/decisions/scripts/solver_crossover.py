@@ -9,7 +9,7 @@ the integration loop's time per step (``stats["integration_time"]``), the flop c
 automatic choice compares (:func:`fastvi.structure._system`) and what ``"auto"`` picks.
 The trajectories of the solvers are compared too (they agree at round-off).
 
-    .venv/bin/python bench/solver_crossover.py [rounds] [--scenes=chain,ladder,tree]
+    .venv/bin/python docs/decisions/scripts/solver_crossover.py [rounds] [--scenes=chain,ladder,tree]
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """How many iterations a step needs with other Newton matrices and stopping rules (a twin).
 
-    .venv/bin/python bench/newton_variants.py [METHOD H [STEPS]]   (default: the four below)
+    .venv/bin/python docs/decisions/scripts/newton_variants.py [METHOD H [STEPS]]   (default: the four below)
 
 Replays the double pendulum from θ1 = θ2 = π/2 at rest with the step kernel, and at every
 step (from the fourth) restarts the step's equations in NumPy from the kernel's own
@@ -20,7 +20,7 @@ For each: iterations a step with the kernel's stopping rule for the mechanics it
 (``θ/(1−θ)·|δ| ≤ tol``, θ the ratio of the last two increments) together with the error
 that exit leaves (max-norm distance of the control points from the step's converged ones,
 relative): an exit that leaves more than round-off lets conserved momenta drift
-(``docs/benchmarks.md``, 2026-11-25 afternoon). The first line is the kernel's own count.
+(``docs/decisions/0001-mechanics-newton.md. The first line is the kernel's own count.
 """
 
 import sys

@@ -3,7 +3,7 @@
 Run it twice from a fresh clone: the first process compiles the kernels and the user's
 callbacks (cold), the second loads both from numba's on-disk cache (warm)::
 
-    python bench/setup_times.py; python bench/setup_times.py
+    python docs/decisions/scripts/setup_times.py; python docs/decisions/scripts/setup_times.py
 """
 import sys, time
 t0 = time.perf_counter()

@@ -1,8 +1,8 @@
 """What the time-reversible adaptive step buys at equal energy error, and what a step costs.
 
-    .venv/bin/python bench/adaptive_steps.py [--starts=8] [--T=1000] [--methods=P2L-Q3G,...]
-    .venv/bin/python bench/adaptive_steps.py cost [--rounds=5] [--methods=P2L-Q3G,...]
-    .venv/bin/python bench/adaptive_steps.py drift [--starts=3]
+    .venv/bin/python docs/decisions/scripts/adaptive_steps.py [--starts=8] [--T=1000] [--methods=P2L-Q3G,...]
+    .venv/bin/python docs/decisions/scripts/adaptive_steps.py cost [--rounds=5] [--methods=P2L-Q3G,...]
+    .venv/bin/python docs/decisions/scripts/adaptive_steps.py drift [--starts=3]
 
 ``integrate(..., adaptive=K_r)`` (``fastvi.kernels.adapt``: Hairer & Söderlind's explicit,
 time-reversible step-size rule with the density ρ(q) = sqrt(1 + KE(q)/K_r), KE = E0 − V on
@@ -24,7 +24,7 @@ import numpy as np
 
 import fastvi
 from fastvi.studies.wpd import peer_starts
-from time_transform_steps import steps_at  # bench/, the script's own folder
+from time_transform_steps import steps_at  # the script's own folder
 
 LEVELS = (1e-2, 3e-3, 1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6)
 CASES = {

@@ -1,9 +1,9 @@
 """What the first compile of the kernels costs in time and memory (docs/benchmarks.md,
 "Compile and set-up time").
 
-    .venv/bin/python bench/compile_memory.py [--methods=P2L-Q3G,P3L-Q4G] [--warm] [--time]
-    NUMBA_OPT=2 .venv/bin/python bench/compile_memory.py --time   # LLVM at -O2 (default 3)
-    .venv/bin/python bench/compile_memory.py --events   # where each compile's time goes
+    .venv/bin/python docs/decisions/scripts/compile_memory.py [--methods=P2L-Q3G,P3L-Q4G] [--warm] [--time]
+    NUMBA_OPT=2 .venv/bin/python docs/decisions/scripts/compile_memory.py --time   # LLVM at -O2 (default 3)
+    .venv/bin/python docs/decisions/scripts/compile_memory.py --events   # where each compile's time goes
 
 Runs in a fresh numba cache (a temporary ``NUMBA_CACHE_DIR``, so nothing is loaded and
 nothing this run compiles is kept) unless ``--warm`` (the repository's own cache: what a

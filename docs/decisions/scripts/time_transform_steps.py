@@ -1,7 +1,7 @@
 """How many steps a time-transformed (Sundman) variational step saves at equal energy error.
 
-    .venv/bin/python bench/time_transform_steps.py [--starts=8] [--T=1000] [--quick]
-    PYTHONPATH=TREE .venv/bin/python bench/time_transform_steps.py cost KIND METHOD H
+    .venv/bin/python docs/decisions/scripts/time_transform_steps.py [--starts=8] [--T=1000] [--quick]
+    PYTHONPATH=TREE .venv/bin/python docs/decisions/scripts/time_transform_steps.py cost KIND METHOD H
 
 The speed study's gap to DOP853 at max|ΔH| = 1e-2 J is the number of steps (fastvi's fixed
 step against an adaptive one; docs/benchmarks.md). This measures what an adaptive step that
@@ -29,14 +29,14 @@ prints the steps each needs at the study's levels (log–log along each front) a
 ratio. Then the cost a step of each (generic kernels, no saving): the model-level
 transform runs through the general mass path, so the ratio says how cheap a dedicated
 kernel path (a scalar factor on a constant mass) would have to be to pay
-(docs/benchmarks.md, 2026-11-26 evening).
+(docs/decisions/0002-adaptive-step.md).
 
-``cost`` measures that dedicated path: ``bench/time_transform_kernel.patch`` is a prototype
+``cost`` measures that dedicated path: ``docs/decisions/scripts/time_transform_kernel.patch`` is a prototype
 of it (double pendulum only: linear potential, diagonal constant mass; the mass part of the
 residual by quadrature with the factor 1/σ(q_i), the mechanics matrix with M̄ = M/σ(q_k),
 the end velocity scaled by σ(q_{k+1}); no full-Newton fallback, no time output). Apply it to
 a worktree (``git worktree add --detach /tmp/wt-tt 5fa7114 && git -C /tmp/wt-tt apply
-$PWD/bench/time_transform_kernel.patch``) and run ``cost prototype METHOD Δτ`` with
+$PWD/docs/decisions/scripts/time_transform_kernel.patch``) and run ``cost prototype METHOD Δτ`` with
 ``PYTHONPATH=/tmp/wt-tt``, and ``cost plain METHOD h`` with this tree: µs a step (process
 CPU, best of 7 runs of 40 000 steps, ``specialize=True``) and Newton iterations a step. The
 prototype integrates the model-level transform's discrete Lagrangian (the same quadrature):
@@ -117,7 +117,7 @@ def transformed(E0: float, Kr: float) -> fastvi.Model:
 
 def prototype_model(E0: float, Kr: float) -> fastvi.Model:
     """The plain double pendulum with (E0, K_r) appended to its parameters: what the
-    prototype kernel of ``bench/time_transform_kernel.patch`` transforms by itself."""
+    prototype kernel of ``docs/decisions/scripts/time_transform_kernel.patch`` transforms by itself."""
     return fastvi.Model(4, 2, params=(1.0, 1.0, 1.0, 1.0, G_ACC, E0, Kr), mass=np.eye(4),
                         potential=_dp._V, potential_grad=_dp._dV, potential_hessian=0,
                         constraint=_dp._g, constraint_jacobian=_dp._G,

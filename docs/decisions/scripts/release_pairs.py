@@ -1,6 +1,6 @@
 """Two fastvi trees side by side, over several pairs of fresh processes.
 
-    .venv/bin/python bench/release_pairs.py TREE_A TREE_B [PAIRS] [--sized] [--methods=M,M]
+    .venv/bin/python docs/decisions/scripts/release_pairs.py TREE_A TREE_B [PAIRS] [--sized] [--methods=M,M]
         [--model=chainN] [--steps=K]
 
 Each tree runs in its own child process (``bench/release_runner.py`` with ``PYTHONPATH`` set

@@ -1,17 +1,16 @@
 """Fixed cost and cost per Newton iteration of a step, from a tolerance sweep.
 
-    .venv/bin/python bench/tolerance_sweep.py [--specialize]
-    .venv/bin/python bench/tolerance_sweep.py --accuracy
+    .venv/bin/python docs/decisions/scripts/tolerance_sweep.py [--specialize]
+    .venv/bin/python docs/decisions/scripts/tolerance_sweep.py --accuracy
 
 Loosening ``tol`` changes only how many iterations a step takes, so a straight-line fit of
 time per step against iterations per step splits a step into the part that each iteration
-costs and the part that does not depend on the count (docs/benchmarks.md, "Fixed cost and
-cost per iteration"). Double pendulum from θ1 = θ2 = π/2 at rest, h = 0.01, best of 7 runs
+costs and the part that does not depend on the count (docs/decisions/0001-mechanics-newton.md). Double pendulum from θ1 = θ2 = π/2 at rest, h = 0.01, best of 7 runs
 of 50 000 steps, thread CPU time, one process. ``--specialize``: the size-specialized
 kernels (``integrate(..., specialize=True)``).
 
 ``--accuracy``: what a looser ``tol`` buys and costs at the speed study's settings
-(docs/benchmarks.md, 2026-11-26 evening): for each method and step of ``ACCURACY`` and each
+(docs/decisions/0001-mechanics-newton.md): for each method and step of ``ACCURACY`` and each
 tol, the process CPU time of T = 1000 s saved every 0.1 s (best of 5, sized kernels, as the
 study runs fastvi), the iterations a step, max|ΔH| over T (the median over 4 of the study's
 starts, ``wpd.peer_starts``), max|g| over those runs, and the error of q at t = 10 s

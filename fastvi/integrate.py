@@ -7,12 +7,12 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
 
 import numpy as np
 
 from . import _validate as valid
 from . import events as events_
+from . import monitor as monitor_
 from . import structure
 from .kernels.events import event_values
 from ._launch import Launcher
@@ -31,10 +31,6 @@ _PROGRESS_CHUNKS = 50  # progress updates per run when progress=True
 _ADAPTIVE_CHUNK = 1 << 10  # least steps a kernel call of an adaptive run takes
 _ADAPTIVE_BUFFER = 1 << 28  # bytes of samples an adaptive run allocates before it must grow
 _ADAPTIVE_CAP = 1 << 62  # no step count: an adaptive run ends at t_end
-#: growth of the energy error (last tenth of the samples over the first) that no bounded,
-#: oscillating error reaches: round-off grows like √steps, chaos by a small factor, while a
-#: step beyond a method's stability limit grows exponentially (docs/robustness.md)
-ENERGY_GROWTH_ALARM = 1e6
 
 
 class IntegrationError(RuntimeError):
@@ -57,9 +53,10 @@ class IntegrationError(RuntimeError):
                  detail: str | None = None):
         self.status, self.step, self.time, self.residual, self.result = status, step, time, residual, result
         self.detail = detail
+        res = f"residual {residual:.3e}, " if residual == residual else ""  # NaN: no Newton failure
         super().__init__(
             f"{MESSAGES[status]} (status {int(status)} {status.name}, at step {step}, t = {time:.6g}, "
-            f"residual {residual:.3e}, method {result.method.name}, h = {result.h:g})"
+            f"{res}method {result.method.name}, h = {result.h:g})"
             + (f": {detail}" if detail else "")
         )
 
@@ -136,6 +133,7 @@ def integrate(
     solver: str = "auto",
     specialize: bool = False,
     adaptive: float | None = None,
+    monitor: bool = True,
 ) -> Result:
     r"""Integrate a constrained mechanical system with a Galerkin variational integrator.
 
@@ -411,10 +409,20 @@ def integrate(
         failed_step=None if status >= 0 else int(info[lay.I_FAILED]),
         **ev_out,
     )
-    _warn_if_energy_explodes(result)
+    verdict = monitor_.judge(result, every=every, newton_tol=opts.tol) if monitor else None
+    if verdict is not None:
+        result.stats.update(monitor_.stats(verdict))
+    if verdict is not None and not verdict.ok and status >= 0:
+        result, k, t_fail, detail = monitor_.cut(result, verdict, every=every, t0=t0)
+        if on_failure == "raise":
+            raise IntegrationError(Status.UNRELIABLE, k, t_fail, float("nan"), result, detail)
+        return result
     if status < 0 and on_failure == "raise":
         k = int(info[lay.I_FAILED])
         culprit = _nonfinite_callback(model, prm, state, ws) if status == Status.NONFINITE else None
+        if verdict is not None and not verdict.ok:  # it broke before Newton gave up: say so
+            culprit = ((culprit + "; ") if culprit else "") + (
+                f"before that, from t = {result.t[verdict.sample]:.6g}, {verdict.reason}")
         t_fail = t0 + k * h if adaptive is None else float(ws.time[0])
         raise IntegrationError(status, k, t_fail, float(info[lay.I_RES]), result, culprit)
     return result
@@ -428,28 +436,6 @@ def _timed(fn) -> float:
 
 #: the time loop, called through its compiled entry points (no per-call typing: _launch.py)
 _RUN = Launcher(drive.run)
-
-
-def _warn_if_energy_explodes(result: Result) -> None:
-    """Warn when the energy error grows by ``ENERGY_GROWTH_ALARM`` over the run.
-
-    A variational integrator's energy error stays bounded; exponential growth means the
-    step is beyond the method's stability limit (e.g. ``P1L-Q2G`` with ``ωh > √12`` on a
-    stiff spring), and the trajectory is then wrong even though every step converged.
-    """
-    err = np.abs(result.energy_balance[1:])
-    if err.size < 20 or not np.all(np.isfinite(err)):
-        return
-    k = err.size // 10
-    first, last = err[:k].max(), err[-k:].max()
-    floor = 1e-6 * max(1.0, abs(result.energy[0]))
-    if last > floor and last > ENERGY_GROWTH_ALARM * first:
-        warnings.warn(
-            f"the energy error grew from {first:.2e} to {last:.2e} over the run: h = {result.h:g} is "
-            f"probably beyond the stability limit of {result.method.name} for this model (a stiff "
-            "spring?); use a smaller h or a method with r = s, e.g. 'P2L-Q2G' (docs/robustness.md)",
-            RuntimeWarning, stacklevel=3,
-        )
 
 
 def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, smp, info,

@@ -12,7 +12,9 @@ import numpy as np
 
 from . import _validate as valid
 from . import events as events_
+from . import guards
 from . import monitor as monitor_
+from . import scipy_compat as compat
 from . import structure
 from .kernels.events import event_values
 from ._launch import Launcher
@@ -21,7 +23,7 @@ from .kernels import drive
 from .kernels import layout as lay
 from .kernels.layout import Samples
 from .model import Model
-from .results import ProgressBar, Result
+from .results import NoDenseOutput, ProgressBar, Result
 from .status import MESSAGES, Status
 from .tables import Method
 
@@ -134,6 +136,8 @@ def integrate(
     specialize: bool = False,
     adaptive: float | None = None,
     monitor: bool = True,
+    t_span=None,
+    t_eval=None,
 ) -> Result:
     r"""Integrate a constrained mechanical system with a Galerkin variational integrator.
 
@@ -288,10 +292,21 @@ def integrate(
     v0 = valid.vector(v0, "v0", n)
     prm = valid.params(params, model)
     h = valid.step_size(h)
+    t0, t_end = compat.span(t_span, t0, t_end, n_steps)
     t0 = valid.start_time(t0)
     adaptive = valid.adaptive(adaptive, model, t_end, n_steps, t0, events=events,
                               dense_output=dense_output, recover=recover)
-    total = valid.step_count(h, t_end, n_steps, t0) if adaptive is None else _ADAPTIVE_CAP
+    if adaptive is None:  # a span not a whole number of steps ends with a shorter step
+        total, h, h_last = compat.steps(h, t_end, n_steps, t0)
+    else:
+        total, h_last = _ADAPTIVE_CAP, 0.0
+        if t_eval is not None:
+            raise ValueError("`t_eval` needs fixed steps (it samples the step polynomials); "
+                             "pass `adaptive=None`, or read the adaptive samples `Result.t`")
+    t_eval = compat.eval_times(t_eval, t0, t0 + total * h + h_last if adaptive is None else None)
+    dense_asked = dense_output
+    if t_eval is not None:  # samples at given times come from the step polynomials
+        dense_output = True
     every = valid.save_every(save_every)
     opts = valid.newton_options(tol, max_iter, newton)
     recover = valid.recover(recover)
@@ -299,12 +314,15 @@ def integrate(
     dense_output = valid.flag(dense_output, "dense_output")
     specialize = valid.flag(specialize, "specialize")
     if recover and (dense_output or events is not None):
-        raise ValueError("`recover` cannot be combined with `dense_output` or `events` (a recovered "
-                         "step has no single polynomial); use a smaller `h` instead")
+        raise ValueError("`recover` cannot be combined with `dense_output`, `t_eval` or `events` (a "
+                         "recovered step has no single polynomial); use a smaller `h` instead")
     compile_time = _timed(model._compile)
     check_time = 0.0
     if check and not model._checked:  # before the projection, which trusts G(q)
         check_time = _timed(lambda: model.check(q0, v0, params=prm, n_random=1, t=t0))
+    else:  # check=False skips the derivatives, never the sizes (a size mistake corrupts memory)
+        check_time = _timed(lambda: guards.sizes(model, q0, v0, prm, t0))
+    guards.signatures(events)
     q0, v0 = valid.initial_state(model, q0, v0, prm, t0)
 
     md = model.kernel_data(prm, t0)
@@ -338,7 +356,9 @@ def integrate(
     tabs = meth.kernel_tables
     ev = events_.prepare(model, meth, events, total if dense_output else 0)
     if ev.count:
-        event_values(md, ev, t0, q0, v0)
+        guards.events(model, ev, q0, v0, prm, t0)  # before the kernels call them
+        with quiet():
+            event_values(md, ev, t0, q0, v0)
 
     sout = np.zeros(lay.STEP_OUT_SIZE)
     sized = True if specialize else None
@@ -409,22 +429,43 @@ def integrate(
         failed_step=None if status >= 0 else int(info[lay.I_FAILED]),
         **ev_out,
     )
+    # the monitor reads the grid samples, before the last sample moves to an event
     verdict = monitor_.judge(result, every=every, newton_tol=opts.tol) if monitor else None
     if verdict is not None:
         result.stats.update(monitor_.stats(verdict))
-    if verdict is not None and not verdict.ok and status >= 0:
-        result, k, t_fail, detail = monitor_.cut(result, verdict, every=every, t0=t0)
-        if on_failure == "raise":
-            raise IntegrationError(Status.UNRELIABLE, k, t_fail, float("nan"), result, detail)
-        return result
-    if status < 0 and on_failure == "raise":
+    error = None
+    if verdict is not None and not verdict.ok:  # broken before any failure of a step
+        later = None
+        if status < 0:
+            later = f"{Status(status).name} at step {int(info[lay.I_FAILED])}"
+        result, k, t_fail, detail = monitor_.cut(result, verdict, every=every, t0=t0, later=later)
+        error = IntegrationError(Status.UNRELIABLE, k, t_fail, float("nan"), result, detail)
+    elif status < 0:
         k = int(info[lay.I_FAILED])
         culprit = _nonfinite_callback(model, prm, state, ws) if status == Status.NONFINITE else None
-        if verdict is not None and not verdict.ok:  # it broke before Newton gave up: say so
-            culprit = ((culprit + "; ") if culprit else "") + (
-                f"before that, from t = {result.t[verdict.sample]:.6g}, {verdict.reason}")
         t_fail = t0 + k * h if adaptive is None else float(ws.time[0])
-        raise IntegrationError(status, k, t_fail, float(info[lay.I_RES]), result, culprit)
+        error = IntegrationError(status, k, t_fail, float(info[lay.I_RES]), result, culprit)
+    else:
+        result = compat.end_at_event(result, model, prm, events)
+        if h_last and result.status == Status.SUCCESS:  # the shorter last step, onto t_end
+            t_last = float(result.t[-1])
+            tail = integrate(model, result.q[-1], result.v[-1], h=h_last, n_steps=1, t0=t_last,
+                             method=meth, tol=tol, max_iter=max_iter, newton=newton, params=prm,
+                             on_failure="return", check=False, dense_output=dense_output,
+                             events=events, solver=solver, specialize=specialize, monitor=monitor)
+            result = compat.append_last_step(result, tail, h_last, t0 + total * h + h_last
+                                             if t_end is None else float(t_end))
+            if result.status < 0:
+                error = IntegrationError(result.status, total, t_last, float("nan"), result,
+                                         f"in the shorter last step (h = {h_last:g}) onto t_end")
+    if t_eval is not None:
+        result = compat.resample(result, model, prm, t_eval)
+        if not dense_asked:
+            result.sol = NoDenseOutput()
+        if error is not None:
+            error.result = result
+    if error is not None and on_failure == "raise":
+        raise error
     return result
 
 

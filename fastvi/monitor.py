@@ -229,7 +229,7 @@ def judge(result, *, every: int, newton_tol: float) -> Verdict:
     return verdict
 
 
-def cut(result, verdict: Verdict, *, every: int, t0: float):
+def cut(result, verdict: Verdict, *, every: int, t0: float, later: str | None = None):
     """The result up to the last sample before the breach, with ``Status.UNRELIABLE``.
 
     Returns ``(result, failed_step, failed_time, detail)``: the step from which the
@@ -247,10 +247,15 @@ def cut(result, verdict: Verdict, *, every: int, t0: float):
     t_good, t_bad = float(result.t[j - 1]), float(result.t[j])
     span = (f"step {bad - 1} (t = {t_good:.6g} → {t_bad:.6g})" if bad - good == 1 else
             f"steps {good}–{bad - 1} (t = {t_good:.6g} → {t_bad:.6g})")
-    detail = (f"the reliability monitor stopped trusting the trajectory at {span}: {verdict.reason}. "
-              f"The result keeps the samples up to t = {t_good:.6g}; use a smaller `h` (see "
-              "fastvi.monitor; `monitor=False` turns this check off)")
-    stats = dict(result.stats, steps=good, monitor_breach=verdict.indicator, monitor_breach_time=t_bad)
+    retaken = [k for k, _ in result.stats.get("recovered_steps", []) if k < bad]
+    extra = (f"; {len(retaken)} step(s) before it were retaken in substeps (`recover`), which "
+             "cannot mend a step too large for the motion" if retaken else "")
+    extra += f"; the run went on until {later}" if later else ""
+    detail = (f"the reliability monitor stopped trusting the trajectory at {span}: {verdict.reason}"
+              f"{extra}. The result keeps the samples up to t = {t_good:.6g}; use a smaller `h` "
+              "(see fastvi.monitor; `monitor=False` turns this check off)")
+    stats = dict(result.stats, steps=good, monitor_breach=verdict.indicator, monitor_breach_time=t_bad,
+                 recovered_steps=[x for x in result.stats.get("recovered_steps", []) if x[0] < good])
     arrays = {name: getattr(result, name)[:j] for name in
               ("t", "q", "v", "p", "energy", "constraint_residual", "velocity_residual",
                "newton_iterations")}
@@ -262,7 +267,7 @@ def cut(result, verdict: Verdict, *, every: int, t0: float):
         extra = dict(t_events=[te[k] for te, k in zip(result.t_events, keep)],
                      q_events=[qe[k] for qe, k in zip(result.q_events, keep)],
                      v_events=[ve[k] for ve, k in zip(result.v_events, keep)])
-    if result.sol is not None:
+    if result.sol:  # a DenseSolution (without dense output: a falsy NoDenseOutput)
         from .events import DenseSolution
 
         sol = result.sol

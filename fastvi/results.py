@@ -19,7 +19,7 @@ import numpy as np
 from .status import MESSAGES, Status
 from .tables import Method, method as _method
 
-__all__ = ["ResultBase", "TrajectoryResult", "Result", "ProgressBar"]
+__all__ = ["ResultBase", "TrajectoryResult", "Result", "ProgressBar", "NoDenseOutput"]
 
 
 def _seconds(x) -> str:
@@ -179,6 +179,29 @@ class TrajectoryResult(ResultBase):
         return _finish_figure(fig, path)
 
 
+class NoDenseOutput:
+    """:attr:`Result.sol` of a run without ``dense_output=True``: false in a test, and
+    calling it (or reading its attributes) raises an error that says what to pass."""
+
+    MESSAGE = ("`Result.sol` needs dense output: pass `dense_output=True` to fastvi.integrate "
+               "(it keeps every step's control points, 8 (s+1) n bytes a step), or `t_eval=` to get "
+               "samples at given times")
+
+    def __bool__(self) -> bool:
+        return False
+
+    def __call__(self, *args, **kwargs):
+        raise ValueError(self.MESSAGE)
+
+    def __getattr__(self, name):
+        if name.startswith("__"):  # copy, pickle and friends probe dunders: not a user's call
+            raise AttributeError(name)
+        raise ValueError(self.MESSAGE)
+
+    def __repr__(self) -> str:
+        return "NoDenseOutput(pass dense_output=True to fastvi.integrate)"
+
+
 @dataclass(repr=False)
 class Result(TrajectoryResult):
     """Trajectory of :func:`fastvi.integrate` at the saved steps.
@@ -234,7 +257,7 @@ class Result(TrajectoryResult):
     t_events: list | None = None
     q_events: list | None = None
     v_events: list | None = None
-    sol: object | None = None
+    sol: object = field(default_factory=NoDenseOutput)
 
     def _label(self) -> str:
         if "adaptive" in self.stats:  # h is then the step where the motion is slow

@@ -20,6 +20,7 @@ import numpy as np
 
 from . import _validate as check
 from . import events as events_
+from . import guards
 from . import structure
 from ._launch import Launcher
 from .integrate import Result, _timed
@@ -442,6 +443,9 @@ def integrate_ensemble(
     check : bool, default True
         As in :func:`fastvi.integrate`: compare the model's derivative callbacks with finite
         differences (at the first member's state) the first time the model is used.
+        ``check=False`` skips that comparison only: the sizes of the callbacks' outputs are
+        checked all the same (a size mistake would corrupt memory), and so are the event
+        functions.
     events : callable or list of callables, optional
         Event functions ``event(t, q, v, params) -> float`` with the optional attributes
         ``terminal`` and ``direction``, exactly as in :func:`fastvi.integrate` (members get
@@ -533,12 +537,17 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
     Q0, V0, P = _members(model, Q0, V0, params)
     compile_time = _timed(model._compile)
     t_events = time.perf_counter()
+    guards.signatures(events)  # SciPy's ev(t, y) named before numba's typing error
     ev = events_.prepare(model, opts["method"], events, 0, 1)  # compiles the event functions
     compile_time += time.perf_counter() - t_events
     check_time = 0.0
     t0 = opts.get("t0", 0.0)
     if run_check and not getattr(model, "_checked", True):  # as integrate: before the projection
         check_time = _timed(lambda: model.check(Q0[0], V0[0], params=P[0], n_random=1, t=t0))
+    else:  # the sizes always (check=False skips the derivatives only)
+        check_time = _timed(lambda: guards.sizes(model, Q0[0], V0[0], P[0], t0))
+    if ev.count:
+        guards.events(model, ev, Q0[0], V0[0], P[0], t0)
     X0, H0, g0, gv0 = _initial_states(model, Q0, V0, P, first_member, t0)
 
     N, n = Q0.shape

@@ -158,7 +158,11 @@ def integrate(
     h : float
         Step size.
     t_end, n_steps :
-        Exactly one: final time (a whole number of steps after ``t0``) or number of steps.
+        Exactly one: final time or number of steps. A ``t_end − t0`` that is not a whole
+        number of steps of ``h`` ends with one shorter step that lands on ``t_end`` (as
+        SciPy's ``solve_ivp`` does; ``stats["last_step"]`` is its length): the same
+        variational step with another ``h``, so only the modified energy of that one step
+        differs. A span shorter than ``h`` is one step of the span.
     t0 : float, default 0.0
         Start time: ``Result.t`` starts there, and step k runs from ``t0 + k h``. It matters
         to a model with forces or time-dependent callbacks (whose initial data must then
@@ -208,6 +212,16 @@ def integrate(
         symplectic and constraint-preserving) but of a different method than its
         neighbours, so the modified energy may jump slightly there. Recovered steps are
         listed in ``stats["recovered_steps"]`` as (step, substeps).
+        What it can save: an isolated hard step in a run whose ``h`` resolves the motion (a
+        pass near a singular position, a brief fast whip), where the neighbouring steps
+        are fine. What it cannot: an ``h`` too large for the motion. Then the steps around
+        the failing one are already wrong (their Newton solutions converge, possibly to
+        another branch of the step's equations), and substeps only carry the wrong state
+        on; the reliability monitor (``monitor``) stops such a run where its energy error
+        leaves the bounded regime, whatever ``recover`` retook (on the slider–crank of
+        ``tests/test_reliability.py`` at h = 0.1: ``UNRELIABLE`` at t = 0.4, where without
+        the monitor the run ended as a success with an energy error of 92 J on 14.4 J).
+        Use a smaller ``h``.
     check : bool, default True
         The first time a model is integrated, run :func:`fastvi.check.check_model` at ``q0``
         and one nearby state (a few milliseconds): first every callback is evaluated once
@@ -215,8 +229,10 @@ def integrate(
         inputs, or leaves an entry unset raises :class:`fastvi.ModelCheckError` instead of
         corrupting memory in the kernels; then its derivative callbacks are compared with
         finite differences. Models that passed once (or passed :meth:`Model.check`) are not
-        checked again. ``check=False`` skips both, at your own risk: a callback with a size
-        mistake then writes out of bounds (crashes, or silently wrong results).
+        checked again. ``check=False`` skips the comparison of the derivatives only, at your
+        own risk (a wrong derivative integrates another Lagrangian; the reliability monitor
+        then usually sees the energy drift). The size check always runs (once per model, well
+        under a millisecond): a size mistake would write out of bounds.
     dense_output : bool, default False
         Keep every step's control points and return ``Result.sol``, a
         :class:`fastvi.events.DenseSolution`: ``sol(t) -> (q, v)`` at any time(s) of the run
@@ -228,8 +244,14 @@ def integrate(
         a count) and ``direction`` (−1, 0, +1). Zero crossings are located on the step
         polynomial to round-off in ``t`` (no extra steps) and returned in
         ``Result.t_events``, ``q_events``, ``v_events`` (one array per event). A terminal
-        event ends the run after the step containing it, with ``status`` 1
-        (``Status.TERMINATED``); that step's end is the last sample.
+        event ends the run at the event, with ``status`` 1 (``Status.TERMINATED``): as in
+        SciPy, the last sample is the state at the event time from the step polynomial
+        (``q`` of order ``s + 1``, ``v`` of order ``s`` inside a step; the energy and
+        residuals of that sample are evaluated there, the work of a forced model is
+        interpolated linearly across the step). Before the first step each event is
+        evaluated once in guarded buffers: one that writes into ``q``, ``v`` or ``params``,
+        reads past their ends, or follows SciPy's ``ev(t, y)`` raises
+        :class:`fastvi.guards.EventFunctionError`.
 
     solver : {"auto", "dense", "banded", "sparse"}, default "auto"
         How the step's linear systems (full Newton matrix, Schur complement of the mechanics
@@ -269,7 +291,27 @@ def integrate(
         fixed step at equal maximum energy error over 1000 s, and no faster growth up to
         10⁴ s for orders 6 and 8). ``Result.t`` then holds the times of the saved steps.
         Needs ``t_end`` and a conservative, autonomous model; not with ``events``,
-        ``dense_output`` or ``recover``.
+        ``dense_output``, ``t_eval`` or ``recover``.
+    monitor : bool, default True
+        After the run, check that it is not broken although every step converged
+        (:mod:`fastvi.monitor`): its energy error (for a forced or driven model the energy
+        balance ``H − H0 − W``) against a tenth of the largest kinetic energy (or work) so
+        far, the constraint residuals against the tolerance initial data must meet, and
+        each step's displacement against its length times its velocities. A run that
+        breaks a limit ends with ``Status.UNRELIABLE``: :class:`IntegrationError` (or, with
+        ``on_failure="return"``, the result) holds the samples up to the last good one, and
+        the message says at which step and time which indicator broke. The indicators'
+        largest values (fractions of their limits) are in ``stats["monitor_energy"]``,
+        ``["monitor_constraint"]``, ``["monitor_hidden_constraint"]``,
+        ``["monitor_displacement"]``. ``False`` skips the check.
+    t_span : (float, float), optional
+        SciPy's spelling of ``t0`` and ``t_end``: ``t_span=(t0, t1)``.
+    t_eval : array_like, optional
+        Return the samples at these times (sorted, within the run), taken from the step
+        polynomials as SciPy does: ``q``, ``v`` (orders ``s + 1`` and ``s`` between grid
+        points), ``p = M(q) v``, the energy and residuals evaluated there, the work of a
+        forced model interpolated linearly. The steps are still of ``h``; the monitor
+        judges them on the grid. ``Result.sol`` stays unset unless ``dense_output=True``.
 
     Returns
     -------

@@ -180,7 +180,8 @@ class EnsembleResult(ResultBase):
                  f"status={self._status_text()}"]
         err = self.member_energy_error()
         if err is not None and np.isfinite(err).any():
-            items.append(f"max|ΔH|={np.nanmax(err):.2g}")
+            name = "max|ΔH−W|" if self.stats.get("timed") else "max|ΔH|"
+            items.append(f"{name}={np.nanmax(err):.2g}")
         return items
 
     def final_state(self) -> tuple[np.ndarray, np.ndarray]:
@@ -193,12 +194,15 @@ class EnsembleResult(ResultBase):
 
     def member_energy_error(self) -> np.ndarray | None:
         """(N,) energy error per member: ``max |ΔH|`` over every step (``"diagnostics"``),
-        over the samples (stride), or at the final state (``"final"``); None if unknown."""
+        over the samples (stride), or at the final state (``"final"``); for a model with
+        forces or time the energy balance ``|ΔH − W|`` where the work is known (every
+        step, the samples); None if unknown."""
         if self.max_energy_error is not None:
             return self.max_energy_error
         if self.t is not None:
+            work = 0.0 if self.work is None else self.work  # a forced model: the balance
             with np.errstate(invalid="ignore"):
-                return np.nanmax(np.abs(self.energy - self.energy[:, :1]), axis=1)
+                return np.nanmax(np.abs(self.energy - self.energy[:, :1] - work), axis=1)
         if self.initial_energy is not None:
             return np.abs(self.energy - self.initial_energy)
         return None
@@ -294,9 +298,11 @@ class EnsembleResult(ResultBase):
             f"Newton iterations/step = {st['newton_iterations'] / max(1, st['member_steps']):.2f}",
         ]
         if self.max_energy_error is not None:
-            lines.append(f"max |ΔH| = {np.max(self.max_energy_error):.3e}, "
+            timed = self.stats.get("timed")
+            lines.append(f"max {'|ΔH − W|' if timed else '|ΔH|'} = {np.max(self.max_energy_error):.3e}, "
                          f"max |g| = {np.max(self.max_constraint_residual):.3e}, "
-                         f"max |Gv| = {np.max(self.max_velocity_residual):.3e}")
+                         f"max {'|Gv + g_t|' if timed else '|Gv|'} = "
+                         f"{np.max(self.max_velocity_residual):.3e}")
         failed = self.failed
         ended = self.terminated.size
         if ended:
@@ -605,7 +611,8 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
     iterations = fst[:, lay.F_ITERS].astype(np.int64)
     stats = dict(members=N, member_steps=int(steps.sum()), newton_iterations=int(iterations.sum()),
                  threads=used, integration_time=t1 - t_loop, setup_time=t_loop - t_setup,
-                 compile_time=compile_time, check_time=check_time, wall_time=t1 - t_setup)
+                 compile_time=compile_time, check_time=check_time, wall_time=t1 - t_setup,
+                 timed=bool(model.timed))  # the energy figures are then balances H − H0 − W
     diag = mode == lay.SAVE_DIAGNOSTICS
     stride = mode == lay.SAVE_STRIDE
     if stride:

@@ -119,7 +119,7 @@ def _samples(K=50, n=2, h=0.1):
 
 def _assess(s, one_step=True):
     return monitor.assess(s["t"], s["q"], s["v"], s["p"], s["energy"], s["work"], s["g"], s["gv"],
-                          h=0.1, one_step=one_step, newton_tol=1e-14)
+                          one_step=one_step, newton_tol=1e-14)
 
 
 def test_exact_samples_pass():

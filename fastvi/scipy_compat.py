@@ -57,13 +57,7 @@ def steps(h: float, t_end, n_steps, t0: float):
     """
     if n_steps is not None or t_end is None:
         return valid.step_count(h, t_end, n_steps, t0), h, 0.0
-    if isinstance(t_end, bool) or not isinstance(t_end, (int, float, np.integer, np.floating)):
-        raise TypeError(f"`t_end` must be a float, got {t_end!r}")
-    t_end = float(t_end)
-    if not (t_end > t0 and math.isfinite(t_end)):
-        after = "positive" if t0 == 0.0 else f"after `t0` = {t0:g}"
-        raise ValueError(f"`t_end` must be finite and {after}, got {t_end}")
-    width = t_end - t0
+    width = valid.end_time(t_end, t0) - t0
     k = round(width / h)
     if k >= 1 and abs(k * h - width) <= _WHOLE * width:
         return int(k), h, 0.0

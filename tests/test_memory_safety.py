@@ -104,30 +104,9 @@ CASES = {
 }
 
 
-# Event functions on the correct sphere model: each mistake of the issue, and SciPy's habit.
-EVENT_SCRIPT = r'''
-import sys
-import numpy as np
-import fastvi
-
-case = sys.argv[1]
-
-def V(q, p):
-    return p[0] * q[2]
-
-def dV(q, p, out):
-    out[0] = 0.0
-    out[1] = 0.0
-    out[2] = p[0]
-
-def g1(q, p, out):
-    out[0] = 0.5 * (q[0] ** 2 + q[1] ** 2 + q[2] ** 2 - 1.0)
-
-def G1(q, p, out):
-    out[0, 0] = q[0]
-    out[0, 1] = q[1]
-    out[0, 2] = q[2]
-
+# Event functions on the correct sphere model of SCRIPT (its functions reused): each mistake
+# of the issue, and SciPy's habit. argv: the event's name, then "check" or "nocheck".
+EVENT_SCRIPT = SCRIPT.split("funcs = dict(")[0] + r'''
 def reads_past_v(t, q, v, p):  # v has n = 3 entries
     return v[3] - 0.5
 
@@ -148,9 +127,8 @@ def correct(t, q, v, p):
 model = fastvi.Model(3, 1, params=(9.81,), mass=np.eye(3), potential=V, potential_grad=dV,
                      constraint=g1, constraint_jacobian=G1)
 q0, v0 = np.array([0.6, 0.8, 0.0]), np.array([-0.8, 0.6, 0.0])
-event = globals()[case]
-result = fastvi.integrate(model, q0, v0, h=0.01, n_steps=200, events=event,
-                          check=len(sys.argv) < 3)
+result = fastvi.integrate(model, q0, v0, h=0.01, n_steps=200, events=globals()[case],
+                          check=route == "check")
 print("integrated", result.success, len(result.t_events[0]))
 '''
 
@@ -219,8 +197,8 @@ def test_event_mistakes_raise_a_clear_error_in_a_fresh_process():
     check; the correct event is the control."""
     import re
 
-    jobs = [(case,) + extra for _ in range(3) for case in EVENT_CASES for extra in ((), ("nocheck",))]
-    results = _run_all(jobs + [("correct",)], script=EVENT_SCRIPT)
+    jobs = [(case, route) for _ in range(3) for case in EVENT_CASES for route in ("check", "nocheck")]
+    results = _run_all(jobs + [("correct", "check")], script=EVENT_SCRIPT)
     control = results.pop()
     assert control[1] == 0 and "integrated True" in control[2], control
     for job, code, out, err in results:

@@ -114,7 +114,9 @@ class Verdict:
 
 
 def _first(bad: np.ndarray) -> int | None:
-    idx = np.flatnonzero(bad)
+    """The first bad sample after the start (sample 0 is the initial state, which
+    :func:`fastvi._validate.initial_state` has checked and projected)."""
+    idx = np.flatnonzero(bad[1:]) + 1
     return int(idx[0]) if idx.size else None
 
 

@@ -143,3 +143,33 @@ def test_t_eval_stops_at_a_terminal_event_like_solve_ivp(pend):
     r = fastvi.integrate(pend, *pend.initial_state(TH0), h=0.01, t_span=(0.0, 2.0), t_eval=t_eval,
                          events=_down)
     np.testing.assert_array_equal(r.t, ref.t)
+
+
+def test_runs_with_events_print_no_numba_warnings_with_warnings_on():
+    """With warnings on (``-W default``, and again after import as a user would), a run with
+    events, a terminal event and an ensemble with events print no NumbaExperimentalFeatureWarning
+    (numba's note on first-class functions, fastvi's own business). The event is defined in
+    ``-c`` code, so it is compiled afresh in the subprocess."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = (
+        "import warnings, numpy as np, fastvi\n"
+        "warnings.simplefilter('default')\n"
+        "m = fastvi.scenes.pendulum()\n"
+        "def ev(t, q, v, p):\n    return q[0]\n"
+        "ev.terminal = True\n"
+        "q0, v0 = m.initial_state(1.0)\n"
+        "r = fastvi.integrate(m, q0, v0, h=0.01, t_end=2.0, events=ev, dense_output=True)\n"
+        "e = fastvi.integrate_ensemble(m, np.array([q0, q0]), np.array([v0, v0]), h=0.01, "
+        "n_steps=100, events=[ev])\n"
+        "print('ok', int(r.status), len(r.t_events[0]))\n")
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.run([sys.executable, "-W", "default", "-c", code], cwd=root, env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0 and "ok 1 1" in proc.stdout, proc.stderr[-2000:]
+    assert "NumbaExperimentalFeatureWarning" not in proc.stderr, proc.stderr[-2000:]
+    assert "Warning" not in proc.stderr, proc.stderr[-2000:]

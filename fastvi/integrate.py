@@ -248,7 +248,7 @@ def integrate(
         SciPy, the last sample is the state at the event time from the step polynomial
         (``q`` of order ``s + 1``, ``v`` of order ``s`` inside a step; the energy and
         residuals of that sample are evaluated there, the work of a forced model is
-        interpolated linearly across the step). Before the first step each event is
+        interpolated linearly between the last two samples). Before the first step each event is
         evaluated once in guarded buffers: one that writes into ``q``, ``v`` or ``params``,
         reads past their ends, or follows SciPy's ``ev(t, y)`` raises
         :class:`fastvi.guards.EventFunctionError`.

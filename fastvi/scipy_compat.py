@@ -149,7 +149,7 @@ def end_at_event(result, model, prm, events):
     state at the event time from the step polynomial (``sol(t_event)`` with dense output,
     else the crossing's record, the same polynomial). Crossings after it, in the same last
     step, are dropped. The work there (a forced or driven model) is interpolated linearly
-    between the ends of the step."""
+    between the last two samples (the ends of the step with ``save_every=1``)."""
     from .events import _as_list, _terminal
     from .status import Status
 

@@ -19,6 +19,7 @@ import numba
 import numpy as np
 
 from . import _validate as check
+from ._validate import flag as _flag
 from . import events as events_
 from . import guards
 from . import structure
@@ -383,6 +384,8 @@ class EnsembleResult(ResultBase):
                   "integration_time", "compile_time", "check_time")
         stats = {k: sum(p.stats[k] for p in parts) for k in summed if all(k in p.stats for p in parts)}
         stats["threads"] = max(p.stats["threads"] for p in parts)
+        if "timed" in first.stats:
+            stats["timed"] = first.stats["timed"]
         return cls(t=first.t, method=first.method, h=first.h, n_steps=first.n_steps,
                    save=first.save, stats=stats, model_name=first.model_name, t0=first.t0,
                    **joined)
@@ -409,6 +412,7 @@ def integrate_ensemble(
     keep_events: int = 1,
     solver: str = "auto",
     specialize: bool = False,
+    progress: bool = False,
 ) -> EnsembleResult:
     r"""Integrate ``N`` members (initial states and/or parameters) of one model in parallel.
 
@@ -471,6 +475,11 @@ def integrate_ensemble(
         for bit, a member's step cheaper on small models (``docs/benchmarks.md``), and one
         more compile of the parallel loop per set of sizes (minutes on a fresh install, then
         cached on disk). Sizes above 64 stay run-time integers.
+    progress : bool, default False
+        Show progress on stderr, in member-steps (one updating line on a terminal, a plain
+        line every few seconds otherwise, as :func:`fastvi.integrate`): the members then
+        run in about 20 consecutive groups, each a parallel loop of at least as many
+        members as threads (the results are the same, bit for bit).
 
     Returns
     -------
@@ -506,8 +515,34 @@ def integrate_ensemble(
     opts = _options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0, keep_events, solver,
                     specialize)
     threads = _validate_threads(threads)
+    if _flag(progress, "progress"):  # (`check` is the argument here, not _validate)
+        return _ensemble_with_progress(model, Q0, V0, params, opts, threads, run_check, events)
     return _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
                      events=events)
+
+
+#: groups of members a run with ``progress=True`` is split into (at most)
+_PROGRESS_GROUPS = 20
+
+
+def _ensemble_with_progress(model, Q0, V0, params, opts, threads, run_check, events):
+    """:func:`_ensemble` over consecutive groups of members, a progress line updated after
+    each group (the kernel runs a member to its end in one go), joined in order."""
+    from .results import ProgressBar
+
+    Q0, V0, P = _members(model, Q0, V0, params)
+    N = Q0.shape[0]
+    size = max(threads or numba.get_num_threads(), -(-N // _PROGRESS_GROUPS))
+    bar = ProgressBar(N * opts["total"], unit="member-steps")
+    parts, done = [], 0
+    for a in range(0, N, size):
+        part = _ensemble(model, Q0[a:a + size], V0[a:a + size], P[a:a + size], opts, threads,
+                         run_check, first_member=a, events=events)
+        parts.append(part)
+        done += int(part.stats["member_steps"])
+        end = a + size >= N
+        bar.update(done, f"{min(a + size, N)}/{N} members", final=end)
+    return EnsembleResult.concatenate(parts)
 
 
 # ------------------------------------------------------------------ pieces shared with distributed

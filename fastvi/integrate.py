@@ -480,7 +480,7 @@ def integrate(
         later = None
         if status < 0:
             later = f"{Status(status).name} at step {int(info[lay.I_FAILED])}"
-        result, k, t_fail, detail = monitor_.cut(result, verdict, every=every, t0=t0, later=later)
+        result, k, t_fail, detail = monitor_.cut(result, verdict, every=every, later=later)
         error = IntegrationError(Status.UNRELIABLE, k, t_fail, float("nan"), result, detail)
     elif status < 0:
         k = int(info[lay.I_FAILED])

@@ -221,7 +221,7 @@ def judge(result, *, every: int, newton_tol: float) -> Verdict:
     return verdict
 
 
-def cut(result, verdict: Verdict, *, every: int, t0: float, later: str | None = None):
+def cut(result, verdict: Verdict, *, every: int, later: str | None = None):
     """The result up to the last sample before the breach, with ``Status.UNRELIABLE``.
 
     Returns ``(result, failed_step, failed_time, detail)``: the step from which the
@@ -240,7 +240,7 @@ def cut(result, verdict: Verdict, *, every: int, t0: float, later: str | None = 
     span = (f"step {bad - 1} (t = {t_good:.6g} → {t_bad:.6g})" if bad - good == 1 else
             f"steps {good}–{bad - 1} (t = {t_good:.6g} → {t_bad:.6g})")
     retaken = [k for k, _ in result.stats.get("recovered_steps", []) if k < bad]
-    extra = (f"; {len(retaken)} step(s) before it were retaken in substeps (`recover`), which "
+    extra = (f"; {len(retaken)} step(s) up to it were retaken in substeps (`recover`), which "
              "cannot mend a step too large for the motion" if retaken else "")
     extra += f"; the run went on until {later}" if later else ""
     detail = (f"the reliability monitor stopped trusting the trajectory at {span}: {verdict.reason}"

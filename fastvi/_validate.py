@@ -96,6 +96,17 @@ def start_time(t0) -> float:
     return t0
 
 
+def end_time(t_end, t0: float) -> float:
+    """The final time ``t_end``: a finite float after ``t0``."""
+    if isinstance(t_end, bool) or not isinstance(t_end, (int, float, np.integer, np.floating)):
+        raise TypeError(f"`t_end` must be a float, got {t_end!r}")
+    t_end = float(t_end)
+    if not (t_end > t0 and math.isfinite(t_end)):
+        after = "positive" if t0 == 0.0 else f"after `t0` = {t0:g}"
+        raise ValueError(f"`t_end` must be finite and {after}, got {t_end}")
+    return t_end
+
+
 def step_count(h: float, t_end, n_steps, t0: float = 0.0) -> int:
     """Exactly one of ``t_end`` and ``n_steps``; ``t_end − t0`` must be a multiple of ``h``."""
     if (t_end is None) == (n_steps is None):
@@ -103,13 +114,7 @@ def step_count(h: float, t_end, n_steps, t0: float = 0.0) -> int:
                          f" (got t_end={t_end!r}, n_steps={n_steps!r})")
     if n_steps is not None:
         return count(n_steps, "n_steps", 1)
-    if isinstance(t_end, bool) or not isinstance(t_end, (int, float, np.integer, np.floating)):
-        raise TypeError(f"`t_end` must be a float, got {t_end!r}")
-    t_end = float(t_end)
-    if not (t_end > t0 and math.isfinite(t_end)):
-        after = "positive" if t0 == 0.0 else f"after `t0` = {t0:g}"
-        raise ValueError(f"`t_end` must be finite and {after}, got {t_end}")
-    span = t_end - t0
+    span = end_time(t_end, t0) - t0
     k = round(span / h)
     if k < 1 or abs(k * h - span) > 1e-9 * span:
         start = "" if t0 == 0.0 else " − t0"

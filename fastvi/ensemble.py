@@ -19,7 +19,9 @@ import numba
 import numpy as np
 
 from . import _validate as check
+from ._validate import flag as _flag
 from . import events as events_
+from . import guards
 from . import structure
 from ._launch import Launcher
 from .integrate import Result, _timed
@@ -180,7 +182,8 @@ class EnsembleResult(ResultBase):
                  f"status={self._status_text()}"]
         err = self.member_energy_error()
         if err is not None and np.isfinite(err).any():
-            items.append(f"max|ΔH|={np.nanmax(err):.2g}")
+            name = "max|ΔH−W|" if self.stats.get("timed") else "max|ΔH|"
+            items.append(f"{name}={np.nanmax(err):.2g}")
         return items
 
     def final_state(self) -> tuple[np.ndarray, np.ndarray]:
@@ -193,12 +196,15 @@ class EnsembleResult(ResultBase):
 
     def member_energy_error(self) -> np.ndarray | None:
         """(N,) energy error per member: ``max |ΔH|`` over every step (``"diagnostics"``),
-        over the samples (stride), or at the final state (``"final"``); None if unknown."""
+        over the samples (stride), or at the final state (``"final"``); for a model with
+        forces or time the energy balance ``|ΔH − W|`` where the work is known (every
+        step, the samples); None if unknown."""
         if self.max_energy_error is not None:
             return self.max_energy_error
         if self.t is not None:
+            work = 0.0 if self.work is None else self.work  # a forced model: the balance
             with np.errstate(invalid="ignore"):
-                return np.nanmax(np.abs(self.energy - self.energy[:, :1]), axis=1)
+                return np.nanmax(np.abs(self.energy - self.energy[:, :1] - work), axis=1)
         if self.initial_energy is not None:
             return np.abs(self.energy - self.initial_energy)
         return None
@@ -294,9 +300,11 @@ class EnsembleResult(ResultBase):
             f"Newton iterations/step = {st['newton_iterations'] / max(1, st['member_steps']):.2f}",
         ]
         if self.max_energy_error is not None:
-            lines.append(f"max |ΔH| = {np.max(self.max_energy_error):.3e}, "
+            timed = self.stats.get("timed")
+            lines.append(f"max {'|ΔH − W|' if timed else '|ΔH|'} = {np.max(self.max_energy_error):.3e}, "
                          f"max |g| = {np.max(self.max_constraint_residual):.3e}, "
-                         f"max |Gv| = {np.max(self.max_velocity_residual):.3e}")
+                         f"max {'|Gv + g_t|' if timed else '|Gv|'} = "
+                         f"{np.max(self.max_velocity_residual):.3e}")
         failed = self.failed
         ended = self.terminated.size
         if ended:
@@ -377,6 +385,8 @@ class EnsembleResult(ResultBase):
                   "integration_time", "compile_time", "check_time")
         stats = {k: sum(p.stats[k] for p in parts) for k in summed if all(k in p.stats for p in parts)}
         stats["threads"] = max(p.stats["threads"] for p in parts)
+        if "timed" in first.stats:
+            stats["timed"] = first.stats["timed"]
         return cls(t=first.t, method=first.method, h=first.h, n_steps=first.n_steps,
                    save=first.save, stats=stats, model_name=first.model_name, t0=first.t0,
                    **joined)
@@ -403,6 +413,7 @@ def integrate_ensemble(
     keep_events: int = 1,
     solver: str = "auto",
     specialize: bool = False,
+    progress: bool = False,
 ) -> EnsembleResult:
     r"""Integrate ``N`` members (initial states and/or parameters) of one model in parallel.
 
@@ -443,6 +454,9 @@ def integrate_ensemble(
     check : bool, default True
         As in :func:`fastvi.integrate`: compare the model's derivative callbacks with finite
         differences (at the first member's state) the first time the model is used.
+        ``check=False`` skips that comparison only: the sizes of the callbacks' outputs are
+        checked all the same (a size mistake would corrupt memory), and so are the event
+        functions.
     events : callable or list of callables, optional
         Event functions ``event(t, q, v, params) -> float`` with the optional attributes
         ``terminal`` and ``direction``, exactly as in :func:`fastvi.integrate` (members get
@@ -462,6 +476,11 @@ def integrate_ensemble(
         for bit, a member's step cheaper on small models (``docs/benchmarks.md``, "Ensembles"), and one
         more compile of the parallel loop per set of sizes (minutes on a fresh install, then
         cached on disk). Sizes above 64 stay run-time integers.
+    progress : bool, default False
+        Show progress on stderr, in member-steps (one updating line on a terminal, a plain
+        line every few seconds otherwise, as :func:`fastvi.integrate`): the members then
+        run in about 20 consecutive groups, each a parallel loop of at least as many
+        members as threads (the results are the same, bit for bit).
 
     Returns
     -------
@@ -497,8 +516,34 @@ def integrate_ensemble(
     opts = _options(h, t_end, n_steps, method, save, tol, max_iter, newton, t0, keep_events, solver,
                     specialize)
     threads = _validate_threads(threads)
+    if _flag(progress, "progress"):  # (`check` is the argument here, not _validate)
+        return _ensemble_with_progress(model, Q0, V0, params, opts, threads, run_check, events)
     return _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
                      events=events)
+
+
+#: groups of members a run with ``progress=True`` is split into (at most)
+_PROGRESS_GROUPS = 20
+
+
+def _ensemble_with_progress(model, Q0, V0, params, opts, threads, run_check, events):
+    """:func:`_ensemble` over consecutive groups of members, a progress line updated after
+    each group (the kernel runs a member to its end in one go), joined in order."""
+    from .results import ProgressBar
+
+    Q0, V0, P = _members(model, Q0, V0, params)
+    N = Q0.shape[0]
+    size = max(threads or numba.get_num_threads(), -(-N // _PROGRESS_GROUPS))
+    bar = ProgressBar(N * opts["total"], unit="member-steps")
+    parts, done = [], 0
+    for a in range(0, N, size):
+        part = _ensemble(model, Q0[a:a + size], V0[a:a + size], P[a:a + size], opts, threads,
+                         run_check, first_member=a, events=events)
+        parts.append(part)
+        done += int(part.stats["member_steps"])
+        end = a + size >= N
+        bar.update(done, f"{min(a + size, N)}/{N} members", final=end)
+    return EnsembleResult.concatenate(parts)
 
 
 # ------------------------------------------------------------------ pieces shared with distributed
@@ -534,12 +579,17 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
     Q0, V0, P = _members(model, Q0, V0, params)
     compile_time = _timed(model._compile)
     t_events = time.perf_counter()
+    guards.signatures(events)  # SciPy's ev(t, y) named before numba's typing error
     ev = events_.prepare(model, opts["method"], events, 0, 1)  # compiles the event functions
     compile_time += time.perf_counter() - t_events
     check_time = 0.0
     t0 = opts.get("t0", 0.0)
     if run_check and not getattr(model, "_checked", True):  # as integrate: before the projection
         check_time = _timed(lambda: model.check(Q0[0], V0[0], params=P[0], n_random=1, t=t0))
+    else:  # the sizes always (check=False skips the derivatives only)
+        check_time = _timed(lambda: guards.sizes(model, Q0[0], V0[0], P[0], t0))
+    if ev.count:
+        guards.events(model, ev, Q0[0], V0[0], P[0], t0)
     X0, H0, g0, gv0 = _initial_states(model, Q0, V0, P, first_member, t0)
 
     N, n = Q0.shape
@@ -605,7 +655,8 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
     iterations = fst[:, lay.F_ITERS].astype(np.int64)
     stats = dict(members=N, member_steps=int(steps.sum()), newton_iterations=int(iterations.sum()),
                  threads=used, integration_time=t1 - t_loop, setup_time=t_loop - t_setup,
-                 compile_time=compile_time, check_time=check_time, wall_time=t1 - t_setup)
+                 compile_time=compile_time, check_time=check_time, wall_time=t1 - t_setup,
+                 timed=bool(model.timed))  # the energy figures are then balances H − H0 − W
     diag = mode == lay.SAVE_DIAGNOSTICS
     stride = mode == lay.SAVE_STRIDE
     if stride:

@@ -7,12 +7,14 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
 
 import numpy as np
 
 from . import _validate as valid
 from . import events as events_
+from . import guards
+from . import monitor as monitor_
+from . import scipy_compat as compat
 from . import structure
 from .kernels.events import event_values
 from ._launch import Launcher
@@ -22,7 +24,7 @@ from .kernels import layout as lay
 from .kernels.layout import Samples
 from .kernels.step import step_kernel
 from .model import Model
-from .results import ProgressBar, Result
+from .results import NoDenseOutput, ProgressBar, Result
 from .status import MESSAGES, Status
 from .tables import Method
 
@@ -32,10 +34,6 @@ _PROGRESS_CHUNKS = 50  # progress updates per run when progress=True
 _ADAPTIVE_CHUNK = 1 << 10  # least steps a kernel call of an adaptive run takes
 _ADAPTIVE_BUFFER = 1 << 28  # bytes of samples an adaptive run allocates before it must grow
 _ADAPTIVE_CAP = 1 << 62  # no step count: an adaptive run ends at t_end
-#: growth of the energy error (last tenth of the samples over the first) that no bounded,
-#: oscillating error reaches: round-off grows like √steps, chaos by a small factor, while a
-#: step beyond a method's stability limit grows exponentially (docs/robustness.md)
-ENERGY_GROWTH_ALARM = 1e6
 
 
 class IntegrationError(RuntimeError):
@@ -58,9 +56,10 @@ class IntegrationError(RuntimeError):
                  detail: str | None = None):
         self.status, self.step, self.time, self.residual, self.result = status, step, time, residual, result
         self.detail = detail
+        res = f"residual {residual:.3e}, " if residual == residual else ""  # NaN: no Newton failure
         super().__init__(
             f"{MESSAGES[status]} (status {int(status)} {status.name}, at step {step}, t = {time:.6g}, "
-            f"residual {residual:.3e}, method {result.method.name}, h = {result.h:g})"
+            f"{res}method {result.method.name}, h = {result.h:g})"
             + (f": {detail}" if detail else "")
         )
 
@@ -137,6 +136,9 @@ def integrate(
     solver: str = "auto",
     specialize: bool = False,
     adaptive: float | None = None,
+    monitor: bool = True,
+    t_span=None,
+    t_eval=None,
 ) -> Result:
     r"""Integrate a constrained mechanical system with a Galerkin variational integrator.
 
@@ -157,7 +159,11 @@ def integrate(
     h : float
         Step size.
     t_end, n_steps :
-        Exactly one: final time (a whole number of steps after ``t0``) or number of steps.
+        Exactly one: final time or number of steps. A ``t_end − t0`` that is not a whole
+        number of steps of ``h`` ends with one shorter step that lands on ``t_end`` (as
+        SciPy's ``solve_ivp`` does; ``stats["last_step"]`` is its length): the same
+        variational step with another ``h``, so only the modified energy of that one step
+        differs. A span shorter than ``h`` is one step of the span.
     t0 : float, default 0.0
         Start time: ``Result.t`` starts there, and step k runs from ``t0 + k h``. It matters
         to a model with forces or time-dependent callbacks (whose initial data must then
@@ -208,6 +214,16 @@ def integrate(
         symplectic and constraint-preserving) but of a different method than its
         neighbours, so the modified energy may jump slightly there. Recovered steps are
         listed in ``stats["recovered_steps"]`` as (step, substeps).
+        What it can save: an isolated hard step in a run whose ``h`` resolves the motion (a
+        pass near a singular position, a brief fast whip), where the neighbouring steps
+        are fine. What it cannot: an ``h`` too large for the motion. Then the steps around
+        the failing one are already wrong (their Newton solutions converge, possibly to
+        another branch of the step's equations), and substeps only carry the wrong state
+        on; the reliability monitor (``monitor``) stops such a run where its energy error
+        leaves the bounded regime, whatever ``recover`` retook (on the slider–crank of
+        ``tests/test_reliability.py`` at h = 0.1: ``UNRELIABLE`` at t = 0.4, where without
+        the monitor the run ended as a success with an energy error of 92 J on 14.4 J).
+        Use a smaller ``h``.
     check : bool, default True
         The first time a model is integrated, run :func:`fastvi.check.check_model` at ``q0``
         and one nearby state (a few milliseconds): first every callback is evaluated once
@@ -215,8 +231,10 @@ def integrate(
         inputs, or leaves an entry unset raises :class:`fastvi.ModelCheckError` instead of
         corrupting memory in the kernels; then its derivative callbacks are compared with
         finite differences. Models that passed once (or passed :meth:`Model.check`) are not
-        checked again. ``check=False`` skips both, at your own risk: a callback with a size
-        mistake then writes out of bounds (crashes, or silently wrong results).
+        checked again. ``check=False`` skips the comparison of the derivatives only, at your
+        own risk (a wrong derivative integrates another Lagrangian; the reliability monitor
+        then usually sees the energy drift). The size check always runs (once per model, well
+        under a millisecond): a size mistake would write out of bounds.
     dense_output : bool, default False
         Keep every step's control points and return ``Result.sol``, a
         :class:`fastvi.events.DenseSolution`: ``sol(t) -> (q, v)`` at any time(s) of the run
@@ -228,8 +246,14 @@ def integrate(
         a count) and ``direction`` (−1, 0, +1). Zero crossings are located on the step
         polynomial to round-off in ``t`` (no extra steps) and returned in
         ``Result.t_events``, ``q_events``, ``v_events`` (one array per event). A terminal
-        event ends the run after the step containing it, with ``status`` 1
-        (``Status.TERMINATED``); that step's end is the last sample.
+        event ends the run at the event, with ``status`` 1 (``Status.TERMINATED``): as in
+        SciPy, the last sample is the state at the event time from the step polynomial
+        (``q`` of order ``s + 1``, ``v`` of order ``s`` inside a step; the energy and
+        residuals of that sample are evaluated there, the work of a forced model is
+        interpolated linearly between the last two samples). Before the first step each event is
+        evaluated once in guarded buffers: one that writes into ``q``, ``v`` or ``params``,
+        reads past their ends, or follows SciPy's ``ev(t, y)`` raises
+        :class:`fastvi.guards.EventFunctionError`.
 
     solver : {"auto", "dense", "banded", "sparse"}, default "auto"
         How the step's linear systems (full Newton matrix, Schur complement of the mechanics
@@ -268,7 +292,27 @@ def integrate(
         1.34–1.40× fewer steps than the fixed step at equal maximum energy error over 1000 s, and no faster growth up to
         10⁴ s for orders 6 and 8). ``Result.t`` then holds the times of the saved steps.
         Needs ``t_end`` and a conservative, autonomous model; not with ``events``,
-        ``dense_output`` or ``recover``.
+        ``dense_output``, ``t_eval`` or ``recover``.
+    monitor : bool, default True
+        After the run, check that it is not broken although every step converged
+        (:mod:`fastvi.monitor`): its energy error (for a forced or driven model the energy
+        balance ``H − H0 − W``) against a tenth of the largest kinetic energy (or work) so
+        far, the constraint residuals against the tolerance initial data must meet, and
+        each step's displacement against its length times its velocities. A run that
+        breaks a limit ends with ``Status.UNRELIABLE``: :class:`IntegrationError` (or, with
+        ``on_failure="return"``, the result) holds the samples up to the last good one, and
+        the message says at which step and time which indicator broke. The indicators'
+        largest values (fractions of their limits) are in ``stats["monitor_energy"]``,
+        ``["monitor_constraint"]``, ``["monitor_hidden_constraint"]``,
+        ``["monitor_displacement"]``. ``False`` skips the check.
+    t_span : (float, float), optional
+        SciPy's spelling of ``t0`` and ``t_end``: ``t_span=(t0, t1)``.
+    t_eval : array_like, optional
+        Return the samples at these times (sorted, within the run), taken from the step
+        polynomials as SciPy does: ``q``, ``v`` (orders ``s + 1`` and ``s`` between grid
+        points), ``p = M(q) v``, the energy and residuals evaluated there, the work of a
+        forced model interpolated linearly. The steps are still of ``h``; the monitor
+        judges them on the grid. ``Result.sol`` stays unset unless ``dense_output=True``.
 
     Returns
     -------
@@ -292,10 +336,21 @@ def integrate(
     v0 = valid.vector(v0, "v0", n)
     prm = valid.params(params, model)
     h = valid.step_size(h)
+    t0, t_end = compat.span(t_span, t0, t_end, n_steps)
     t0 = valid.start_time(t0)
     adaptive = valid.adaptive(adaptive, model, t_end, n_steps, t0, events=events,
                               dense_output=dense_output, recover=recover)
-    total = valid.step_count(h, t_end, n_steps, t0) if adaptive is None else _ADAPTIVE_CAP
+    if adaptive is None:  # a span not a whole number of steps ends with a shorter step
+        total, h, h_last = compat.steps(h, t_end, n_steps, t0)
+    else:
+        total, h_last = _ADAPTIVE_CAP, 0.0
+        if t_eval is not None:
+            raise ValueError("`t_eval` needs fixed steps (it samples the step polynomials); "
+                             "pass `adaptive=None`, or read the adaptive samples `Result.t`")
+    t_eval = compat.eval_times(t_eval, t0, t0 + total * h + h_last if adaptive is None else None)
+    dense_asked = dense_output
+    if t_eval is not None:  # samples at given times come from the step polynomials
+        dense_output = True
     every = valid.save_every(save_every)
     opts = valid.newton_options(tol, max_iter, newton)
     recover = valid.recover(recover)
@@ -303,12 +358,15 @@ def integrate(
     dense_output = valid.flag(dense_output, "dense_output")
     specialize = valid.flag(specialize, "specialize")
     if recover and (dense_output or events is not None):
-        raise ValueError("`recover` cannot be combined with `dense_output` or `events` (a recovered "
-                         "step has no single polynomial); use a smaller `h` instead")
+        raise ValueError("`recover` cannot be combined with `dense_output`, `t_eval` or `events` (a "
+                         "recovered step has no single polynomial); use a smaller `h` instead")
     compile_time = _timed(model._compile)
     check_time = 0.0
     if check and not model._checked:  # before the projection, which trusts G(q)
         check_time = _timed(lambda: model.check(q0, v0, params=prm, n_random=1, t=t0))
+    else:  # check=False skips the derivatives, never the sizes (a size mistake corrupts memory)
+        check_time = _timed(lambda: guards.sizes(model, q0, v0, prm, t0))
+    guards.signatures(events)
     q0, v0 = valid.initial_state(model, q0, v0, prm, t0)
 
     md = model.kernel_data(prm, t0)
@@ -342,7 +400,9 @@ def integrate(
     tabs = meth.kernel_tables
     ev = events_.prepare(model, meth, events, total if dense_output else 0)
     if ev.count:
-        event_values(md, ev, t0, q0, v0)
+        guards.events(model, ev, q0, v0, prm, t0)  # before the kernels call them
+        with quiet():
+            event_values(md, ev, t0, q0, v0)
 
     sout = np.zeros(lay.STEP_OUT_SIZE)
     t_step = time.perf_counter()
@@ -415,12 +475,43 @@ def integrate(
         failed_step=None if status >= 0 else int(info[lay.I_FAILED]),
         **ev_out,
     )
-    _warn_if_energy_explodes(result)
-    if status < 0 and on_failure == "raise":
+    # the monitor reads the grid samples, before the last sample moves to an event
+    verdict = monitor_.judge(result, every=every, newton_tol=opts.tol) if monitor else None
+    if verdict is not None:
+        result.stats.update(monitor_.stats(verdict))
+    error = None
+    if verdict is not None and not verdict.ok:  # broken before any failure of a step
+        later = None
+        if status < 0:
+            later = f"{Status(status).name} at step {int(info[lay.I_FAILED])}"
+        result, k, t_fail, detail = monitor_.cut(result, verdict, every=every, later=later)
+        error = IntegrationError(Status.UNRELIABLE, k, t_fail, float("nan"), result, detail)
+    elif status < 0:
         k = int(info[lay.I_FAILED])
         culprit = _nonfinite_callback(model, prm, state, ws) if status == Status.NONFINITE else None
         t_fail = t0 + k * h if adaptive is None else float(ws.time[0])
-        raise IntegrationError(status, k, t_fail, float(info[lay.I_RES]), result, culprit)
+        error = IntegrationError(status, k, t_fail, float(info[lay.I_RES]), result, culprit)
+    else:
+        result = compat.end_at_event(result, model, prm, events)
+        if h_last and result.status == Status.SUCCESS:  # the shorter last step, onto t_end
+            t_last = float(result.t[-1])
+            tail = integrate(model, result.q[-1], result.v[-1], h=h_last, n_steps=1, t0=t_last,
+                             method=meth, tol=tol, max_iter=max_iter, newton=newton, params=prm,
+                             on_failure="return", check=False, dense_output=dense_output,
+                             events=events, solver=solver, specialize=specialize, monitor=monitor)
+            result = compat.append_last_step(result, tail, h_last, t0 + total * h + h_last
+                                             if t_end is None else float(t_end))
+            if result.status < 0:
+                error = IntegrationError(result.status, total, t_last, float("nan"), result,
+                                         f"in the shorter last step (h = {h_last:g}) onto t_end")
+    if t_eval is not None:
+        result = compat.resample(result, model, prm, t_eval)
+        if not dense_asked:
+            result.sol = NoDenseOutput()
+        if error is not None:
+            error.result = result
+    if error is not None and on_failure == "raise":
+        raise error
     return result
 
 
@@ -432,28 +523,6 @@ def _timed(fn) -> float:
 
 #: the time loop, called through its compiled entry points (no per-call typing: _launch.py)
 _RUN = Launcher(drive.run)
-
-
-def _warn_if_energy_explodes(result: Result) -> None:
-    """Warn when the energy error grows by ``ENERGY_GROWTH_ALARM`` over the run.
-
-    A variational integrator's energy error stays bounded; exponential growth means the
-    step is beyond the method's stability limit (e.g. ``P1L-Q2G`` with ``ωh > √12`` on a
-    stiff spring), and the trajectory is then wrong even though every step converged.
-    """
-    err = np.abs(result.energy_balance[1:])
-    if err.size < 20 or not np.all(np.isfinite(err)):
-        return
-    k = err.size // 10
-    first, last = err[:k].max(), err[-k:].max()
-    floor = 1e-6 * max(1.0, abs(result.energy[0]))
-    if last > floor and last > ENERGY_GROWTH_ALARM * first:
-        warnings.warn(
-            f"the energy error grew from {first:.2e} to {last:.2e} over the run: h = {result.h:g} is "
-            f"probably beyond the stability limit of {result.method.name} for this model (a stiff "
-            "spring?); use a smaller h or a method with r = s, e.g. 'P2L-Q2G' (docs/robustness.md)",
-            RuntimeWarning, stacklevel=3,
-        )
 
 
 def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, smp, info,

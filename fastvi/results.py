@@ -19,7 +19,7 @@ import numpy as np
 from .status import MESSAGES, Status
 from .tables import Method, method as _method
 
-__all__ = ["ResultBase", "TrajectoryResult", "Result", "ProgressBar"]
+__all__ = ["ResultBase", "TrajectoryResult", "Result", "ProgressBar", "NoDenseOutput"]
 
 
 def _seconds(x) -> str:
@@ -108,13 +108,21 @@ class TrajectoryResult(ResultBase):
         return (f"ΔH = {self.energy_error[-1]:.3e}, work = {self.work[-1]:.3e}, "
                 f"max |ΔH − W| = {np.max(np.abs(self.energy_balance)):.3e}")
 
+    def _velocity_label(self) -> str:
+        """``|Gv|``, or ``|Gv + g_t|`` for a model with forces or time (what the residual
+        is: the hidden constraint of a driven constraint has the term ``g_t``)."""
+        return "|Gv|" if getattr(self, "work", None) is None else "|Gv + g_t|"
+
     def _repr_items(self) -> list[str]:
         t = self.t
         span = f"[{t[0]:g}, {t[-1]:g}]" if t.size else "[]"
-        err = np.abs(self.energy_error) if self.energy.size else np.zeros(1)
+        # a forced or driven model: the energy balance, not the change of H its forces make
+        err = (np.abs(self.energy_balance) if getattr(self, "work", None) is not None
+               else np.abs(self.energy_error)) if self.energy.size else np.zeros(1)
+        name = "max|ΔH|" if getattr(self, "work", None) is None else "max|ΔH−W|"
         return [f"model={self.model_name!r}", f"method={self._label()!r}", f"h={self.h:g}",
                 f"steps={self.stats.get('steps', '?')}", f"t={span}", f"status={self._status_text()}",
-                f"max|ΔH|={np.max(err):.2g}"]
+                f"{name}={np.max(err):.2g}"]
 
     def summary(self) -> str:
         """One line with the figures a user checks first."""
@@ -123,14 +131,14 @@ class TrajectoryResult(ResultBase):
             f"{self._timing()}, "
             f"{self._balance_text()}, "
             f"max |g| = {np.max(self.constraint_residual):.3e}, "
-            f"max |Gv| = {np.max(self.velocity_residual):.3e}"
+            f"max {self._velocity_label()} = {np.max(self.velocity_residual):.3e}"
         )
         if "newton_iterations" in self.stats:
             text += (f", Newton iterations/step = "
                      f"{self.stats['newton_iterations'] / max(1, self.stats['steps']):.2f}")
         return text
 
-    def plot(self, path=None, *, coordinates=None):
+    def plot(self, path=None, *, coordinates=None, labels=None):
         """Motion, energy error and constraint residuals against time (needs matplotlib).
 
         Parameters
@@ -138,8 +146,13 @@ class TrajectoryResult(ResultBase):
         path : str or path-like, optional
             Save the figure there (PNG, PDF, … by extension). Drawn on its own canvas:
             the process's matplotlib backend is never changed.
-        coordinates : sequence of int, optional
-            Which components of ``q`` to draw in the top panel (default: the first six).
+        coordinates : sequence of int, or mapping of str to sequences of int, optional
+            Which components of ``q`` to draw (default: every one, so that none is hidden).
+            A mapping groups them, one panel per group, titled by its key, e.g.
+            ``{"crank": [0, 1, 2], "rod": [3, 4, 5], "slider": [6, 7]}``.
+        labels : sequence of str, optional
+            A name per coordinate (``n`` of them) for the legends, e.g.
+            ``["x1", "y1", "θ1", …]`` (default ``q[i]``).
 
         Returns
         -------
@@ -151,15 +164,22 @@ class TrajectoryResult(ResultBase):
         samples that are exactly zero (a constraint met to the last bit) are drawn on the
         bottom edge as open markers labelled "exact 0", instead of at a fake 1e-300.
         """
-        fig = _new_figure(path, figsize=(7, 7.5))
-        a0, a1, a2 = fig.subplots(3, 1, sharex=True)
         n = self.q.shape[1] if self.q.ndim == 2 else 0
-        idx = list(range(min(n, 6))) if coordinates is None else [int(i) for i in coordinates]
-        for i in idx:
-            a0.plot(self.t, self.q[:, i], lw=0.8, label=f"q[{i}]")
-        a0.set_ylabel("q(t)")
-        if idx and len(idx) <= 8:
-            a0.legend(fontsize="small", ncol=min(len(idx), 4), loc="upper right")
+        groups = _coordinate_groups(coordinates, n)
+        if labels is not None:
+            labels = [str(x) for x in labels]
+            if len(labels) != n:
+                raise ValueError(f"`labels` must name each of the n = {n} coordinates, got {len(labels)}")
+        fig = _new_figure(path, figsize=(7, 5.0 + 2.5 * len(groups)))
+        axes = fig.subplots(len(groups) + 2, 1, sharex=True)
+        a1, a2 = axes[-2], axes[-1]
+        for ax, (title, idx) in zip(axes, groups):
+            for i in idx:
+                ax.plot(self.t, self.q[:, i], lw=0.8, label=labels[i] if labels else f"q[{i}]")
+            ax.set_ylabel("q(t)" if title is None else title)
+            if idx and len(idx) <= 12:
+                ax.legend(fontsize="small", ncol=min(len(idx), 4), loc="upper right")
+        a0 = axes[0]
         if getattr(self, "work", None) is None:
             a1.plot(self.t, self.energy_error, lw=0.8)
             a1.set_ylabel("H(t) − H(0)")
@@ -172,11 +192,34 @@ class TrajectoryResult(ResultBase):
             ab.plot(self.t, self.energy_balance, lw=0.6, color="tab:red")
             ab.set_ylabel("balance H − H(t0) − W", color="tab:red")
         _residual_panel(a2, self.t[1:], {"max|g|": self.constraint_residual[1:],
-                                          "max|Gv|": self.velocity_residual[1:]})
+                                          f"max{self._velocity_label()}": self.velocity_residual[1:]})
         a2.set_xlabel("t")
         a0.set_title(f"{self.model_name}, {self._label()}, h = {self.h:g}")
         fig.tight_layout()
         return _finish_figure(fig, path)
+
+
+class NoDenseOutput:
+    """:attr:`Result.sol` of a run without ``dense_output=True``: false in a test, and
+    calling it (or reading its attributes) raises an error that says what to pass."""
+
+    MESSAGE = ("`Result.sol` needs dense output: pass `dense_output=True` to fastvi.integrate "
+               "(it keeps every step's control points, 8 (s+1) n bytes a step), or `t_eval=` to get "
+               "samples at given times")
+
+    def __bool__(self) -> bool:
+        return False
+
+    def __call__(self, *args, **kwargs):
+        raise ValueError(self.MESSAGE)
+
+    def __getattr__(self, name):
+        if name.startswith("__"):  # copy, pickle and friends probe dunders: not a user's call
+            raise AttributeError(name)
+        raise ValueError(self.MESSAGE)
+
+    def __repr__(self) -> str:
+        return "NoDenseOutput(pass dense_output=True to fastvi.integrate)"
 
 
 @dataclass(repr=False)
@@ -234,7 +277,7 @@ class Result(TrajectoryResult):
     t_events: list | None = None
     q_events: list | None = None
     v_events: list | None = None
-    sol: object | None = None
+    sol: object = field(default_factory=NoDenseOutput)
 
     def _label(self) -> str:
         if "adaptive" in self.stats:  # h is then the step where the motion is slow
@@ -294,6 +337,27 @@ class Result(TrajectoryResult):
 
 
 # ---------------------------------------------------------------------------- plotting helpers
+def _coordinate_groups(coordinates, n: int) -> list:
+    """``[(title or None, [indices])]``: the panels of :meth:`TrajectoryResult.plot`."""
+    def indices(seq, name):
+        try:
+            idx = [int(i) for i in seq]
+        except (TypeError, ValueError):
+            raise TypeError(f"`{name}` must be a sequence of coordinate indices, got {seq!r}") from None
+        bad = [i for i in idx if not 0 <= i < n]
+        if bad:
+            raise ValueError(f"`{name}` holds indices outside 0…{n - 1} (n = {n}): {bad}")
+        return idx
+
+    if coordinates is None:
+        return [(None, list(range(n)))]
+    if isinstance(coordinates, dict):
+        if not coordinates:
+            raise ValueError("`coordinates` as a mapping needs at least one group")
+        return [(str(k), indices(v, f"coordinates[{k!r}]")) for k, v in coordinates.items()]
+    return [(None, indices(coordinates, "coordinates"))]
+
+
 def _new_figure(path, figsize):
     """A figure that does not touch pyplot's state when it is only saved to ``path``.
 

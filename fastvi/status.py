@@ -15,6 +15,7 @@ class Status(IntEnum):
     NONFINITE = -3
     SINGULAR_MASS = -4
     SINGULAR_CONSTRAINTS = -5
+    UNRELIABLE = -6
 
 
 MESSAGES = {
@@ -28,4 +29,7 @@ MESSAGES = {
     Status.SINGULAR_MASS: "The mass matrix is singular at the end of a step.",
     Status.SINGULAR_CONSTRAINTS: "G M⁻¹ Gᵀ is singular at the end of a step "
     "(the constraint Jacobian lost rank).",
+    Status.UNRELIABLE: "Every step converged, but the reliability monitor found the trajectory "
+    "untrustworthy (energy, constraints or step displacement beyond what a step that resolves "
+    "the motion leaves); try a smaller step `h`.",
 }

@@ -170,3 +170,86 @@ def slider_crank_state(phi, omega):
     from fastvi.scenes.slider_crank import state
 
     return state(phi, omega, *SLIDER_CRANK_PARAMS[:2])
+
+
+# ----------------------------------------------------------------------------- bar slider–crank
+# The slider–crank of the reliability monitor's case, in 8 body coordinates: the crank and the
+# rod as uniform bars given by centre and angle (inertia m L²/12), the slider a point on the x
+# axis, q = (x1, y1, θ1, x2, y2, θ2, x3, y3). Seven constraints: the crank's end pinned at the
+# origin, crank tip = rod start, rod end = slider, slider on y = 0. Gravity and a spring k
+# pulling the slider to x = x_rest. params = (a, L, m1, m2, m3, g, k, x_rest).
+BAR_SC_PARAMS = (0.3, 1.0, 1.0, 2.0, 1.0, 9.81, 100.0, 0.8)
+
+
+def bsc_V(q, p):
+    return p[5] * (p[2] * q[1] + p[3] * q[4] + p[4] * q[7]) + 0.5 * p[6] * (q[6] - p[7]) ** 2
+
+
+def bsc_dV(q, p, out):
+    out[:] = 0.0
+    out[1] = p[5] * p[2]
+    out[4] = p[5] * p[3]
+    out[6] = p[6] * (q[6] - p[7])
+    out[7] = p[5] * p[4]
+
+
+def bsc_ddV(q, p, out):
+    out[:, :] = 0.0
+    out[6, 6] = p[6]
+
+
+def bsc_g(q, p, out):
+    ha, hl = 0.5 * p[0], 0.5 * p[1]
+    c1, s1, c2, s2 = np.cos(q[2]), np.sin(q[2]), np.cos(q[5]), np.sin(q[5])
+    out[0] = q[0] - ha * c1
+    out[1] = q[1] - ha * s1
+    out[2] = q[0] + ha * c1 - q[3] + hl * c2
+    out[3] = q[1] + ha * s1 - q[4] + hl * s2
+    out[4] = q[3] + hl * c2 - q[6]
+    out[5] = q[4] + hl * s2 - q[7]
+    out[6] = q[7]
+
+
+def bsc_G(q, p, out):
+    ha, hl = 0.5 * p[0], 0.5 * p[1]
+    c1, s1, c2, s2 = np.cos(q[2]), np.sin(q[2]), np.cos(q[5]), np.sin(q[5])
+    out[:, :] = 0.0
+    out[0, 0], out[0, 2] = 1.0, ha * s1
+    out[1, 1], out[1, 2] = 1.0, -ha * c1
+    out[2, 0], out[2, 2], out[2, 3], out[2, 5] = 1.0, -ha * s1, -1.0, -hl * s2
+    out[3, 1], out[3, 2], out[3, 4], out[3, 5] = 1.0, ha * c1, -1.0, hl * c2
+    out[4, 3], out[4, 5], out[4, 6] = 1.0, -hl * s2, -1.0
+    out[5, 4], out[5, 5], out[5, 7] = 1.0, hl * c2, -1.0
+    out[6, 7] = 1.0
+
+
+def bsc_ddg(q, eta, p, out):
+    ha, hl = 0.5 * p[0], 0.5 * p[1]
+    c1, s1, c2, s2 = np.cos(q[2]), np.sin(q[2]), np.cos(q[5]), np.sin(q[5])
+    out[:, :] = 0.0
+    out[2, 2] = ha * (c1 * (eta[0] - eta[2]) + s1 * (eta[1] - eta[3]))
+    out[5, 5] = -hl * (c2 * (eta[2] + eta[4]) + s2 * (eta[3] + eta[5]))
+
+
+def bar_slider_crank(**overrides):
+    """The bar slider–crank (n = 8, m = 7) with exact second derivatives."""
+    a, L, m1, m2, m3 = BAR_SC_PARAMS[:5]
+    mass = np.diag([m1, m1, m1 * a * a / 12, m2, m2, m2 * L * L / 12, m3, m3])
+    funcs = dict(potential=bsc_V, potential_grad=bsc_dV, potential_hessian=bsc_ddV,
+                 constraint=bsc_g, constraint_jacobian=bsc_G, constraint_hessian=bsc_ddg)
+    funcs.update(overrides)
+    return fastvi.Model(8, 7, params=BAR_SC_PARAMS, mass=mass, name="bar_slider_crank", **funcs)
+
+
+def bar_slider_crank_state(phi=0.3, omega=5.0):
+    """The exact ``(q, v)`` at crank angle ``phi`` and crank speed ``omega`` (slider right)."""
+    a, L = BAR_SC_PARAMS[:2]
+    A, dA = a * np.array([np.cos(phi), np.sin(phi)]), a * omega * np.array([-np.sin(phi), np.cos(phi)])
+    th2 = -np.arcsin(A[1] / L)
+    dth2 = -dA[1] / (L * np.cos(th2))
+    e2, de2 = np.array([np.cos(th2), np.sin(th2)]), np.array([-np.sin(th2), np.cos(th2)])
+    C2, dC2 = A + 0.5 * L * e2, dA + 0.5 * L * dth2 * de2
+    B, dB = A + L * e2, dA + L * dth2 * de2
+    q = np.array([A[0] / 2, A[1] / 2, phi, C2[0], C2[1], th2, B[0], B[1]])
+    v = np.array([dA[0] / 2, dA[1] / 2, omega, dC2[0], dC2[1], dth2, dB[0], dB[1]])
+    return q, v

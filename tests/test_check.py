@@ -335,8 +335,12 @@ def test_integrate_runs_the_check_before_the_first_step():
     model = cart(kinetic_grad=bad_kinetic_grad_sign)
     with pytest.raises(fastvi.ModelCheckError, match="kinetic_grad.*check=False"):
         fastvi.integrate(model, CART_Q, CART_V, h=0.01, n_steps=10)
-    # the check is skippable (the run then integrates the wrong model silently)
-    res = fastvi.integrate(model, CART_Q, CART_V, h=0.01, n_steps=10, check=False)
+    # the check is skippable; the run then integrates a different Lagrangian, whose energy
+    # the monitor sees drift from the model's (0.11 of the kinetic energy at step 5)
+    with pytest.raises(fastvi.IntegrationError, match="UNRELIABLE.*energy error"):
+        fastvi.integrate(model, CART_Q, CART_V, h=0.01, n_steps=10, check=False)
+    # and without the monitor too, the wrong model runs silently
+    res = fastvi.integrate(model, CART_Q, CART_V, h=0.01, n_steps=10, check=False, monitor=False)
     assert res.success
 
 

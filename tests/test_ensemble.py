@@ -279,3 +279,18 @@ def test_specialized_members_are_the_generic_ones_bit_for_bit(double_pendulum, d
     r = fastvi.integrate(double_pendulum, Q0[3], V0[3], h=H, n_steps=103, save_every=10,
                          specialize=True)
     assert np.array_equal(sized.member(3).q, r.q) and np.array_equal(sized.member(3).p, r.p)
+
+
+def test_progress_reports_member_steps_and_changes_nothing(pendulum, capsys):
+    """``progress=True`` used to raise a TypeError; it runs the members in groups, reports
+    member-steps on stderr and returns the same ensemble bit for bit."""
+    Q0, V0 = _states(pendulum, [(0.1 * (i + 1),) for i in range(30)])
+    plain = fastvi.integrate_ensemble(pendulum, Q0, V0, h=H, n_steps=STEPS, save=10)
+    capsys.readouterr()
+    shown = fastvi.integrate_ensemble(pendulum, Q0, V0, h=H, n_steps=STEPS, save=10, progress=True)
+    err = capsys.readouterr().err
+    assert f"{30 * STEPS}/{30 * STEPS} member-steps (100%)" in err and "30/30 members" in err
+    for name in ("q", "v", "p", "energy", "t", "status", "steps"):
+        assert np.array_equal(getattr(plain, name), getattr(shown, name)), name
+    with pytest.raises(TypeError, match="`progress` must be True or False"):
+        fastvi.integrate_ensemble(pendulum, Q0, V0, h=H, n_steps=STEPS, progress="yes")

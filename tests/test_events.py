@@ -98,15 +98,16 @@ def test_direction_filters_crossings(pend):
     assert np.all(r.v_events[1][:, 0] > 0)
 
 
-def test_terminal_event_ends_the_run_at_the_step_containing_it(pend):
+def test_terminal_event_ends_the_run_at_the_event(pend):
     q0, v0 = pend.initial_state(TH0)
     r = fastvi.integrate(pend, q0, v0, h=0.01, n_steps=1000, events=stop, dense_output=True)
     assert r.status == Status.TERMINATED and r.success and "termination event" in r.message
     (te,) = r.t_events
     assert te.size == 1 and abs(te[0] - PERIOD / 4) < 1e-6
-    assert r.t[-1] - 0.01 < te[0] <= r.t[-1] + 1e-15  # the last sample ends that step
-    assert r.stats["steps"] == int(round(r.t[-1] / 0.01))
+    assert r.t[-1] == te[0]  # the last sample is the state at the event (as SciPy's)
+    assert r.t[-2] < te[0] and r.stats["steps"] == int(np.ceil(te[0] / 0.01))  # within that step
     q, v = r.sol(te[0])
+    assert np.array_equal(q, r.q[-1]) and np.array_equal(v, r.v[-1])
     assert np.allclose(q, r.q_events[0][0], atol=1e-15) and np.allclose(v, r.v_events[0][0], atol=1e-15)
 
 
@@ -184,9 +185,15 @@ def test_ensemble_members_record_the_events_of_integrate_bit_for_bit(double_pend
         r = fastvi.integrate(dp, Q0[i], V0[i], save_every=7, events=events, **kw)
         m = ens.member(i)
         assert r.status == m.status
+        # integrate ends a terminated run at its event; an ensemble member at that step's end
+        last = -1 if i in ended else None
         for name in ("t", "q", "v", "p", "energy", "constraint_residual", "velocity_residual",
                      "newton_iterations"):
-            assert np.array_equal(getattr(r, name), getattr(m, name)), (i, name)
+            assert np.array_equal(getattr(r, name)[:last], getattr(m, name)[:last]), (i, name)
+        if i in ended:
+            e = int(np.flatnonzero(ens.n_events[i, :2])[0])
+            assert r.t[-1] == ens.t_events[i, e, 0] <= m.t[-1]
+            assert np.array_equal(r.q[-1], ens.q_events[i, e, 0])
         for name in ("t_events", "q_events", "v_events"):
             for a, b in zip(getattr(r, name), getattr(m, name)):
                 assert np.array_equal(a, b), (i, name)

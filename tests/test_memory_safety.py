@@ -87,6 +87,9 @@ q0, v0 = np.array([0.6, 0.8, 0.0]), np.array([-0.8, 0.6, 0.0])  # on the sphere,
 if route == "integrate":  # the default path: the automatic check on first use
     result = fastvi.integrate(model, q0, v0, h=0.01, n_steps=1)
     print("integrated", result.success)
+elif route == "nocheck":  # check=False skips the derivatives, never the size guard
+    result = fastvi.integrate(model, q0, v0, h=0.01, n_steps=50, check=False)
+    print("integrated", result.success)
 else:
     model.check(q0, v0)
     print("check passed")
@@ -101,14 +104,51 @@ CASES = {
 }
 
 
-def _run_all(jobs):
+# Event functions on the correct sphere model of SCRIPT (its functions reused): each mistake
+# of the issue, and SciPy's habit. argv: the event's name, then "check" or "nocheck".
+EVENT_SCRIPT = SCRIPT.split("funcs = dict(")[0] + r'''
+def reads_past_v(t, q, v, p):  # v has n = 3 entries
+    return v[3] - 0.5
+
+def writes_v(t, q, v, p):
+    v[0] = 0.0
+    return q[0]
+
+def writes_q(t, q, v, p):
+    q[2] = 1.0
+    return q[0]
+
+def scipy_style(t, y):
+    return y[0]
+
+def correct(t, q, v, p):
+    return q[0]
+
+model = fastvi.Model(3, 1, params=(9.81,), mass=np.eye(3), potential=V, potential_grad=dV,
+                     constraint=g1, constraint_jacobian=G1)
+q0, v0 = np.array([0.6, 0.8, 0.0]), np.array([-0.8, 0.6, 0.0])
+result = fastvi.integrate(model, q0, v0, h=0.01, n_steps=200, events=globals()[case],
+                          check=route == "check")
+print("integrated", result.success, len(result.t_events[0]))
+'''
+
+EVENT_CASES = {
+    "reads_past_v": r"`events\[0\]` reads past the end of `q` or `v`.*n = 3 entries",
+    "writes_v": r"`events\[0\]` wrote into its input `v` \(entry 0\)",
+    "writes_q": r"`events\[0\]` wrote into its input `q` \(entry 2\)",
+    "scipy_style": r"takes 2 positional arguments — SciPy's solve_ivp convention `ev\(t, y\)`.*"
+                   r"event\(t, q, v, params\)",
+}
+
+
+def _run_all(jobs, script=SCRIPT):
     """Run ``(case, route)`` jobs in fresh processes, two at a time (numba import and compiling
     the model's callbacks take a few seconds each): ``[(job, returncode, stdout, stderr)]``."""
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     results, pending = [], list(jobs)
     while pending:
         batch, pending = pending[:2], pending[2:]
-        procs = [(job, subprocess.Popen([sys.executable, "-c", SCRIPT, *job], cwd=ROOT, env=env,
+        procs = [(job, subprocess.Popen([sys.executable, "-c", script, *job], cwd=ROOT, env=env,
                                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
                  for job in batch]
         for job, proc in procs:
@@ -136,6 +176,36 @@ def test_size_mistakes_raise_a_clear_error_in_a_fresh_process():
     control = results.pop()
     assert control[1] == 0 and "integrated True" in control[2], control
     _assert_clean_errors(results)
+
+
+def test_size_mistakes_raise_with_check_false_too():
+    """``check=False`` skips the derivative comparison only: before the size guard ran always,
+    these ended in a segfault at exit (m too small), a raise then a segfault (transposed
+    Jacobian), or a silent success (gradient past n). Three fresh processes each."""
+    jobs = [(case, "nocheck") for _ in range(3) for case in CASES]
+    jobs.append(("correct", "nocheck"))
+    results = _run_all(jobs)
+    control = results.pop()
+    assert control[1] == 0 and "integrated True" in control[2], control
+    _assert_clean_errors(results)
+
+
+def test_event_mistakes_raise_a_clear_error_in_a_fresh_process():
+    """Before the event guard an event reading v[n] returned invented crossings (exit 0), one
+    writing into v corrupted the recorded velocities silently, and SciPy's ev(t, y) got
+    numba's generic typing advice. Three fresh processes each, with and without the model
+    check; the correct event is the control."""
+    import re
+
+    jobs = [(case, route) for _ in range(3) for case in EVENT_CASES for route in ("check", "nocheck")]
+    results = _run_all(jobs + [("correct", "check")], script=EVENT_SCRIPT)
+    control = results.pop()
+    assert control[1] == 0 and "integrated True" in control[2], control
+    for job, code, out, err in results:
+        where = f"{job}: exit code {code}\nstdout: {out}\nstderr (end): {err[-2000:]}"
+        assert code >= 0, "killed by a signal: " + where
+        assert code == 1 and "fastvi.guards.EventFunctionError" in err, where
+        assert re.search(EVENT_CASES[job[0]], err), where
 
 
 @pytest.mark.slow

@@ -364,3 +364,34 @@ def test_pickling_a_model_of_module_functions_is_silent(pendulum):
         warnings.simplefilter("error")
         pickle.dumps(models.polar_pendulum())
         pickle.dumps(pendulum)
+
+
+def test_plot_shows_every_coordinate_or_the_groups_given(tmp_path):
+    """The issue's slider–crank in 8 coordinates: the default used to stop at q[5] and hid the
+    slider; now every coordinate is drawn, or the groups the caller names."""
+    from . import models
+
+    r = fastvi.integrate(models.bar_slider_crank(), *models.bar_slider_crank_state(), h=0.01,
+                         n_steps=20)
+    fig = r.plot(tmp_path / "all.png")
+    assert len(fig.axes[0].get_lines()) == 8
+    np.testing.assert_array_equal(fig.axes[0].get_lines()[6].get_ydata(), r.q[:, 6])  # slider x
+    names = ["x1", "y1", "θ1", "x2", "y2", "θ2", "x3", "y3"]
+    fig = r.plot(tmp_path / "groups.png", labels=names,
+                 coordinates={"crank": [0, 1, 2], "rod": [3, 4, 5], "slider": [6, 7]})
+    assert [ax.get_ylabel() for ax in fig.axes[:3]] == ["crank", "rod", "slider"]
+    assert [t.get_text() for t in fig.axes[2].get_legend().get_texts()] == ["x3", "y3"]
+    with pytest.raises(ValueError, match=r"outside 0…7"):
+        r.plot(tmp_path / "bad.png", coordinates=[8])
+    with pytest.raises(ValueError, match="`labels` must name each of the n = 8"):
+        r.plot(tmp_path / "bad.png", labels=["x"])
+
+
+def test_a_driven_run_reports_its_energy_balance_and_names_the_velocity_residual():
+    model = fastvi.scenes.slider_crank(drive=5.0)
+    r = fastvi.integrate(model, *model.initial_state(0.0), h=0.01, t_end=2.0)
+    text, rep = r.summary(), repr(r)
+    # H changes by what the motor does (about 1 J here): the balance is what is small
+    assert abs(r.energy_error[-1]) > 0.1 and np.max(np.abs(r.energy_balance)) < 1e-6
+    assert "max |ΔH − W|" in text and "max |Gv + g_t|" in text and "max |Gv| " not in text
+    assert "max|ΔH−W|=" in rep and "max|ΔH|=" not in rep

@@ -63,7 +63,7 @@ def test_t_eval_samples_the_step_polynomials_like_solve_ivp(pend):
     r = fastvi.integrate(pend, *pend.initial_state(TH0), h=0.005, t_span=(T0, T1), t_eval=t_eval)
     np.testing.assert_array_equal(r.t, ref.t)
     np.testing.assert_array_equal(r.t, t_eval)
-    # between grid points the polynomial is of order s + 1 = 3 in q (docs/api.md)
+    # between grid points the polynomial is of order s + 1 = 3 in q (docs/events.md)
     assert np.max(np.abs(pend.angle(r.q) - ref.y[0])) < 1e-5
     omega = (r.q[:, 0] * r.v[:, 1] - r.q[:, 1] * r.v[:, 0]) * -1.0  # θ' = (x ẏ − y ẋ)/l², y = −cos θ
     assert np.max(np.abs(-omega - ref.y[1])) < 1e-3
@@ -129,7 +129,7 @@ def test_a_terminal_event_ends_at_the_event_like_solve_ivp(pend, dense):
         np.testing.assert_array_equal(r.q[-1], r.q_events[0][-1])
     assert abs(r.q[-1, 0]) < 1e-12  # the bob is under the pivot
     assert abs(pend.angle(r.q[-1]) - ref.y_events[0][0][0]) < 1e-7
-    # the velocity is the polynomial's, of order s = 2 inside a step (docs/api.md): the
+    # the velocity is the polynomial's, of order s = 2 inside a step (docs/events.md): the
     # angular velocity there agrees with SciPy's to that order, and so does the energy
     q, v = r.q[-1], r.v[-1]
     omega = q[0] * v[1] - q[1] * v[0]

@@ -2,6 +2,7 @@
 
 import contextlib
 import hashlib
+import inspect
 import types as types_
 import warnings
 from pathlib import Path
@@ -9,7 +10,7 @@ from pathlib import Path
 import numba as nb
 from numba import types
 from numba.core import caching, cgutils
-from numba.core.extending import intrinsic
+from numba.core.extending import intrinsic, overload
 from numba.core.imputils import impl_ret_borrowed
 
 # First-class function values (our cfunc callbacks) are "experimental" in numba's words;
@@ -251,3 +252,32 @@ def own(typingctx, x):
         return impl_ret_borrowed(context, builder, ty, value)
 
     return sig, codegen
+
+
+# ----------------------------------------------------------------------------- compiled only where used
+def only_if(kernel, field, default=None):
+    """``kernel`` where its workspace argument's ``field`` is not None, else nothing.
+
+    Returns a function with ``kernel``'s parameters that numba compiles, for each type of
+    the workspace argument (the parameter named ``ws`` or ``ws_``, a named tuple or a
+    :func:`byref` pointer to one), into a call of ``kernel`` when the field is typed as a
+    value, or into ``return default`` when it is typed ``None``. A run-time branch would
+    leave the code it skips to be compiled all the same: this is how a small model's step
+    compiles without the large models' banded and sparse solvers (``Workspace.structured``).
+    """
+    params = list(inspect.signature(kernel.py_func).parameters)
+    at = next(p for p in params if p in ("ws", "ws_"))
+    args = ", ".join(params)
+    scope = dict(kernel=kernel, default=default, types=types)
+    exec(f"def call({args}):\n    return kernel({args})\n"  # noqa: S102 - names from a signature
+         f"def skip({args}):\n    return default\n"
+         f"def choose({args}):\n"
+         f"    t = {at}.dtype if isinstance({at}, types.CPointer) else {at}\n"
+         f"    if isinstance(t[t.fields.index({field!r})], types.NoneType):\n"
+         f"        return skip\n"
+         f"    return call\n", scope)
+    stub = scope["call"]
+    stub.__name__ = stub.__qualname__ = kernel.py_func.__name__
+    stub.__doc__ = kernel.py_func.__doc__
+    overload(stub, jit_options=dict(_nrt=False))(scope["choose"])
+    return stub

@@ -639,7 +639,7 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
                                 opts["newton"], ws)
             compile_time += time.perf_counter() - t_step
             args = (fns, flags, Mc, KP, meth.kernel_tables,
-                    opts["newton"], h, t0, dims, plan.si, plan.sb, X0, total, mode, every, H0,
+                    opts["newton"], h, t0, dims, plan.si, plan.sb, ws.structured, X0, total, mode, every, H0,
                     Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, ev.fns, ev.count, ev.direction,
                     ev.terminal, Te, Qe, Ve, Ne, stepk)
             run, seconds = _RUN_ENSEMBLE.bind(*args)

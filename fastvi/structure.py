@@ -343,5 +343,5 @@ def workspace(model, meth, prm=None, solver: str = "auto"):
     p = plan(model, meth, prm, solver)
     ws = lay.make_workspace(model.n, model.m, meth.s, meth.r, meth.J)
     if np.any(p.si[:lay.SI_HEADER]):  # something structured: a solve or grouped differences
-        ws = ws._replace(si=p.si.copy(), sb=p.sb.copy())
+        ws = ws._replace(si=p.si.copy(), sb=p.sb.copy(), structured=True)
     return ws

@@ -21,7 +21,7 @@ a plain numba loop needs no function pointer baked into a cached kernel.
 
 import numpy as np
 
-from .._numba import hot, hot_inline, own
+from .._numba import hot, hot_inline, only_if, own
 from .layout import (NONFINITE, OK, S_GV, SI_A_BAND, SI_A_KL, SI_A_KU, SI_A_PERM, SI_GCOL, SI_GPTR,
                      SI_RHS, SI_S, SI_S_BAND, SI_S_DST, SI_S_IPERM, SI_S_KL, SI_S_KU, SI_S_LEN, SI_S_LU, SI_S_PERM,
                      SI_SC, SI_SC_BAND, SI_SC_DST, SI_SC_KL, SI_SC_KU, SI_SC_LEN, SI_SC_LU,
@@ -373,3 +373,11 @@ def mech_impulses_structured(ws_, Lc, Ainv, h, n, m, s, J):
             c = h * Ainv[mu, nu]
             for a in range(n):
                 U[mu, a] += c * Z[nu, a]
+
+
+# what the step calls: compiled into it only for a workspace with a structured plan
+newton_banded = only_if(newton_banded, "structured", 0)
+schur_structured = only_if(schur_structured, "structured", 0)
+mech_rows_sparse = only_if(mech_rows_sparse, "structured")
+project_structured = only_if(project_structured, "structured", 0)
+mech_impulses_structured = only_if(mech_impulses_structured, "structured")

@@ -263,7 +263,7 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
 
 
 @njit(parallel=True)
-def run_ensemble(fns, flags, Mc, P, tabs, opts, h, t0, dims, si, sb, X0, n_total, mode, every,
+def run_ensemble(fns, flags, Mc, P, tabs, opts, h, t0, dims, si, sb, structured, X0, n_total, mode, every,
                  H0, Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, efns, ecount, edir, eterm, Te, Qe,
                  Ve, Ne, stepk):
     """``run_member`` for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in parallel.
@@ -272,7 +272,8 @@ def run_ensemble(fns, flags, Mc, P, tabs, opts, h, t0, dims, si, sb, X0, n_total
     (:func:`.layout.parallel_markers`: each member then runs the size-specialized kernels
     of ``integrate(..., specialize=True)``), sizes each member's workspace, and ``si``,
     ``sb`` are the structured-solve plan of the model and method (:func:`fastvi.structure.plan`;
-    each member solves with its own copy of ``sb``). ``P``
+    each member solves with its own copy of ``sb``; ``structured`` as in
+    :class:`.layout.Workspace`). ``P``
     (N, k + 1) holds each member's kernel parameters (the kernels write the time into the
     last entry of a member's own row); the
     outputs are indexed by
@@ -289,7 +290,7 @@ def run_ensemble(fns, flags, Mc, P, tabs, opts, h, t0, dims, si, sb, X0, n_total
     n = dim(dims[0])
     s = dim(dims[2])
     for i in prange(X0.shape[0]):
-        ws = with_plan(workspace_for(member_sizes(dims)), si, sb.copy())
+        ws = with_plan(workspace_for(member_sizes(dims)), si, sb.copy(), structured)
         state = np.zeros((6, n))
         for a in range(n):
             state[0, a] = X0[i, 0, a]

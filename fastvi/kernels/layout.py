@@ -269,6 +269,10 @@ Workspace = namedtuple(
         "Ew",  # (s+2, s+2) the predictor's weights for steps of changing length
         "si",  # int64: structured-solve plan (header SI_*, permutations, patterns)
         "sb",  # float64: band storages and scratch of the structured solves
+        # None for a plan of dense solves only, True when something is structured: a
+        # type-level switch, so that a small model's step compiles without the banded and
+        # sparse solvers (_numba.only_if)
+        "structured",
         "dims",  # (n, m, s, r, J): int64 sizes, or size markers (see :func:`specialize`)
     ],
 )
@@ -280,7 +284,7 @@ def is_timed(md):
 
     A run-time test: a type-level switch compiled every kernel twice, once without the
     force and time code, for a conservative step a few per cent cheaper
-    (``docs/decisions/0001-kernel-shape.md``)."""
+    (``docs/decisions/0010-kernel-shape.md``)."""
     return md.flags[F_FORCE] != 0 or md.flags[F_TIME] != 0
 
 
@@ -307,7 +311,7 @@ _WS_SHAPES = dict(
     gt="mm", time="2", hist="2", Ew="(s + 2, s + 2)", si="SI_HEADER", sb="1",
 )
 _WS_INT = {"piv", "pivm", "pivn", "pivp", "pivs", "hold", "si"}
-assert tuple(_WS_SHAPES) + ("dims",) == Workspace._fields
+assert tuple(_WS_SHAPES) + ("structured", "dims") == Workspace._fields
 
 
 def make_workspace(n, m, s, r, J):
@@ -320,7 +324,7 @@ def make_workspace(n, m, s, r, J):
                Jm=max(env["J"] * env["m"], 1))
     fields = [np.zeros(eval(shape, {}, env), dtype=np.int64 if name in _WS_INT else np.float64)  # noqa: S307
               for name, shape in _WS_SHAPES.items()]
-    return Workspace(*fields, (env["n"], env["m"], env["s"], env["r"], env["J"]))
+    return Workspace(*fields, None, (env["n"], env["m"], env["s"], env["r"], env["J"]))
 
 
 def _workspace_for_source():
@@ -329,22 +333,22 @@ def _workspace_for_source():
     return ("def workspace_for(dims):\n"
             "    n, m, s, r, J = dim(dims[0]), dim(dims[1]), dim(dims[2]), dim(dims[3]), dim(dims[4])\n"
             "    N = s * n + J * m\n    mm = max(m, 1)\n    Jm = max(J * m, 1)\n"
-            f"    return Workspace({args}, dims)\n")
+            f"    return Workspace({args}, None, dims)\n")
 
 
 
 
 #: the structured-solve plan's fields come last in a Workspace: si, sb, then dims
 _PLAN_AT = Workspace._fields.index("si")
-assert Workspace._fields[_PLAN_AT:] == ("si", "sb", "dims")
+assert Workspace._fields[_PLAN_AT:] == ("si", "sb", "structured", "dims")
 
 
 @njit
-def with_plan(ws, si, sb):
+def with_plan(ws, si, sb, structured):
     """``ws`` with the structured-solve plan ``si``, ``sb`` of :func:`fastvi.structure.plan`
     (``sb`` is written by the solves: each trajectory needs its own copy; ``si`` is read
     only). What :func:`fastvi.structure.workspace` does in Python, for compiled callers."""
-    return Workspace(*ws[:_PLAN_AT], si, sb, ws.dims)
+    return Workspace(*ws[:_PLAN_AT], si, sb, structured, ws.dims)
 
 
 # ----------------------------------------------------------------------------- sizes

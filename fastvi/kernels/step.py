@@ -32,7 +32,7 @@ import numpy as np
 from numba.core import types
 
 from .._launch import _key
-from .._numba import hot, hot_inline, own, ptr
+from .._numba import hot, hot_inline, own, ptr, quiet
 from .banded import (gt_times, mech_impulses_structured, mech_rows_sparse, newton_banded,
                      project_structured, schur_structured)
 from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
@@ -1504,16 +1504,17 @@ def step_kernel(md, tabs, opts, ws):
     more in every loop. The workspace's sizes (integers, or size markers with
     ``specialize=True``) are part of its type: one generic step serves every model.
     """
-    key = (_key(md), _key(opts), _key(ws.dims), type(ws.si), ws.si.ndim)
+    key = (_key(md), _key(opts), _key(ws.dims), ws.structured is None)
     k = _ENTRIES.get(key)
     if k is None:
         P = types.CPointer
         arg = numba.typeof
-        sig = types.int64(P(arg(md)), P(arg(tabs)), P(arg(opts)), types.float64,
-                          P(arg(np.zeros((1, 1)))), P(arg(ws)), types.boolean,
-                          P(arg(np.zeros(1))))
-        # the step's own body becomes the C function (not a call of the njit `step`, whose
-        # code numba would compile once more into the wrapper)
-        k = _ENTRIES[key] = numba.cfunc(sig, cache=True, error_model="numpy", boundscheck=False,
-                                        _nrt=False)(step.py_func)
+        with quiet():  # typing the callbacks draws numba's first-class-function note
+            sig = types.int64(P(arg(md)), P(arg(tabs)), P(arg(opts)), types.float64,
+                              P(arg(np.zeros((1, 1)))), P(arg(ws)), types.boolean,
+                              P(arg(np.zeros(1))))
+            # the step's own body becomes the C function (not a call of the njit `step`,
+            # whose code numba would compile once more into the wrapper)
+            k = _ENTRIES[key] = numba.cfunc(sig, cache=True, error_model="numpy",
+                                            boundscheck=False, _nrt=False)(step.py_func)
     return k

@@ -3,7 +3,6 @@
 import contextlib
 import hashlib
 import inspect
-import types as types_
 import warnings
 from pathlib import Path
 
@@ -142,34 +141,14 @@ def hot(fn):
 
 
 def hot_inline(fn):
-    """:func:`hot`, inlined into its callers by numba: for the small helpers of the step.
+    """:func:`hot`, inlined into its callers by numba: only for the small helpers of the
+    step (a few lines, or a branch that a caller's arguments decide).
 
-    A kernel's named tuples travel as flattened arguments (the workspace alone is some 300
-    machine words), so a helper that LLVM does not inline pays for copying them at every
-    call: factoring the forces at a quadrature point into a plain ``hot`` helper made the
-    default step 1.4× slower (6.0 against 4.3 µs,
-    ``docs/decisions/0006-kernels-without-reference-counting.md``)."""
+    numba types an inlined body again in every caller: inlining the step's large helpers
+    made the first compile of ``integrate`` twice as long
+    (``docs/decisions/0010-kernel-shape.md``). Those are plain :func:`hot` functions that
+    take the named tuples by pointer (:func:`byref`), so that a call costs a few words."""
     return nb.njit(**_OPTIONS, _nrt=False, inline="always")(fn)
-
-
-def inline_copy(kernel, **calls):
-    """A :func:`hot_inline` copy of the kernel ``kernel`` whose calls to the named kernels
-    go to ``calls`` instead, e.g. ``inline_copy(step, newton_full=newton_full_inlined)``.
-
-    The size-specialized time loop compiles one step with everything inlined (no flattened
-    named tuples copied at a call), while the generic kernels keep their calls (inlining
-    every helper everywhere multiplies the compile time of the first ``integrate``). The
-    copy shares the kernel's code object; only the names it looks up differ.
-    """
-    fn = kernel.py_func
-    scope = dict(fn.__globals__)
-    unknown = set(calls) - set(fn.__code__.co_names)
-    if unknown:
-        raise NameError(f"{fn.__name__} calls no {sorted(unknown)}")
-    scope.update(calls)
-    copy = types_.FunctionType(fn.__code__, scope, fn.__name__, fn.__defaults__, fn.__closure__)
-    copy.__qualname__, copy.__module__, copy.__doc__ = fn.__qualname__, fn.__module__, fn.__doc__
-    return hot_inline(copy)
 
 
 @contextlib.contextmanager

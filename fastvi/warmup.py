@@ -12,6 +12,9 @@ The four first calls are the four kinds of kernel a session uses:
 2. ``integrate`` of the damped double pendulum (forces and time);
 3. ``integrate`` with terminal events and dense output;
 4. ``integrate_ensemble`` of 8 members (the parallel driver).
+
+``--only specialize`` times a fifth, opt-in kind: ``integrate(..., specialize=True)`` of the
+double pendulum, the kernels compiled for its sizes.
 """
 
 from __future__ import annotations
@@ -79,22 +82,32 @@ def _ensemble():
     return fastvi.integrate_ensemble(model, Q0, V0, h=0.01, n_steps=100)
 
 
-#: name -> the first call of one kind of kernel
+def _specialized():
+    import fastvi
+
+    model = fastvi.scenes.double_pendulum()
+    q0, v0 = model.initial_state(np.pi / 2, np.pi / 2)
+    return fastvi.integrate(model, q0, v0, h=0.01, n_steps=100, specialize=True)
+
+
+#: name -> the first call of one kind of kernel (the first four: a new session's)
 FIRST_CALLS = {
     "integrate": _conservative,
     "forces": _forces,
     "events+dense": _events,
     "ensemble": _ensemble,
+    "specialize": _specialized,
 }
+_SESSION = ("integrate", "forces", "events+dense", "ensemble")
 
 
 def first_calls(names=None) -> list[dict]:
-    """Run the first calls ``names`` (default: all of :data:`FIRST_CALLS`) in this process.
+    """Run the first calls ``names`` (default: a new session's four) in this process.
 
     Returns one record per call: ``name``, ``wall`` and ``cpu`` seconds (process CPU time,
     all threads) and ``peak_mb``, the process's peak resident memory after the call."""
     out = []
-    for name in names or FIRST_CALLS:
+    for name in names or _SESSION:
         w, c = time.perf_counter(), time.process_time()
         FIRST_CALLS[name]()
         out.append(dict(name=name, wall=time.perf_counter() - w, cpu=time.process_time() - c,
@@ -127,7 +140,7 @@ def main(argv=None) -> int:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("--report", action="store_true",
                         help="time each first call cold (fresh process, empty temporary cache)")
-    parser.add_argument("--only", default=",".join(FIRST_CALLS),
+    parser.add_argument("--only", default=",".join(_SESSION),
                         help="comma-separated first calls: " + ", ".join(FIRST_CALLS))
     parser.add_argument("--json", metavar="FILE", help="with --report: also write the records here")
     args = parser.parse_args(argv)

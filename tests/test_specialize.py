@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 import fastvi
-from fastvi._numba import hot, inline_copy, njit
 from fastvi.kernels import layout as lay
 
 FIELDS = ("t", "q", "v", "p", "energy", "constraint_residual", "velocity_residual",
@@ -41,20 +40,6 @@ def test_parallel_markers_carry_the_sizes_into_a_compiled_body():
     assert lay.member_sizes(dims) == dims  # the generic kernels' integers pass unchanged
 
 
-@njit
-def _runs_inlined_step(dims):
-    return lay.sized_flag(dims) is not None
-
-
-def test_sized_flag_tells_the_member_loop_which_step_to_run():
-    """Inside the ensembles' parallel loop, parallel markers select the inlined step of
-    integrate(..., specialize=True) and integer sizes the generic step (drive.run_member's
-    ``sized``), decided when numba compiles the loop."""
-    dims = (4, 2, 2, 3, 2)
-    assert _runs_inlined_step(lay.parallel_markers(dims))
-    assert not _runs_inlined_step(dims)
-
-
 # compiles the time loop for the double pendulum's sizes (≈ 90 s on an empty cache): over
 # the 8-minute budget of `make test` together with the rest; `make test-slow` and `make bench`
 # (which asserts the same equality on every method it times) run it
@@ -86,8 +71,7 @@ def test_specialize_is_a_flag():
         fastvi.integrate(dp, q0, v0, h=0.01, n_steps=2, specialize=1)
 
 
-# the sized step inlines the full Newton and its assembly (fastvi._numba.inline_copy): the
-# stiff rod–slider takes it on nearly every step (the mechanics iteration fails there and
+# the stiff rod–slider takes the full Newton on nearly every step (the mechanics iteration fails there and
 # falls back), the fallback's retries from lower-degree guesses included; compiles the
 # slider's sizes (≈ 100 s on an empty cache)
 @pytest.mark.slow
@@ -104,33 +88,3 @@ def test_specialized_stiff_fallback_is_the_generic_trajectory_bit_for_bit():
     for key in ("newton_iterations", "full_newton_steps"):
         assert sized.stats[key] == gen.stats[key], key
     _same(gen, sized)
-
-
-@hot
-def _inner(x):
-    return x + 1.0
-
-
-@hot
-def _other(x):
-    return 10.0 * x
-
-
-@hot
-def _outer(x):
-    return _inner(x) * 2.0
-
-
-_copy = inline_copy(_outer, _inner=_other)
-
-
-@njit
-def _call_copy(x):
-    return _copy(x)
-
-
-def test_inline_copy_redirects_only_the_named_calls():
-    assert _outer(1.0) == 4.0  # the original keeps its call
-    assert _call_copy(1.0) == 20.0  # the copy, inlined into its caller, calls the replacement
-    with pytest.raises(NameError, match="calls no"):
-        inline_copy(_outer, missing=_other)

@@ -430,20 +430,6 @@ def member_sizes(dims):
             from_parallel_marker(dims[4]))
 
 
-def sized_flag(dims):
-    """Inside a parallel loop's body: True when ``dims`` carries parallel markers (the
-    members run the size-specialized kernels), else None — the ``sized`` argument of the
-    drive kernels, whose ``is None`` test numba resolves at compile time."""
-    return True if isinstance(dims[0], np.ndarray) else None
-
-
-@overload(sized_flag)
-def _sized_flag(dims):
-    if isinstance(dims[0], types.Array):
-        return lambda dims: True
-    return lambda dims: None
-
-
 @hot_inline
 def sizes(ws):
     """``(n, m, s, r, J)`` of the workspace ``ws``: run-time integers in the generic kernels,

@@ -664,9 +664,7 @@ def newton_full(md_, tabs_, opts, h, qk, pk, ws_, out):
     Converged or not, it ends with the residual at the final unknowns (``ws.R``, ``ws.D``,
     ``ws.G[1:]``: what the end momentum and the diagnostics need) and its max-norm in
     ``out[S_RES]``. The loop has one call of :func:`assemble`, with the Newton matrix while
-    iterating and without it for that final residual: the size-specialized step inlines
-    this function with the assembly (:data:`step_inlined`), and every call site would be
-    another copy of the assembly to compile.
+    iterating and without it for that final residual.
     """
     md, tabs, ws = own(md_), own(tabs_), own(ws_)
     X, R, A, piv = ws.X, ws.R, ws.A, ws.piv

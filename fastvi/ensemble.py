@@ -635,13 +635,13 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
             ws = structure.workspace(model, meth, None, opts.get("solver", "auto"))
             if opts.get("specialize", False):
                 ws = lay.specialize(ws)
-            stepk = step_kernel(model.kernel_data(), meth.kernel_tables,
-                                opts["newton"], ws)
+            stepk, stages = step_kernel(model.kernel_data(), meth.kernel_tables,
+                                        opts["newton"], ws)
             compile_time += time.perf_counter() - t_step
             args = (fns, flags, Mc, KP, meth.kernel_tables,
                     opts["newton"], h, t0, dims, plan.si, plan.sb, ws.structured, X0, total, mode, every, H0,
                     Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, ev.fns, ev.count, ev.direction,
-                    ev.terminal, Te, Qe, Ve, Ne, stepk)
+                    ev.terminal, Te, Qe, Ve, Ne, stepk, stages)
             run, seconds = _RUN_ENSEMBLE.bind(*args)
             compile_time += seconds
             t_loop = time.perf_counter()

@@ -406,10 +406,10 @@ def integrate(
 
     sout = np.zeros(lay.STEP_OUT_SIZE)
     t_step = time.perf_counter()
-    stepk = step_kernel(md, tabs, opts, ws)
+    stepk, stages = step_kernel(md, tabs, opts, ws)
     compile_time += time.perf_counter() - t_step
     run, seconds = _RUN.bind(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout,
-                             ev, stepk)
+                             ev, stepk, stages)
     compile_time += seconds
     span = None if adaptive is None else float(t_end) - t0
     bar = None
@@ -424,11 +424,11 @@ def integrate(
             smp = _room(smp, _samples_after_chunk(int(info[lay.I_SLOT]), chunk, every))
         with quiet():
             status = run(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout, ev,
-                         stepk)
+                         stepk, stages)
         if status == lay.EVENTS_FULL:
             ev = events_.grow(ev)
             run = _RUN.bind(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout, ev,
-                            stepk)[0]
+                            stepk, stages)[0]
             status = 0
             continue
         if status == lay.EVENT_TERMINAL:  # the step containing the event is the last sample
@@ -546,7 +546,7 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
         with quiet():
             st = _RUN(md, tabs, opts, h / sub, trial, ws_sub, sub, sub, sub, smp_sub, info_sub,
                       np.zeros(lay.STEP_OUT_SIZE), events_.prepare(model, meth, None, 0),
-                      step_kernel(md, tabs, opts, ws_sub))
+                      *step_kernel(md, tabs, opts, ws_sub))
         if st == 0:
             state[:3] = trial[:3]
             info[lay.I_ITERS] += info_sub[lay.I_ITERS]

@@ -116,7 +116,7 @@ def _book(status, k, state, ws, info, sout):
 
 @hot
 def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, sout, ev,
-        stepk):
+        stepk, stages):
     """Advance ``state`` (rows q, p, v, then scratch) by up to ``n_chunk`` steps, step k
     running from ``info[I_T0] + k h``; ``sout`` is the step's output scratch
     (``STEP_OUT_SIZE``); ``ev`` the :class:`.layout.Events` of the run (no events and no
@@ -135,8 +135,9 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
     ``EVENT_TERMINAL`` after the step in which a terminal event fired, ``EVENTS_FULL``
     before a step when an event record has no room left.
 
-    ``stepk``: the compiled step for these argument types (:func:`.step.step_kernel`),
-    called through its address with pointers to the named tuples (:func:`.byref`).
+    ``stepk``, ``stages``: the compiled step for these argument types and the stages it
+    calls (:func:`.step.step_kernel`), called through its address with pointers to the
+    named tuples (:func:`.byref`).
 
     Adaptive steps (``info[I_KR] > 0``, another run-time switch): ``h`` is then ε, step k
     has the length of :func:`.adapt.next_step` and the run ends at ``info[I_TEND]``
@@ -147,7 +148,7 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
     # the step reads the model, tables and workspace through pointers: one word each
     # instead of their flattened fields copied at every call (_numba.byref)
     mdp, tabp, optp, wsp = byref(md), byref(tabs), byref(opts), byref(ws)
-    statep, soutp = byref(state), byref(sout)
+    statep, soutp, stagesp = byref(state), byref(sout), byref(stages)
     hk = h
     for _ in range(n_chunk):
         k = int(info[I_STEPS])
@@ -163,7 +164,7 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
         else:
             _clock(ws, info, h)
         first = info[I_FIRST] != 0.0
-        status = stepk(mdp, tabp, optp, hk, statep, wsp, first, soutp)
+        status = stepk(mdp, tabp, optp, hk, statep, wsp, first, soutp, stagesp)
         status = _book(status, k, state, ws, info, sout)
         if status != 0:
             return status
@@ -184,7 +185,7 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
 # ----------------------------------------------------------------------------- ensembles
 @hot
 def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, ist, fst, sout,
-               info, ev, stepk):
+               info, ev, stepk, stages):
     """Advance one member (rows q, p, v, then scratch of ``state``) through ``n_total`` steps.
 
     ``mode`` is ``SAVE_FINAL`` (the final state into slot 0 of ``smp``), ``SAVE_STRIDE``
@@ -201,7 +202,7 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
     the step that contains it (status ``EVENT_TERMINAL``); in stride mode that step is then
     the last sample, as in :func:`fastvi.integrate`.
 
-    ``stepk``: the compiled step (:func:`.step.step_kernel`), the very one
+    ``stepk``, ``stages``: the compiled step (:func:`.step.step_kernel`), the very one
     :func:`fastvi.integrate` of that member calls: the same step, bit for bit.
     """
     for k in range(INFO_SIZE):
@@ -219,7 +220,7 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
     if active:
         event_values(md, ev, t0, state[0], state[2])
     mdp, tabp, optp, wsp = byref(md), byref(tabs), byref(opts), byref(ws)
-    statep, soutp = byref(state), byref(sout)
+    statep, soutp, stagesp = byref(state), byref(sout), byref(stages)
     while int(info[I_STEPS]) < n_total:
         k = int(info[I_STEPS])
         if active:
@@ -227,7 +228,7 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
                 ev.qk[a] = state[0, a]
         _clock(ws, info, h)
         first = info[I_FIRST] != 0.0
-        status = stepk(mdp, tabp, optp, h, statep, wsp, first, soutp)
+        status = stepk(mdp, tabp, optp, h, statep, wsp, first, soutp, stagesp)
         status = _book(status, k, state, ws, info, sout)
         fst[F_RES] = sout[S_RES]
         if status != 0:
@@ -265,7 +266,7 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
 @njit(parallel=True)
 def run_ensemble(fns, flags, Mc, P, tabs, opts, h, t0, dims, si, sb, structured, X0, n_total, mode, every,
                  H0, Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, efns, ecount, edir, eterm, Te, Qe,
-                 Ve, Ne, stepk):
+                 Ve, Ne, stepk, stages):
     """``run_member`` for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in parallel.
 
     ``dims`` = (n, m, s, r, J), integers (the generic kernels) or parallel markers
@@ -285,7 +286,7 @@ def run_ensemble(fns, flags, Mc, P, tabs, opts, h, t0, dims, si, sb, structured,
     as in :class:`.layout.Events`; member ``i`` keeps its first ``Te.shape[2]`` crossings of
     each event in ``Te[i]`` (E, K), ``Qe[i]``, ``Ve[i]`` (E, K, n) and counts all of them in
     ``Ne[i]`` (EVENT_SLOTS,). ``stepk`` is the compiled step for a member's workspace
-    (:func:`.step.step_kernel`).
+    and its stages (:func:`.step.step_kernel`).
     """
     n = dim(dims[0])
     s = dim(dims[2])
@@ -304,4 +305,4 @@ def run_ensemble(fns, flags, Mc, P, tabs, opts, h, t0, dims, si, sb, structured,
                     np.zeros(n), np.zeros(s + 1), np.zeros(s + 1), np.zeros(1))
         run_member(ModelData(fns, flags, Mc, P[i]), tabs, opts, h, t0, state, ws, n_total,
                    mode, every, H0[i], smp, ist[i], fst[i], np.zeros(STEP_OUT_SIZE),
-                   np.zeros(INFO_SIZE), ev, stepk)
+                   np.zeros(INFO_SIZE), ev, stepk, stages)

@@ -27,12 +27,14 @@ Model, method, options and scratch arrive as the named tuples of :mod:`.layout`;
 here allocates.
 """
 
+from collections import namedtuple
+
 import numba
 import numpy as np
 from numba.core import types
 
 from .._launch import _key
-from .._numba import hot, hot_inline, own, ptr, quiet
+from .._numba import byref, hot, hot_inline, own, ptr, quiet
 from .banded import (gt_times, mech_impulses_structured, mech_rows_sparse, newton_banded,
                      project_structured, schur_structured)
 from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
@@ -652,7 +654,7 @@ def _apply_increment(X, R, N, sn, qscale):
 
 
 @hot
-def newton_full(md_, tabs_, opts, h, qk, pk, ws_, out):
+def newton_full(md_, tabs_, opts_, h, qk_, pk_, ws_, out_):
     """Newton's method with the exact Newton matrix, from the unknowns in ``ws.X``.
 
     Stops on the increment of the control points, scaled by ``max(1, |q_k|)``: converged
@@ -667,6 +669,7 @@ def newton_full(md_, tabs_, opts, h, qk, pk, ws_, out):
     iterating and without it for that final residual.
     """
     md, tabs, ws = own(md_), own(tabs_), own(ws_)
+    opts, qk, pk, out = own(opts_), own(qk_), own(pk_), own(out_)
     X, R, A, piv = ws.X, ws.R, ws.A, ws.piv
     n, m, s, _, J = sizes(ws)
     sn = s * n
@@ -1088,7 +1091,7 @@ def _exact_mechanics(md):
 
 
 @hot
-def newton_mech(md_, tabs_, opts, h, qk, pk, ws_, out):
+def newton_mech(md_, tabs_, opts_, h, qk_, pk_, ws_, out_):
     """Newton-like iteration with the mechanics matrix (see :func:`_mech_solve`).
 
     Stops when the scaled increment of the control points is below ``tol`` (or at the
@@ -1110,6 +1113,7 @@ def newton_mech(md_, tabs_, opts, h, qk, pk, ws_, out):
     predictor's G(q_{k+1}) and the strict stop (docs/decisions/0001-mechanics-newton.md).
     """
     md, tabs, ws = own(md_), own(tabs_), own(ws_)
+    opts, qk, pk, out = own(opts_), own(qk_), own(pk_), own(out_)
     X, R = ws.X, ws.R
     n, m, s, _, J = sizes(ws)
     sn = s * n
@@ -1205,7 +1209,7 @@ def _finish_mech(md_, tabs_, h, qk, ws_, q1, n, m, s, J):
 
 # ----------------------------------------------------------------------------- one step
 @hot
-def step(md_, tabs_, opts_, h, state_, ws_, first, out_):
+def step(md_, tabs_, opts_, h, state_, ws_, first, out_, stages=None):
     """Advance ``state`` rows (q_k, p_k, v_k) by one step into rows 3–5 (q1, p1, v1).
 
     ``out`` (float64, ``STEP_OUT_SIZE``) receives the Newton iterations, max|g(q1)|,
@@ -1246,7 +1250,11 @@ def step(md_, tabs_, opts_, h, state_, ws_, first, out_):
             if m > 0:
                 _mech_rows(md, ws, 0, n, m)
             predict(tabs_, n, m, h, vk, ws_, 0 if first else ws.hold[H_HIST])
-            st = newton_mech(md_, tabs_, opts, h, qk, pk, ws_, out)
+            if stages is None:
+                st = newton_mech(md_, tabs_, opts, h, qk, pk, ws_, out)
+            else:
+                st = own(stages).newton_mech(md_, tabs_, opts_, h, byref(qk), byref(pk), ws_,
+                                             out_)
         if st == OK:
             gmax = _finish_mech(md_, tabs_, h, qk, ws_, q1, n, m, s, J)
         else:
@@ -1264,7 +1272,11 @@ def step(md_, tabs_, opts_, h, state_, ws_, first, out_):
             # of lower degree, down to the straight line through q_k with velocity v_k.
             # (One call site of newton_full: the sized step inlines it, assembly and all.)
             predict(tabs_, n, m, h, vk, ws_, order)
-            st = newton_full(md_, tabs_, opts, h, qk, pk, ws_, out)
+            if stages is None:
+                st = newton_full(md_, tabs_, opts, h, qk, pk, ws_, out)
+            else:
+                st = own(stages).newton_full(md_, tabs_, opts_, h, byref(qk), byref(pk), ws_,
+                                             out_)
             if st == OK or order == 0:
                 break
             used += out[S_ITERS]
@@ -1291,7 +1303,12 @@ def step(md_, tabs_, opts_, h, state_, ws_, first, out_):
                 for c in range(m):
                     acc += G[j, c, a] * X[sn + j * m + c]
                 P[a] -= cl * acc
-    st = end_momentum(md_, q1, P, p1, v1, G[J], ws_, out)
+    if stages is None:
+        st = end_momentum(md_, q1, P, p1, v1, G[J], ws_, out)
+    else:
+        G1 = G[J]
+        st = own(stages).end_momentum(md_, byref(q1), byref(P), byref(p1), byref(v1), byref(G1),
+                                      ws_, out_)
     if st != OK:
         return st
     out[S_G] = gmax
@@ -1395,7 +1412,7 @@ def _step_work(md_, tabs_, h, qk, q1, ws_, n, m, s, J):
 
 
 @hot
-def end_momentum(md_, q1, P, p1, v1, G1, ws_, out):
+def end_momentum(md_, q1_, P_, p1_, v1_, G1_, ws_, out_):
     """p1 = P − G1ᵀ η with (G M⁻¹ Gᵀ) η = G M⁻¹ P (+ g_t at t_{k+1} for a rheonomic
     constraint), and v1 = M⁻¹ p1: the hidden constraint G v1 + g_t = 0.
 
@@ -1405,6 +1422,7 @@ def end_momentum(md_, q1, P, p1, v1, G1, ws_, out):
     model's step has no code for it (a branch and a call for it in the step cost the
     generic double-pendulum step 9–19 %, measured side by side)."""
     md, ws = own(md_), own(ws_)
+    q1, P, p1, v1, G1, out = own(q1_), own(P_), own(p1_), own(v1_), own(G1_), own(out_)
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     n, m, _, _, _ = sizes(ws)
     if ws.si[SI_S] != SOLVE_DENSE:  # large sparse models, diagonal mass (banded.py)
@@ -1490,17 +1508,28 @@ def end_momentum(md_, q1, P, p1, v1, G1, ws_, out):
 _ENTRIES: dict = {}
 
 
+#: the step's three large stages, compiled as C functions and called by address from the
+#: step's entry point (:func:`step_kernel`): each compiled once, not again inside its caller
+Stages = namedtuple("Stages", ["newton_mech", "newton_full", "end_momentum"])
+
+
+def _cfunc(fn, sig):
+    return numba.cfunc(sig, cache=True, error_model="numpy", boundscheck=False, _nrt=False)(fn)
+
+
 def step_kernel(md, tabs, opts, ws):
     """The step for these kinds of model, method, options and workspace, compiled once as a
-    C function (cached on disk) that the time loops call through its address.
+    C function (cached on disk) that the time loops call through its address; and the
+    :class:`Stages` it calls. Returns ``(step, stages)``.
 
-    Its arguments are pointers (:func:`fastvi._numba.byref`) to ``md``, ``tabs``, ``opts``,
-    ``state``, ``ws`` and ``out``, with ``h`` and ``first`` by value; it returns the step's
-    status code. Every time loop — :func:`.drive.run`, the ensemble's members, a recovery's
-    substeps — calls this one compiled step: numba links a callee's code into each of its
-    callers and optimises it again there, so a step called directly would be compiled once
-    more in every loop. The workspace's sizes (integers, or size markers with
-    ``specialize=True``) are part of its type: one generic step serves every model.
+    The step's arguments are pointers (:func:`fastvi._numba.byref`) to ``md``, ``tabs``,
+    ``opts``, ``state``, ``ws``, ``out`` and ``stages``, with ``h`` and ``first`` by value;
+    it returns the step's status code. Every time loop — :func:`.drive.run`, the ensemble's
+    members, a recovery's substeps — calls this one compiled step: numba links a callee's
+    code into each of its callers and optimises it again there, so a step called directly
+    would be compiled once more in every loop, and so would its stages inside the step. The
+    workspace's sizes (integers, or size markers with ``specialize=True``) and whether its
+    plan is structured are part of its type: one generic step serves every small model.
     """
     key = (_key(md), _key(opts), _key(ws.dims), ws.structured is None)
     k = _ENTRIES.get(key)
@@ -1508,11 +1537,15 @@ def step_kernel(md, tabs, opts, ws):
         P = types.CPointer
         arg = numba.typeof
         with quiet():  # typing the callbacks draws numba's first-class-function note
-            sig = types.int64(P(arg(md)), P(arg(tabs)), P(arg(opts)), types.float64,
-                              P(arg(np.zeros((1, 1)))), P(arg(ws)), types.boolean,
-                              P(arg(np.zeros(1))))
+            tmd, ttabs, topts, tws = P(arg(md)), P(arg(tabs)), P(arg(opts)), P(arg(ws))
+            a1, a2 = P(arg(np.zeros(1))), P(arg(np.zeros((1, 1))))
+            newton = types.int64(tmd, ttabs, topts, types.float64, a1, a1, tws, a1)
+            stages = Stages(_cfunc(newton_mech.py_func, newton), _cfunc(newton_full.py_func, newton),
+                            _cfunc(end_momentum.py_func,
+                                   types.int64(tmd, a1, a1, a1, a1, a2, tws, a1)))
             # the step's own body becomes the C function (not a call of the njit `step`,
             # whose code numba would compile once more into the wrapper)
-            k = _ENTRIES[key] = numba.cfunc(sig, cache=True, error_model="numpy",
-                                            boundscheck=False, _nrt=False)(step.py_func)
+            sig = types.int64(tmd, ttabs, topts, types.float64, a2, tws, types.boolean, a1,
+                              P(arg(stages)))
+            k = _ENTRIES[key] = (_cfunc(step.py_func, sig), stages)
     return k

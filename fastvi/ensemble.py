@@ -636,7 +636,7 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
             if opts.get("specialize", False):
                 ws = lay.specialize(ws)
             stepk, stages = step_kernel(model.kernel_data(), meth.kernel_tables,
-                                        opts["newton"], ws)
+                                        opts["newton"], ws, full=True)
             compile_time += time.perf_counter() - t_step
             args = (fns, flags, Mc, KP, meth.kernel_tables,
                     opts["newton"], h, t0, dims, plan.si, plan.sb, ws.structured, X0, total, mode, every, H0,

@@ -425,6 +425,12 @@ def integrate(
         with quiet():
             status = run(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout, ev,
                          stepk, stages)
+        if status == lay.NEEDS_FULL_NEWTON:  # compiled on first need; the step is retaken
+            t_step = time.perf_counter()
+            stepk, stages = step_kernel(md, tabs, opts, ws, full=True)
+            compile_time += time.perf_counter() - t_step
+            status = 0
+            continue
         if status == lay.EVENTS_FULL:
             ev = events_.grow(ev)
             run = _RUN.bind(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout, ev,
@@ -546,7 +552,7 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
         with quiet():
             st = _RUN(md, tabs, opts, h / sub, trial, ws_sub, sub, sub, sub, smp_sub, info_sub,
                       np.zeros(lay.STEP_OUT_SIZE), events_.prepare(model, meth, None, 0),
-                      *step_kernel(md, tabs, opts, ws_sub))
+                      *step_kernel(md, tabs, opts, ws_sub, full=True))
         if st == 0:
             state[:3] = trial[:3]
             info[lay.I_ITERS] += info_sub[lay.I_ITERS]

@@ -2,9 +2,8 @@
 
 import numpy as np
 
-import fastvi
 from fastvi.kernels import layout as lay
-from fastvi.kernels.step import step
+from fastvi.kernels.step import step_once
 
 
 def one_step(model, meth, h, q, p, v, *, ws=None, first=True, tol=1e-14, max_iter=30,
@@ -18,6 +17,5 @@ def one_step(model, meth, h, q, p, v, *, ws=None, first=True, tol=1e-14, max_ite
     state = np.zeros((6, n))
     state[0], state[1], state[2] = q, p, v
     out = np.zeros(lay.STEP_OUT_SIZE)
-    with fastvi._numba.quiet():
-        st = step(md, meth.kernel_tables, opts, h, state, ws, first, out)
+    st = step_once(md, meth.kernel_tables, opts, h, state, ws, first, out)
     return st, state[3].copy(), state[4].copy(), state[5].copy(), out, ws

@@ -11,7 +11,7 @@ import numpy as np
 from numba import prange
 
 from .._numba import byref, hot, hot_inline, njit, ptr
-from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_ITERS,
+from .layout import (NEEDS_FULL_NEWTON, E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_ITERS,
                      F_MAXRES, F_RES, F_TSLOT, I_FAILED, I_FIRST, I_FULL, I_ITERS, I_MAXRES,
                      I_KR, I_RES, I_SLOT, I_STEPS, I_T, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK,
                      INFO_SIZE,
@@ -165,6 +165,8 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
             _clock(ws, info, h)
         first = info[I_FIRST] != 0.0
         status = stepk(mdp, tabp, optp, hk, statep, wsp, first, soutp, stagesp)
+        if status == NEEDS_FULL_NEWTON:
+            return status  # nothing booked: the driver retakes step k with the full Newton
         status = _book(status, k, state, ws, info, sout)
         if status != 0:
             return status

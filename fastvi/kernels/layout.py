@@ -108,6 +108,10 @@ EVENT_SLOTS = 8
 #: the event records need room before the next step (the driver grows them and resumes)
 EVENT_TERMINAL = 1
 EVENTS_FULL = 2
+#: a positive return of the step and the time loop: the step needs the full Newton, whose
+#: compiled stage the run does not have yet (:func:`.step.step_kernel` compiles it on
+#: first need); nothing of the step was kept, so the driver retakes it with that stage
+NEEDS_FULL_NEWTON = 3
 
 # ----------------------------------------------------------------------------- Newton variants
 #: full Newton: the exact Newton matrix assembled and factored at every iteration

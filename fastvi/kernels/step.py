@@ -40,7 +40,8 @@ from .banded import (gt_times, mech_impulses_structured, mech_rows_sparse, newto
 from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
                      F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_LINPOT, F_M, F_MASSFN, F_TIME,
                      F_TSLOT, FJQ, FJV, FORCE, GT, H_FG, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
-                     NEWTON_FAILED, NEWTON_FULL, NONFINITE, OK, PGRAD, PHESS, POT, KHESS, S_FULL,
+                     NEEDS_FULL_NEWTON, NEWTON_FAILED, NEWTON_FULL, NONFINITE, OK, PGRAD, PHESS,
+                     POT, KHESS, S_FULL,
                      S_G, S_GV, S_ITERS, S_RES, S_WORK, SI_A, SI_GCOL, SI_GPTR, SI_HC_BCOL,
                      SI_HC_COLS, SI_HC_CPTR, SI_HC_NG, SI_HC_PPTR, SI_HC_ROWS, SI_S, SI_SC, SINGULAR,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, SOLVE_BANDED, SOLVE_DENSE, is_timed,
@@ -49,6 +50,7 @@ from .linalg import (invert, invert_unpivoted, lu_factor, lu_factor_small, lu_so
                      lu_solve_small)
 
 __all__ = ["make_workspace", "assemble", "residual", "linear_force", "step", "step_kernel",
+           "take_step", "step_once",
            "end_momentum", "velocity_residual", "hidden_residual", "constraint_rate"]
 
 _FD_REL = 6.0554544523933395e-06  # cbrt(machine epsilon): central differences' best step
@@ -1209,7 +1211,7 @@ def _finish_mech(md_, tabs_, h, qk, ws_, q1, n, m, s, J):
 
 # ----------------------------------------------------------------------------- one step
 @hot
-def step(md_, tabs_, opts_, h, state_, ws_, first, out_, stages=None):
+def step(md_, tabs_, opts_, h, state_, ws_, first, out_, stages_):
     """Advance ``state`` rows (q_k, p_k, v_k) by one step into rows 3–5 (q1, p1, v1).
 
     ``out`` (float64, ``STEP_OUT_SIZE``) receives the Newton iterations, max|g(q1)|,
@@ -1217,7 +1219,7 @@ def step(md_, tabs_, opts_, h, state_, ws_, first, out_, stages=None):
     Newton as a fallback. Returns a status code (0 on success).
     """
     md, tabs, ws = own(md_), own(tabs_), own(ws_)
-    opts, state, out = own(opts_), own(state_), own(out_)
+    opts, state, out, stages = own(opts_), own(state_), own(out_), own(stages_)
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     qk, pk, vk, q1, p1, v1 = state[0], state[1], state[2], state[3], state[4], state[5]
     X, R, D, G = ws.X, ws.R, ws.D, ws.G
@@ -1240,6 +1242,8 @@ def step(md_, tabs_, opts_, h, state_, ws_, first, out_, stages=None):
         ws.hold[H_FG] = 1
     out[S_FULL] = 0.0
     full = opts.mode == NEWTON_FULL or ws.hold[H_FULL] > 0 or not tabs.mech
+    if full and stages.full == 0:
+        return NEEDS_FULL_NEWTON
     if ws.hold[H_FULL] > 0:
         ws.hold[H_FULL] -= 1
     used = 0.0
@@ -1250,14 +1254,12 @@ def step(md_, tabs_, opts_, h, state_, ws_, first, out_, stages=None):
             if m > 0:
                 _mech_rows(md, ws, 0, n, m)
             predict(tabs_, n, m, h, vk, ws_, 0 if first else ws.hold[H_HIST])
-            if stages is None:
-                st = newton_mech(md_, tabs_, opts, h, qk, pk, ws_, out)
-            else:
-                st = own(stages).newton_mech(md_, tabs_, opts_, h, byref(qk), byref(pk), ws_,
-                                             out_)
+            st = stages.newton_mech(md_, tabs_, opts_, h, byref(qk), byref(pk), ws_, out_)
         if st == OK:
             gmax = _finish_mech(md_, tabs_, h, qk, ws_, q1, n, m, s, J)
         else:
+            if stages.full == 0:
+                return NEEDS_FULL_NEWTON  # before anything of this step is kept
             # too slow a contraction (stiff forces) or a failure: the full Newton, which
             # then stays on for a while rather than paying this detour at every step
             used = out[S_ITERS]
@@ -1272,11 +1274,7 @@ def step(md_, tabs_, opts_, h, state_, ws_, first, out_, stages=None):
             # of lower degree, down to the straight line through q_k with velocity v_k.
             # (One call site of newton_full: the sized step inlines it, assembly and all.)
             predict(tabs_, n, m, h, vk, ws_, order)
-            if stages is None:
-                st = newton_full(md_, tabs_, opts, h, qk, pk, ws_, out)
-            else:
-                st = own(stages).newton_full(md_, tabs_, opts_, h, byref(qk), byref(pk), ws_,
-                                             out_)
+            st = stages.newton_full(md_, tabs_, opts_, h, byref(qk), byref(pk), ws_, out_)
             if st == OK or order == 0:
                 break
             used += out[S_ITERS]
@@ -1303,12 +1301,8 @@ def step(md_, tabs_, opts_, h, state_, ws_, first, out_, stages=None):
                 for c in range(m):
                     acc += G[j, c, a] * X[sn + j * m + c]
                 P[a] -= cl * acc
-    if stages is None:
-        st = end_momentum(md_, q1, P, p1, v1, G[J], ws_, out)
-    else:
-        G1 = G[J]
-        st = own(stages).end_momentum(md_, byref(q1), byref(P), byref(p1), byref(v1), byref(G1),
-                                      ws_, out_)
+    G1 = G[J]
+    st = stages.end_momentum(md_, byref(q1), byref(P), byref(p1), byref(v1), byref(G1), ws_, out_)
     if st != OK:
         return st
     out[S_G] = gmax
@@ -1510,14 +1504,20 @@ _ENTRIES: dict = {}
 
 #: the step's three large stages, compiled as C functions and called by address from the
 #: step's entry point (:func:`step_kernel`): each compiled once, not again inside its caller
-Stages = namedtuple("Stages", ["newton_mech", "newton_full", "end_momentum"])
+#: (``full``: 1, or 0 while ``newton_full`` is a placeholder that no step calls — a step
+#: that needs it returns ``NEEDS_FULL_NEWTON`` first)
+Stages = namedtuple("Stages", ["newton_mech", "newton_full", "end_momentum", "full"])
+
+
+def _no_full_newton(md_, tabs_, opts_, h, qk_, pk_, ws_, out_):
+    return NEEDS_FULL_NEWTON
 
 
 def _cfunc(fn, sig):
     return numba.cfunc(sig, cache=True, error_model="numpy", boundscheck=False, _nrt=False)(fn)
 
 
-def step_kernel(md, tabs, opts, ws):
+def step_kernel(md, tabs, opts, ws, full=False):
     """The step for these kinds of model, method, options and workspace, compiled once as a
     C function (cached on disk) that the time loops call through its address; and the
     :class:`Stages` it calls. Returns ``(step, stages)``.
@@ -1530,9 +1530,16 @@ def step_kernel(md, tabs, opts, ws):
     would be compiled once more in every loop, and so would its stages inside the step. The
     workspace's sizes (integers, or size markers with ``specialize=True``) and whether its
     plan is structured are part of its type: one generic step serves every small model.
+
+    The full Newton is compiled only when ``full`` is true, ``opts`` asks for it or the
+    method's mechanics matrix is singular (or it is compiled already): most runs never take
+    it, and its assembly is a fifth of the step's code. Until then a step that would need it
+    returns ``NEEDS_FULL_NEWTON`` with nothing kept, and the driver asks again with
+    ``full=True`` and retakes the step — the same trajectory, bit for bit.
     """
     key = (_key(md), _key(opts), _key(ws.dims), ws.structured is None)
-    k = _ENTRIES.get(key)
+    full = bool(full or opts.mode == NEWTON_FULL or not tabs.mech or (key, "full") in _ENTRIES)
+    k = _ENTRIES.get((key, full))
     if k is None:
         P = types.CPointer
         arg = numba.typeof
@@ -1540,12 +1547,40 @@ def step_kernel(md, tabs, opts, ws):
             tmd, ttabs, topts, tws = P(arg(md)), P(arg(tabs)), P(arg(opts)), P(arg(ws))
             a1, a2 = P(arg(np.zeros(1))), P(arg(np.zeros((1, 1))))
             newton = types.int64(tmd, ttabs, topts, types.float64, a1, a1, tws, a1)
-            stages = Stages(_cfunc(newton_mech.py_func, newton), _cfunc(newton_full.py_func, newton),
-                            _cfunc(end_momentum.py_func,
-                                   types.int64(tmd, a1, a1, a1, a1, a2, tws, a1)))
-            # the step's own body becomes the C function (not a call of the njit `step`,
-            # whose code numba would compile once more into the wrapper)
-            sig = types.int64(tmd, ttabs, topts, types.float64, a2, tws, types.boolean, a1,
-                              P(arg(stages)))
-            k = _ENTRIES[key] = (_cfunc(step.py_func, sig), stages)
+            part = _ENTRIES.get(key)
+            if part is None:
+                mech = _cfunc(newton_mech.py_func, newton)
+                end = _cfunc(end_momentum.py_func, types.int64(tmd, a1, a1, a1, a1, a2, tws, a1))
+                stub = _cfunc(_no_full_newton, newton)
+                proto = Stages(mech, stub, end, 0)
+                # the step's own body becomes the C function (not a call of the njit `step`,
+                # whose code numba would compile once more into the wrapper)
+                sig = types.int64(tmd, ttabs, topts, types.float64, a2, tws, types.boolean, a1,
+                                  P(arg(proto)))
+                part = _ENTRIES[key] = (_cfunc(step.py_func, sig), proto)
+            stepk, proto = part
+            if full:
+                _ENTRIES[(key, "full")] = True
+                k = (stepk, proto._replace(newton_full=_cfunc(newton_full.py_func, newton), full=1))
+            else:
+                k = (stepk, proto)
+            _ENTRIES[(key, full)] = k
     return k
+
+
+@hot
+def take_step(md, tabs, opts, h, state, ws, first, out, stepk, stages):
+    """One step through the compiled entry point ``stepk`` and its ``stages``
+    (:func:`step_kernel`), for callers other than the time loops: tests and profiles, from
+    Python or from their own compiled loops. Arguments as :func:`step`, by value."""
+    return stepk(byref(md), byref(tabs), byref(opts), h, byref(state), byref(ws), first,
+                 byref(out), byref(stages))
+
+
+def step_once(md, tabs, opts, h, state, ws, first, out):
+    """:func:`take_step` from Python with the kernels of :func:`step_kernel` (the full Newton
+    included): advance ``state`` rows (q, p, v) by one step into rows 3–5; returns the
+    status code."""
+    with quiet():
+        return take_step(md, tabs, opts, h, state, ws, first, out,
+                         *step_kernel(md, tabs, opts, ws, full=True))

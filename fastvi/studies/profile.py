@@ -19,7 +19,8 @@ from fastvi._numba import hot, ptr, quiet
 from fastvi.kernels import layout as lay
 from fastvi.kernels.layout import make_workspace
 from fastvi.kernels.linalg import lu_factor, lu_solve
-from fastvi.kernels.step import _exact_mechanics, _mech_solve, assemble, end_momentum, residual, step
+from fastvi.kernels.step import (_exact_mechanics, _mech_solve, assemble, end_momentum, residual,
+                                 step_kernel, step_once, take_step)
 
 __all__ = ["profile_step", "main", "loop_step", "loop_residual", "loop_assemble", "loop_lu",
            "loop_solve", "loop_mech", "loop_end", "loop_callback"]
@@ -31,11 +32,12 @@ __all__ = ["profile_step", "main", "loop_step", "loop_residual", "loop_assemble"
 # such a loop against 0.066 µs in a ``hot`` one;
 # docs/decisions/0006-kernels-without-reference-counting.md).
 @hot
-def loop_step(md, tabs, opts, h, state, ws, out, K):
-    """``K`` steps from ``state``, each continuing from the last (``out``: the step's output)."""
+def loop_step(md, tabs, opts, h, state, ws, out, stepk, stages, K):
+    """``K`` steps from ``state``, each continuing from the last (``out``: the step's output),
+    through the compiled step ``stepk`` and its ``stages`` (:func:`.step.step_kernel`)."""
     st = 0
     for _ in range(K):
-        st += step(md, tabs, opts, h, state, ws, False, out)
+        st += take_step(md, tabs, opts, h, state, ws, False, out, stepk, stages)
         for a in range(state.shape[1]):
             state[0, a] = state[3, a]
             state[1, a] = state[4, a]
@@ -157,13 +159,14 @@ def profile_step(model, q0, v0, method: str = "P2L-Q3G", h: float = 0.01, warm: 
             opts = lay.NewtonOptions(1e-14, 30, lay.NEWTON_MODES[mode])
             # a first step fills the predictor's history; the loop then runs on
             st0 = np.zeros(lay.STEP_OUT_SIZE)
-            step(md, tabs, opts, h, state, ws, True, st0)
+            step_once(md, tabs, opts, h, state, ws, True, st0)
             out[f"step_{mode}"] = _per_call(loop_step, md, tabs, opts, h, state, ws, st0,
+                                            *step_kernel(md, tabs, opts, ws, full=True),
                                             calls=calls)
         qk, pk = state[0].copy(), state[1].copy()
         ws = make_workspace(n, m, s, meth.r, J)
-        step(md, tabs, lay.NewtonOptions(1e-14, 30, lay.NEWTON_FULL), h, state, ws, True,
-             np.zeros(lay.STEP_OUT_SIZE))
+        step_once(md, tabs, lay.NewtonOptions(1e-14, 30, lay.NEWTON_FULL), h, state, ws, True,
+                  np.zeros(lay.STEP_OUT_SIZE))
         out["residual"] = _per_call(loop_residual, md, tabs, h, qk, pk, ws, calls=calls)
         out["residual_generic"] = _per_call(loop_assemble, md, tabs, h, qk, pk, ws, False,
                                             calls=calls)
@@ -177,8 +180,8 @@ def profile_step(model, q0, v0, method: str = "P2L-Q3G", h: float = 0.01, warm: 
         out["lu_solve"] = _per_call(loop_solve, A, piv, R0, R, N, calls=calls)
         # the mechanics solve needs M̄⁻¹ and Y_0 prepared as a step does
         ws2 = make_workspace(n, m, s, meth.r, J)
-        step(md, tabs, lay.NewtonOptions(1e-14, 30, lay.NEWTON_AUTO), h, state, ws2, True,
-             np.zeros(lay.STEP_OUT_SIZE))
+        step_once(md, tabs, lay.NewtonOptions(1e-14, 30, lay.NEWTON_AUTO), h, state, ws2, True,
+                  np.zeros(lay.STEP_OUT_SIZE))
         out["mech_solve"] = _per_call(loop_mech, md, tabs, h, ws2, ws2.R.copy(), n, m, s, J,
                                       calls=calls)
         q1, P = state[3].copy(), ws.P.copy()

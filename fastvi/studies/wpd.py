@@ -82,7 +82,7 @@ from fastvi.kernels.layout import PGRAD as _PGRAD
 from fastvi.kernels.layout import F_M, F_N, NEWTON_FULL, STEP_OUT_SIZE, NewtonOptions
 from fastvi.kernels.layout import make_workspace as vi_workspace
 from fastvi.kernels.step import assemble
-from fastvi.kernels.step import step as _vi_step
+from fastvi.kernels.step import step_once as _vi_step
 from fastvi.status import Status
 from fastvi.studies.profile import loop_assemble, loop_callback, loop_end, loop_lu, loop_solve
 from fastvi.studies.reference import REF_TOL, chain_cartesian, chain_pendulum_reference

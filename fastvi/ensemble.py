@@ -474,8 +474,8 @@ def integrate_ensemble(
         Run every member with the kernels compiled for the model's and method's sizes, as
         :func:`fastvi.integrate` does with ``specialize=True``: the same trajectories bit
         for bit, a member's step cheaper on small models (``docs/benchmarks.md``, "Ensembles"), and one
-        more compile of the parallel loop per set of sizes (minutes on a fresh install, then
-        cached on disk). Sizes above 64 stay run-time integers.
+        more compile of the step and the parallel loop per set of sizes (under a minute on
+        a fresh install, then cached on disk). Sizes above 64 stay run-time integers.
     progress : bool, default False
         Show progress on stderr, in member-steps (one updating line on a terminal, a plain
         line every few seconds otherwise, as :func:`fastvi.integrate`): the members then

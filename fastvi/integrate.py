@@ -268,15 +268,13 @@ def integrate(
     specialize : bool, default False
         Compile the kernels for this model's and method's sizes ``(n, m, s, r, J)``, as
         compile-time constants (:func:`fastvi.kernels.layout.specialize`): every small loop
-        of the step is unrolled, and the step is compiled into the time loop. The
-        trajectory is the generic kernels' bit for bit; a step of the double pendulum costs
-        2.0–2.9× less (``docs/decisions/0007-size-specialized-kernels.md``). The price is
-        one compile per size on a fresh install: ≈ 3.5 min of CPU and ≈ 4 GB of peak memory (the double pendulum's
-        ``P2L-Q3G``: 209 s, the process's peak resident memory 4.8 GB against 1 GB for the
-        generic kernels, ≈ 3 GB of it still held after the compile). Then it is cached on
-        disk like the generic kernels: a new process loads it in ≈ 0.1 s and ≈ 12 MB.
-        Worth it for long runs of one model. :func:`fastvi.integrate_ensemble` takes the
-        same option.
+        of the step is unrolled. The trajectory is the generic kernels' bit for bit; a step
+        of the double pendulum costs about half
+        (``docs/decisions/0007-size-specialized-kernels.md``). The price is one compile per
+        size on a fresh install, ≈ 36 s of CPU with a peak of ≈ 0.4 GB of memory
+        (``python -m fastvi compile --report --only specialize``); then it is cached on
+        disk like the generic kernels. Worth it for long runs of one model.
+        :func:`fastvi.integrate_ensemble` takes the same option.
     adaptive : float, optional
         A time-reversible adaptive step (:mod:`fastvi.kernels.adapt`): the energy scale
         ``K_r`` (in the model's energy units) of the step density

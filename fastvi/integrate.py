@@ -66,7 +66,7 @@ class IntegrationError(RuntimeError):
 
 def _alloc(K: int, n: int) -> Samples:
     return Samples(np.zeros(K), np.zeros((K, n)), np.zeros((K, n)), np.zeros((K, n)), np.zeros(K),
-                   np.zeros(K), np.zeros(K), np.zeros(K), np.zeros(K))
+                   np.zeros(K), np.zeros(K), np.zeros(K), np.zeros(K), np.zeros(K))
 
 
 def _adaptive_chunk(span: float, eps: float, every: int, n: int, progress: bool) -> int:
@@ -467,6 +467,7 @@ def integrate(
     result = Result(
         t=out.t, q=out.q, v=out.v, p=out.p,
         energy=out.energy, work=out.work if model.timed else None,
+        work_forces=out.work_forces if model.timed else None,
         constraint_residual=out.g,
         velocity_residual=out.gv, newton_iterations=out.iters,
         stats=dict(steps=int(info[lay.I_STEPS]), newton_iterations=int(info[lay.I_ITERS]),
@@ -562,6 +563,7 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
             sout[lay.S_RES] = info_sub[lay.I_MAXRES]
             sout[lay.S_FULL] = info_sub[lay.I_FULL]
             sout[lay.S_WORK] = info_sub[lay.I_WORK]
+            sout[lay.S_WORK_F] = info_sub[lay.I_WORK_F]
             k = int(info[lay.I_STEPS]) + 1
             with quiet():
                 drive.accept(md, info[lay.I_T0] + k * h, k == total, state, ws_sub, every, smp,

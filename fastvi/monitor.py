@@ -251,8 +251,9 @@ def cut(result, verdict: Verdict, *, every: int, later: str | None = None):
     arrays = {name: getattr(result, name)[:j] for name in
               ("t", "q", "v", "p", "energy", "constraint_residual", "velocity_residual",
                "newton_iterations")}
-    if result.work is not None:
-        arrays["work"] = result.work[:j]
+    for name in ("work", "work_forces"):
+        if getattr(result, name) is not None:
+            arrays[name] = getattr(result, name)[:j]
     extra = {}
     if result.t_events is not None:
         keep = [te <= t_good for te in result.t_events]

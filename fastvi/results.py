@@ -239,6 +239,10 @@ class Result(TrajectoryResult):
         forces (``∫ F·v dt``), the time-dependent potential (``∫ ∂V/∂t dt``) and driving
         constraints (``∫ λ·g_t dt``), quadratured on each step's polynomial; see
         :attr:`energy_balance`. None for a conservative model.
+    work_forces : ndarray (K,) or None
+        The part of :attr:`work` done by the applied forces (``∫ F·v dt``: dampers, motors,
+        springs given as forces); the rest, :attr:`work_driven`, is done by the
+        time-dependent potential and the driving constraints. None for a conservative model.
     constraint_residual, velocity_residual : ndarray (K,)
         ``max |g(t_k, q_k)|`` and ``max |G v_k + g_t|`` over the steps since the previous
         sample.
@@ -274,10 +278,20 @@ class Result(TrajectoryResult):
     failed_step: int | None = None
     model_name: str = field(default="model")
     work: np.ndarray | None = None
+    work_forces: np.ndarray | None = None
     t_events: list | None = None
     q_events: list | None = None
     v_events: list | None = None
     sol: object = field(default_factory=NoDenseOutput)
+
+    @property
+    def work_driven(self):
+        """``work − work_forces``: the work done since ``t0`` by the time-dependent potential
+        and the driving constraints (prescribed motions, moving supports), or None for a
+        conservative model or a result without the split."""
+        if self.work is None or self.work_forces is None:
+            return None
+        return self.work - self.work_forces
 
     def _label(self) -> str:
         if "adaptive" in self.stats:  # h is then the step where the motion is slow
@@ -300,6 +314,7 @@ class Result(TrajectoryResult):
             failed_step=-1 if self.failed_step is None else int(self.failed_step),
             stats_recovered_steps=np.asarray(rec, dtype=np.int64).reshape(-1, 2),
             **({} if self.work is None else {"work": self.work}),
+            **({} if self.work_forces is None else {"work_forces": self.work_forces}),
             **{f"stats_{k}": v for k, v in stats.items()},
         )
 
@@ -331,9 +346,11 @@ class Result(TrajectoryResult):
             failed = int(data["failed_step"]) if "failed_step" in data.files else -1
             name = str(data["model_name"]) if "model_name" in data.files else "model"
             work = data["work"] if "work" in data.files else None
+            forces = data["work_forces"] if "work_forces" in data.files else None
             return cls(**arrays, stats=stats, status=Status(int(data["status"])),
                        method=_method(str(data["method"])), h=float(data["h"]),
-                       failed_step=None if failed < 0 else failed, model_name=name, work=work)
+                       failed_step=None if failed < 0 else failed, model_name=name, work=work,
+                       work_forces=forces)
 
 
 # ---------------------------------------------------------------------------- plotting helpers

@@ -181,11 +181,12 @@ def end_at_event(result, model, prm, events):
     pp, HH, gg, ggv = _state_arrays(model, prm, t[-1:], q[-1:], v[-1:])
     p[-1], H[-1], g[-1], gv[-1] = pp[0], HH[0], gg[0], ggv[0]
     extra = {}
-    if result.work is not None:
-        w = result.work.copy()
-        frac = (te - t_prev) / (t_step - t_prev) if t_step > t_prev else 1.0
-        w[-1] = w[-2] + frac * (w[-1] - w[-2])
-        extra["work"] = w
+    frac = (te - t_prev) / (t_step - t_prev) if t_step > t_prev else 1.0
+    for name in ("work", "work_forces"):
+        if getattr(result, name) is not None:
+            w = getattr(result, name).copy()
+            w[-1] = w[-2] + frac * (w[-1] - w[-2])
+            extra[name] = w
     return replace(result, t=t, q=q, v=v, p=p, energy=H, constraint_residual=g, velocity_residual=gv,
                    t_events=[x[k] for x, k in zip(result.t_events, keep)],
                    q_events=[x[k] for x, k in zip(result.q_events, keep)],
@@ -203,8 +204,9 @@ def append_last_step(result, tail, h_last: float, t_end: float):
                "newton_iterations")}
     if tail.success:
         arrays["t"][-1] = t_end
-    if result.work is not None:
-        arrays["work"] = cat(result.work, tail.work + result.work[-1])
+    for name in ("work", "work_forces"):
+        if getattr(result, name) is not None:
+            arrays[name] = cat(getattr(result, name), getattr(tail, name) + getattr(result, name)[-1])
     extra = {}
     if result.t_events is not None:
         extra = {k: [np.concatenate([a, b]) for a, b in zip(getattr(result, k), getattr(tail, k))]
@@ -239,8 +241,9 @@ def resample(result, model, prm, t_eval):
     at = np.searchsorted(result.t, te, side="right") - 1
     iters = np.diff(np.concatenate([[0.0], cum[np.clip(at, 0, cum.size - 1)]]))
     extra = {}
-    if result.work is not None:  # from the first sample, like the energy error
-        w = np.interp(te, result.t, result.work)
-        extra["work"] = w - w[0]
+    for name in ("work", "work_forces"):  # from the first sample, like the energy error
+        if getattr(result, name) is not None:
+            w = np.interp(te, result.t, getattr(result, name))
+            extra[name] = w - w[0]
     return replace(result, t=te, q=q, v=v, p=p, energy=H, constraint_residual=g,
                    velocity_residual=gv, newton_iterations=iters, **extra)

@@ -13,9 +13,9 @@ from numba import prange
 from .._numba import byref, hot, hot_inline, njit, ptr
 from .layout import (NEEDS_FULL_NEWTON, E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_ITERS,
                      F_MAXRES, F_RES, F_TSLOT, I_FAILED, I_FIRST, I_FULL, I_ITERS, I_MAXRES,
-                     I_KR, I_RES, I_SLOT, I_STEPS, I_T, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK,
+                     I_KR, I_RES, I_SLOT, I_STEPS, I_T, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK, I_WORK_F,
                      INFO_SIZE,
-                     POT, S_FULL, S_G, S_GV, S_ITERS, S_RES, S_WORK, SAVE_DIAGNOSTICS, SAVE_FINAL,
+                     POT, S_FULL, S_G, S_GV, S_ITERS, S_RES, S_WORK, S_WORK_F, SAVE_DIAGNOSTICS, SAVE_FINAL,
                      SAVE_STRIDE, STEP_OUT_SIZE, EVENT_SLOTS, EVENTS_FULL, Events, ModelData,
                      Samples, dim, is_timed, member_sizes, sizes, with_plan,
                      workspace_for)
@@ -49,6 +49,7 @@ def record(md, t, state, ws, smp, slot, info):
     smp.t[slot] = t
     smp.energy[slot] = energy(md, t, q, p, v, ws.g)
     smp.work[slot] = info[I_WORK]
+    smp.work_forces[slot] = info[I_WORK_F]
     smp.g[slot] = info[I_WIN_G]
     smp.gv[slot] = info[I_WIN_GV]
     smp.iters[slot] = info[I_WIN_IT]
@@ -68,6 +69,7 @@ def accept(md, t1, last, state, ws, save_every, smp, info, sout):
     info[I_WIN_IT] += sout[S_ITERS]
     info[I_FULL] += sout[S_FULL]
     info[I_WORK] += sout[S_WORK]
+    info[I_WORK_F] += sout[S_WORK_F]
     k = int(info[I_STEPS]) + 1
     info[I_STEPS] = k
     if save_every > 0 and (k % save_every == 0 or last):
@@ -301,7 +303,7 @@ def run_ensemble(fns, flags, Mc, P, tabs, opts, h, t0, dims, si, sb, structured,
             state[2, a] = X0[i, 2, a]
         # the member's times are the caller's grid, so they go to scratch
         smp = Samples(np.zeros(En.shape[1]), Qs[i], Vs[i], Ps[i], En[i], Gr[i], GVr[i], It[i],
-                      Wk[i])
+                      Wk[i], np.zeros(En.shape[1]))
         ev = Events(efns, ecount, edir, eterm, np.zeros(EVENT_SLOTS), Te[i], Qe[i], Ve[i], Ne[i],
                     np.zeros((0, s + 1, n)), np.zeros((s + 1, n)), np.zeros(n), np.zeros(n),
                     np.zeros(n), np.zeros(s + 1), np.zeros(s + 1), np.zeros(1))

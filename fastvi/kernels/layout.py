@@ -171,9 +171,10 @@ H_SIZE = 4
 # float64 vector filled by step(): Newton iterations, max|g(q1)|, max|G v1|, last residual,
 # and whether the step fell back from the mechanics matrix to the full Newton
 # and the work done on the system over the step by the forces, the time-dependent potential
-# and driving constraints (Result.energy_balance; docs/method.md §11)
-S_ITERS, S_G, S_GV, S_RES, S_FULL, S_WORK = range(6)
-STEP_OUT_SIZE = 6
+# and driving constraints (Result.energy_balance; docs/method.md §11), then the part of that
+# work done by the applied forces alone (Result.work_forces)
+S_ITERS, S_G, S_GV, S_RES, S_FULL, S_WORK, S_WORK_F = range(7)
+STEP_OUT_SIZE = 7
 
 # ----------------------------------------------------------------------------- run counters
 # float64 ``info`` vector of drive.run, kept across chunks
@@ -181,10 +182,11 @@ STEP_OUT_SIZE = 6
 # I_T0: the start time of the run, so that step k starts at t0 + k h exactly; then the
 # adaptive step of kernels/adapt.py, I_KR > 0 switching it on: the energy scale K_r, the
 # energy E0 of the start, the end time, the time reached and its summation error, and the
-# step density ρ_{k+1/2} of the next step, 0 before the first)
+# step density ρ_{k+1/2} of the next step, 0 before the first; I_WORK_F: the part of
+# I_WORK done by the applied forces)
 (I_STEPS, I_ITERS, I_WIN_G, I_WIN_GV, I_WIN_IT, I_RES, I_FAILED, I_SLOT, I_FIRST, I_MAXRES,
- I_FULL, I_WORK, I_T0, I_KR, I_E0, I_TEND, I_T, I_TC, I_RHO) = range(19)
-INFO_SIZE = 19
+ I_FULL, I_WORK, I_T0, I_KR, I_E0, I_TEND, I_T, I_TC, I_RHO, I_WORK_F) = range(20)
+INFO_SIZE = 20
 
 # ----------------------------------------------------------------------------- ensembles
 #: save modes of ``run_ensemble``
@@ -200,8 +202,10 @@ F_SIZE = 6
 # ----------------------------------------------------------------------------- named tuples
 #: the saved samples of one trajectory (drive.run): time, q, v, p, energy, and the maxima of
 #: |g|, |G v| and the sum of Newton iterations over the steps since the previous sample, and
-#: the work of forces and time since the start (zero for a conservative model)
-Samples = namedtuple("Samples", ["t", "q", "v", "p", "energy", "g", "gv", "iters", "work"])
+#: the work of forces and time since the start (zero for a conservative model), and the part
+#: of it done by the applied forces
+Samples = namedtuple("Samples", ["t", "q", "v", "p", "energy", "g", "gv", "iters", "work",
+                                 "work_forces"])
 ModelData = namedtuple("ModelData", ["fns", "flags", "Mc", "prm"])
 NewtonOptions = namedtuple("NewtonOptions", ["tol", "max_iter", "mode"])
 #: dense output and events of one trajectory (kernels/events.py): the event callbacks

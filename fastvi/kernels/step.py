@@ -42,7 +42,8 @@ from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F
                      F_TSLOT, FJQ, FJV, FORCE, GT, H_FG, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
                      NEEDS_FULL_NEWTON, NEWTON_FAILED, NEWTON_FULL, NONFINITE, OK, PGRAD, PHESS,
                      POT, KHESS, S_FULL,
-                     S_G, S_GV, S_ITERS, S_RES, S_WORK, SI_A, SI_GCOL, SI_GPTR, SI_HC_BCOL,
+                     S_G, S_GV, S_ITERS, S_RES, S_WORK, S_WORK_F, SI_A, SI_GCOL, SI_GPTR,
+                     SI_HC_BCOL,
                      SI_HC_COLS, SI_HC_CPTR, SI_HC_NG, SI_HC_PPTR, SI_HC_ROWS, SI_S, SI_SC, SINGULAR,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, SOLVE_BANDED, SOLVE_DENSE, is_timed,
                      linear_potential, make_workspace, sizes)
@@ -1307,8 +1308,9 @@ def step(md_, tabs_, opts_, h, state_, ws_, first, out_, stages_):
         return st
     out[S_G] = gmax
     out[S_WORK] = 0.0
+    out[S_WORK_F] = 0.0
     if is_timed(md):
-        out[S_WORK] = _step_work(md_, tabs_, h, qk, q1, ws_, n, m, s, J)
+        out[S_WORK] = _step_work(md_, tabs_, h, qk, q1, ws_, n, m, s, J, out)
     # keep this step's unknowns (and the last step's) for the next predictor
     Xp, Xpp = ws.Xprev, ws.Xpp
     for k in range(N):
@@ -1345,14 +1347,16 @@ def hidden_residual(G1, v1, gt, n, m):
 
 
 @hot
-def _step_work(md_, tabs_, h, qk, q1, ws_, n, m, s, J):
+def _step_work(md_, tabs_, h, qk, q1, ws_, n, m, s, J, out):
     r"""The work done on the system over the step (``docs/method.md`` §11, energy balance)::
 
         W = h Σ_i b_i [F(t_i, q_i, v_i)·v_i + ∂V/∂t(t_i, q_i)] + Σ_{j≤J} η_j·g_t(t_j, q(d_j))
 
     on the converged step polynomial, with the action's quadrature for the forces and the
     time-dependent potential, and the constraint impulses (``η_J`` the projection's) for
-    driving constraints: the constraint force ``−Gᵀλ`` has power ``−λ·Gv = λ·g_t``.
+    driving constraints: the constraint force ``−Gᵀλ`` has power ``−λ·Gv = λ·g_t``. The
+    first term alone, the work of the applied forces, goes to ``out[S_WORK_F]`` (summed
+    apart, so that the total is the same sum as ever).
     """
     md, tabs, ws = own(md_), own(tabs_), own(ws_)
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
@@ -1361,6 +1365,7 @@ def _step_work(md_, tabs_, h, qk, q1, ws_, n, m, s, J):
     timed = flags[F_TIME] != 0
     inv_h = 1.0 / h
     w = 0.0
+    wf = 0.0
     r = sizes(ws)[3]
     for i in range(r):
         ti = ws.time[0] + tabs.c[i] * h
@@ -1381,6 +1386,7 @@ def _step_work(md_, tabs_, h, qk, q1, ws_, n, m, s, J):
             fns[FORCE](ptr(qi), ptr(vi), ptr(prm), ptr(fb))
             for a in range(n):
                 p += fb[a] * vi[a]
+            wf += h * b[i] * p
         if timed:
             _d_dt(md, fns[POT], qi, ti, fb, ws.fa, 1)
             p += fb[0]
@@ -1402,6 +1408,7 @@ def _step_work(md_, tabs_, h, qk, q1, ws_, n, m, s, J):
                 w += X[sn + j * m + c] * gt[c]
         for c in range(m):
             w += ws.etaJ[c] * ws.gt[c]
+    out[S_WORK_F] = wf
     return w
 
 

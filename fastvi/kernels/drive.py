@@ -3,8 +3,9 @@
 ``run`` advances one trajectory by a chunk of steps (the Python driver calls it once, or in
 chunks when it shows progress; the state carries everything, so chunking changes no bit).
 ``run_member``/``run_ensemble`` do the same for the members of an ensemble, in parallel.
-Both take the step with :func:`.step.step` and book it with :func:`record`, so a member of an
-ensemble equals :func:`fastvi.integrate` of that member bit for bit by construction.
+Both take the step through the one compiled entry point of :func:`.step.step_kernel` and
+book it with :func:`record`, so a member of an ensemble equals :func:`fastvi.integrate` of
+that member bit for bit by construction.
 """
 
 import numpy as np

@@ -23,8 +23,10 @@ Two Newton variants solve these equations (``docs/method.md`` §9–10):
   contracts slower than ``MECH_THETA_MAX`` (stiff springs) the step is redone with the
   full Newton, which then stays on for ``FULL_HOLD`` steps.
 
-Model, method, options and scratch arrive as the named tuples of :mod:`.layout`; nothing
-here allocates.
+Model, method, options and scratch arrive as the named tuples of :mod:`.layout`, passed
+between the compiled functions by pointer (:func:`fastvi._numba.byref`); nothing here
+allocates. The step is compiled once as a C entry point, and its three large stages as C
+functions it calls by address (:func:`step_kernel`, ``docs/decisions/0010-kernel-shape.md``).
 """
 
 from collections import namedtuple

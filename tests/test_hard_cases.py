@@ -171,3 +171,33 @@ def test_stable_runs_do_not_trip_the_monitor(name, double_pendulum, dp_start):
               fastvi.integrate(double_pendulum, *dp_start, h=0.01, n_steps=20_000, method=name)):
         assert r.status == Status.SUCCESS
         assert r.stats["monitor_energy"] < 0.5 and r.stats["monitor_displacement"] < 0.5
+
+
+def test_the_full_newton_compiled_on_first_need_gives_the_same_run():
+    """A run that first meets the full Newton mid-way (the stiff rod–slider: the mechanics
+    iteration fails there) retakes that step once the stage is compiled: the same samples,
+    events and dense output, bit for bit, as a run that had the stage from the start."""
+    from fastvi.kernels import step as step_kernels
+    from fastvi.studies import peers
+
+    k = 1e8
+    model = fastvi.scenes.rotary_rod_slider(k=k)
+    q0, v0 = model.initial_state(0.0, peers.SLIDER_R0 + peers.slider_stretch(k))
+
+    def crossing(t, q, v, p):
+        return q[0] + 1.0  # the angle passes −1 rad
+
+    kw = dict(h=0.01, n_steps=300, method="P2L-Q2G", events=crossing, dense_output=True)
+    fastvi.integrate(model, q0, v0, **kw)  # compiles the full Newton (lazily, if first)
+    eager = fastvi.integrate(model, q0, v0, **kw)  # has it from the start
+    assert eager.stats["full_newton_steps"] > 0
+    # forget that the full Newton was compiled: the next run starts with the placeholder
+    for key in [k_ for k_ in step_kernels._ENTRIES if k_[-1] in (True, "full") and len(k_) == 2]:
+        del step_kernels._ENTRIES[key]
+    lazy = fastvi.integrate(model, q0, v0, **kw)
+    for name in ("t", "q", "v", "p", "energy", "newton_iterations"):
+        assert np.array_equal(getattr(lazy, name), getattr(eager, name)), name
+    assert lazy.stats["full_newton_steps"] == eager.stats["full_newton_steps"]
+    assert np.array_equal(lazy.t_events[0], eager.t_events[0]) and len(eager.t_events[0]) > 0
+    ts = np.linspace(0.0, float(eager.t[-1]), 37)
+    assert np.array_equal(lazy.sol(ts)[0], eager.sol(ts)[0])

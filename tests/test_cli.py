@@ -69,3 +69,18 @@ def test_paper_b_without_out_writes_into_the_current_directory(tmp_path):
     assert out.returncode == 0, out.stderr
     assert (tmp_path / "fastvi-study-paper-b" / "paper-b.md").is_file()
     assert not (tmp_path / "docs").exists()
+
+
+def test_compile_times_the_first_calls_it_is_asked_for(capsys):
+    """``python -m fastvi compile`` runs the first calls it is given (here warm: the
+    kernels of this process) and prints one line each; an unknown call is refused by name."""
+    from fastvi import warmup
+
+    records = warmup.first_calls(["integrate", "events+dense"])
+    assert [r["name"] for r in records] == ["integrate", "events+dense"]
+    assert all(r["wall"] > 0 and r["peak_mb"] > 0 for r in records)
+    assert main(["compile", "--only", "integrate"]) == 0
+    assert "integrate" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as info:
+        main(["compile", "--only", "integrate,bogus"])
+    assert info.value.code == 2 and "bogus" in capsys.readouterr().err

@@ -100,9 +100,9 @@ def test_kernels_compile_once_for_every_model(double_pendulum, dp_start):
 
     assert len(generic(drive.run.signatures)) == 1, drive.run.signatures
     # one compiled step for every small model (dense solves, run-time sizes)
-    dense = [k for k in step._ENTRIES  # (model, options, sizes, dense plan) -> entry point
-             if len(k) == 4 and k[2] == _key((0, 0, 0, 0, 0)) and k[3]]
-    assert len(dense) == 1, list(step._ENTRIES)
+    dense = [k for k in step._STEPS  # (model, options, sizes, dense plan) -> entry point
+             if k[2] == _key((0, 0, 0, 0, 0)) and k[3]]
+    assert len(dense) == 1, list(step._STEPS)
 
 
 def test_every_scene_callback_has_the_one_signature():

@@ -1507,8 +1507,11 @@ def end_momentum(md_, q1_, P_, p1_, v1_, G1_, ws_, out_):
 
 
 # ----------------------------------------------------------------------------- entry point
-#: the compiled entry points of the step, one per kernel type (model kind, sizes)
-_ENTRIES: dict = {}
+#: the compiled step of each kernel type — (model, options, sizes, dense plan) as
+#: :func:`step_kernel` keys them — and its stages with the full Newton's placeholder
+_STEPS: dict = {}
+#: the stages with the full Newton compiled, for the kernel types that needed it
+_FULL: dict = {}
 
 
 #: the step's three large stages, compiled as C functions and called by address from the
@@ -1547,34 +1550,31 @@ def step_kernel(md, tabs, opts, ws, full=False):
     ``full=True`` and retakes the step — the same trajectory, bit for bit.
     """
     key = (_key(md), _key(opts), _key(ws.dims), ws.structured is None)
-    full = bool(full or opts.mode == NEWTON_FULL or not tabs.mech or (key, "full") in _ENTRIES)
-    k = _ENTRIES.get((key, full))
-    if k is None:
-        P = types.CPointer
-        arg = numba.typeof
-        with quiet():  # typing the callbacks draws numba's first-class-function note
-            tmd, ttabs, topts, tws = P(arg(md)), P(arg(tabs)), P(arg(opts)), P(arg(ws))
-            a1, a2 = P(arg(np.zeros(1))), P(arg(np.zeros((1, 1))))
-            newton = types.int64(tmd, ttabs, topts, types.float64, a1, a1, tws, a1)
-            part = _ENTRIES.get(key)
-            if part is None:
-                mech = _cfunc(newton_mech.py_func, newton)
-                end = _cfunc(end_momentum.py_func, types.int64(tmd, a1, a1, a1, a1, a2, tws, a1))
-                stub = _cfunc(_no_full_newton, newton)
-                proto = Stages(mech, stub, end, 0)
-                # the step's own body becomes the C function (not a call of the njit `step`,
-                # whose code numba would compile once more into the wrapper)
-                sig = types.int64(tmd, ttabs, topts, types.float64, a2, tws, types.boolean, a1,
-                                  P(arg(proto)))
-                part = _ENTRIES[key] = (_cfunc(step.py_func, sig), proto)
-            stepk, proto = part
-            if full:
-                _ENTRIES[(key, "full")] = True
-                k = (stepk, proto._replace(newton_full=_cfunc(newton_full.py_func, newton), full=1))
-            else:
-                k = (stepk, proto)
-            _ENTRIES[(key, full)] = k
-    return k
+    if key in _FULL:
+        return _STEPS[key][0], _FULL[key]
+    full = full or opts.mode == NEWTON_FULL or not tabs.mech
+    if key in _STEPS and not full:
+        return _STEPS[key]
+    P = types.CPointer
+    arg = numba.typeof
+    with quiet():  # typing the callbacks draws numba's first-class-function note
+        tmd, ttabs, topts, tws = P(arg(md)), P(arg(tabs)), P(arg(opts)), P(arg(ws))
+        a1, a2 = P(arg(np.zeros(1))), P(arg(np.zeros((1, 1))))
+        newton = types.int64(tmd, ttabs, topts, types.float64, a1, a1, tws, a1)
+        if key not in _STEPS:
+            mech = _cfunc(newton_mech.py_func, newton)
+            end = _cfunc(end_momentum.py_func, types.int64(tmd, a1, a1, a1, a1, a2, tws, a1))
+            placeholder = Stages(mech, _cfunc(_no_full_newton, newton), end, 0)
+            # the step's own body becomes the C function (not a call of the njit `step`,
+            # whose code numba would compile once more into the wrapper)
+            sig = types.int64(tmd, ttabs, topts, types.float64, a2, tws, types.boolean, a1,
+                              P(arg(placeholder)))
+            _STEPS[key] = (_cfunc(step.py_func, sig), placeholder)
+        if not full:
+            return _STEPS[key]
+        _FULL[key] = _STEPS[key][1]._replace(newton_full=_cfunc(newton_full.py_func, newton),
+                                             full=1)
+    return _STEPS[key][0], _FULL[key]
 
 
 @hot

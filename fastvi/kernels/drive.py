@@ -12,14 +12,13 @@ import numpy as np
 from numba import prange
 
 from .._numba import byref, hot, hot_inline, njit, ptr
-from .layout import (NEEDS_FULL_NEWTON, E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_ITERS,
-                     F_MAXRES, F_RES, F_TSLOT, I_FAILED, I_FIRST, I_FULL, I_ITERS, I_MAXRES,
-                     I_KR, I_RES, I_SLOT, I_STEPS, I_T, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK, I_WORK_F,
-                     INFO_SIZE,
-                     POT, S_FULL, S_G, S_GV, S_ITERS, S_RES, S_WORK, S_WORK_F, SAVE_DIAGNOSTICS, SAVE_FINAL,
-                     SAVE_STRIDE, STEP_OUT_SIZE, EVENT_SLOTS, EVENTS_FULL, Events, ModelData,
-                     Samples, dim, is_timed, member_sizes, sizes, with_plan,
-                     workspace_for)
+from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_ITERS, F_MAXRES,
+                     F_RES, F_TSLOT, I_FAILED, I_FIRST, I_FULL, I_ITERS, I_MAXRES, I_KR, I_RES,
+                     I_SLOT, I_STEPS, I_T, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK, I_WORK_F,
+                     INFO_SIZE, NEEDS_FULL_NEWTON, POT, S_FULL, S_G, S_GV, S_ITERS, S_RES, S_WORK,
+                     S_WORK_F, SAVE_DIAGNOSTICS, SAVE_FINAL, SAVE_STRIDE, STEP_OUT_SIZE,
+                     EVENT_SLOTS, EVENTS_FULL, Events, ModelData, Samples, dim, is_timed,
+                     member_sizes, sizes, with_plan, workspace_for)
 from .adapt import advance, finished, next_step
 from .events import after_step, event_values, room_for_crossings
 
@@ -124,8 +123,8 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
     running from ``info[I_T0] + k h``; ``sout`` is the step's output scratch
     (``STEP_OUT_SIZE``); ``ev`` the :class:`.layout.Events` of the run (no events and no
     dense rows: the event code is skipped by one test per chunk). Events are a run-time
-    switch: every kernel variant costs ≈ 45 s
-    of compile on an empty cache, and one test a chunk costs nothing measurable.
+    switch: a type-level one would compile the loop twice, and one test a chunk costs
+    nothing measurable.
 
     The time loop is ``hot`` (no reference counting) with the bookkeeping inlined: with
     reference counting on, the inlined helpers' array views cost 15 % of a step; without
@@ -269,9 +268,9 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
 
 
 @njit(parallel=True)
-def run_ensemble(fns, flags, Mc, P, tabs, opts, h, t0, dims, si, sb, structured, X0, n_total, mode, every,
-                 H0, Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, efns, ecount, edir, eterm, Te, Qe,
-                 Ve, Ne, stepk, stages):
+def run_ensemble(fns, flags, Mc, P, tabs, opts, h, t0, dims, si, sb, structured, X0, n_total,
+                 mode, every, H0, Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, efns, ecount, edir,
+                 eterm, Te, Qe, Ve, Ne, stepk, stages):
     """``run_member`` for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in parallel.
 
     ``dims`` = (n, m, s, r, J), integers (the generic kernels) or parallel markers

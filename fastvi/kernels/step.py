@@ -1312,7 +1312,8 @@ def step(md_, tabs_, opts_, h, state_, ws_, first, out_, stages_):
     out[S_WORK] = 0.0
     out[S_WORK_F] = 0.0
     if is_timed(md):
-        out[S_WORK] = _step_work(md_, tabs_, h, qk, q1, ws_, n, m, s, J, out)
+        out[S_WORK] = stages.step_work(md_, tabs_, h, byref(qk), byref(q1), ws_, n, m, s, J,
+                                       out_)
     # keep this step's unknowns (and the last step's) for the next predictor
     Xp, Xpp = ws.Xprev, ws.Xpp
     for k in range(N):
@@ -1349,7 +1350,7 @@ def hidden_residual(G1, v1, gt, n, m):
 
 
 @hot
-def _step_work(md_, tabs_, h, qk, q1, ws_, n, m, s, J, out):
+def _step_work(md_, tabs_, h, qk_, q1_, ws_, n, m, s, J, out_):
     r"""The work done on the system over the step (``docs/method.md`` §11, energy balance)::
 
         W = h Σ_i b_i [F(t_i, q_i, v_i)·v_i + ∂V/∂t(t_i, q_i)] + Σ_{j≤J} η_j·g_t(t_j, q(d_j))
@@ -1361,6 +1362,7 @@ def _step_work(md_, tabs_, h, qk, q1, ws_, n, m, s, J, out):
     apart, so that the total is the same sum as ever).
     """
     md, tabs, ws = own(md_), own(tabs_), own(ws_)
+    qk, q1, out = own(qk_), own(q1_), own(out_)
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     b, L, Ld, Lc = tabs.b, tabs.L, tabs.Ld, tabs.Lc
     X, qi, vi, fb = ws.X, ws.qi, ws.vi, ws.fb
@@ -1508,21 +1510,28 @@ def end_momentum(md_, q1_, P_, p1_, v1_, G1_, ws_, out_):
 
 # ----------------------------------------------------------------------------- entry point
 #: the compiled step of each kernel type — (model, options, sizes, dense plan) as
-#: :func:`step_kernel` keys them — and its stages with the full Newton's placeholder
+#: :func:`step_kernel` keys them — with its stages, placeholders in the optional ones
 _STEPS: dict = {}
-#: the stages with the full Newton compiled, for the kernel types that needed it
-_FULL: dict = {}
+#: the optional stages compiled so far: (kernel type, stage name) -> C function
+_OPTIONAL: dict = {}
 
 
 #: the step's three large stages, compiled as C functions and called by address from the
 #: step's entry point (:func:`step_kernel`): each compiled once, not again inside its caller
 #: (``full``: 1, or 0 while ``newton_full`` is a placeholder that no step calls — a step
 #: that needs it returns ``NEEDS_FULL_NEWTON`` first)
-Stages = namedtuple("Stages", ["newton_mech", "newton_full", "end_momentum", "full"])
+#: ``step_work``, the work of forces and time over a step, is compiled only for a model
+#: with forces or time (a placeholder that no conservative step calls otherwise).
+Stages = namedtuple("Stages", ["newton_mech", "newton_full", "end_momentum", "step_work",
+                               "full"])
 
 
 def _no_full_newton(md_, tabs_, opts_, h, qk_, pk_, ws_, out_):
     return NEEDS_FULL_NEWTON
+
+
+def _no_work(md_, tabs_, h, qk_, q1_, ws_, n, m, s, J, out_):
+    return 0.0
 
 
 def _cfunc(fn, sig):
@@ -1547,34 +1556,45 @@ def step_kernel(md, tabs, opts, ws, full=False):
     method's mechanics matrix is singular (or it is compiled already): most runs never take
     it, and its assembly is a fifth of the step's code. Until then a step that would need it
     returns ``NEEDS_FULL_NEWTON`` with nothing kept, and the driver asks again with
-    ``full=True`` and retakes the step — the same trajectory, bit for bit.
+    ``full=True`` and retakes the step — the same trajectory, bit for bit. The work of forces
+    and time over a step is compiled only for a model with forces or time.
     """
     key = (_key(md), _key(opts), _key(ws.dims), ws.structured is None)
-    if key in _FULL:
-        return _STEPS[key][0], _FULL[key]
-    full = full or opts.mode == NEWTON_FULL or not tabs.mech
-    if key in _STEPS and not full:
-        return _STEPS[key]
-    P = types.CPointer
-    arg = numba.typeof
-    with quiet():  # typing the callbacks draws numba's first-class-function note
-        tmd, ttabs, topts, tws = P(arg(md)), P(arg(tabs)), P(arg(opts)), P(arg(ws))
-        a1, a2 = P(arg(np.zeros(1))), P(arg(np.zeros((1, 1))))
-        newton = types.int64(tmd, ttabs, topts, types.float64, a1, a1, tws, a1)
-        if key not in _STEPS:
-            mech = _cfunc(newton_mech.py_func, newton)
-            end = _cfunc(end_momentum.py_func, types.int64(tmd, a1, a1, a1, a1, a2, tws, a1))
-            placeholder = Stages(mech, _cfunc(_no_full_newton, newton), end, 0)
-            # the step's own body becomes the C function (not a call of the njit `step`,
-            # whose code numba would compile once more into the wrapper)
-            sig = types.int64(tmd, ttabs, topts, types.float64, a2, tws, types.boolean, a1,
-                              P(arg(placeholder)))
-            _STEPS[key] = (_cfunc(step.py_func, sig), placeholder)
-        if not full:
-            return _STEPS[key]
-        _FULL[key] = _STEPS[key][1]._replace(newton_full=_cfunc(newton_full.py_func, newton),
-                                             full=1)
-    return _STEPS[key][0], _FULL[key]
+    full = full or opts.mode == NEWTON_FULL or not tabs.mech or (key, "newton_full") in _OPTIONAL
+    timed = md.flags[F_FORCE] != 0 or md.flags[F_TIME] != 0
+    wanted = [name for name, want in (("newton_full", full), ("step_work", timed))
+              if want and (key, name) not in _OPTIONAL]
+    if key not in _STEPS or wanted:
+        with quiet():  # typing the callbacks draws numba's first-class-function note
+            _compile(key, md, tabs, opts, ws, wanted)
+    stepk, stages = _STEPS[key]
+    if full:
+        stages = stages._replace(newton_full=_OPTIONAL[(key, "newton_full")], full=1)
+    if timed:
+        stages = stages._replace(step_work=_OPTIONAL[(key, "step_work")])
+    return stepk, stages
+
+
+def _compile(key, md, tabs, opts, ws, wanted):
+    """The step of kernel type ``key`` with its placeholder stages (if not compiled yet), and
+    the optional stages ``wanted``, into :data:`_STEPS` and :data:`_OPTIONAL`."""
+    P, arg, i64, f64 = types.CPointer, numba.typeof, types.int64, types.float64
+    tmd, ttabs, topts, tws = P(arg(md)), P(arg(tabs)), P(arg(opts)), P(arg(ws))
+    a1, a2 = P(arg(np.zeros(1))), P(arg(np.zeros((1, 1))))
+    sigs = dict(newton_full=i64(tmd, ttabs, topts, f64, a1, a1, tws, a1),
+                step_work=f64(tmd, ttabs, f64, a1, a1, tws, i64, i64, i64, i64, a1))
+    if key not in _STEPS:
+        placeholder = Stages(_cfunc(newton_mech.py_func, sigs["newton_full"]),
+                             _cfunc(_no_full_newton, sigs["newton_full"]),
+                             _cfunc(end_momentum.py_func, i64(tmd, a1, a1, a1, a1, a2, tws, a1)),
+                             _cfunc(_no_work, sigs["step_work"]), 0)
+        # the step's own body becomes the C function (not a call of the njit `step`, whose
+        # code numba would compile once more into the wrapper)
+        sig = i64(tmd, ttabs, topts, f64, a2, tws, types.boolean, a1, P(arg(placeholder)))
+        _STEPS[key] = (_cfunc(step.py_func, sig), placeholder)
+    for name in wanted:
+        fn = newton_full if name == "newton_full" else _step_work
+        _OPTIONAL[(key, name)] = _cfunc(fn.py_func, sigs[name])
 
 
 @hot

@@ -406,8 +406,10 @@ def integrate(
     t_step = time.perf_counter()
     stepk, stages = step_kernel(md, tabs, opts, ws)
     compile_time += time.perf_counter() - t_step
+    # a run without events or dense output has a time loop compiled without their code
+    evk = True if ev.count or ev.dense.shape[0] else None
     run, seconds = _RUN.bind(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout,
-                             ev, stepk, stages)
+                             ev, stepk, stages, evk)
     compile_time += seconds
     span = None if adaptive is None else float(t_end) - t0
     bar = None
@@ -422,7 +424,7 @@ def integrate(
             smp = _room(smp, _samples_after_chunk(int(info[lay.I_SLOT]), chunk, every))
         with quiet():
             status = run(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout, ev,
-                         stepk, stages)
+                         stepk, stages, evk)
         if status == lay.NEEDS_FULL_NEWTON:  # compiled on first need; the step is retaken
             t_step = time.perf_counter()
             stepk, stages = step_kernel(md, tabs, opts, ws, full=True)
@@ -432,7 +434,7 @@ def integrate(
         if status == lay.EVENTS_FULL:
             ev = events_.grow(ev)
             run = _RUN.bind(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout, ev,
-                            stepk, stages)[0]
+                            stepk, stages, evk)[0]
             status = 0
             continue
         if status == lay.EVENT_TERMINAL:  # the step containing the event is the last sample
@@ -551,7 +553,7 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
         with quiet():
             st = _RUN(md, tabs, opts, h / sub, trial, ws_sub, sub, sub, sub, smp_sub, info_sub,
                       np.zeros(lay.STEP_OUT_SIZE), events_.prepare(model, meth, None, 0),
-                      *step_kernel(md, tabs, opts, ws_sub, full=True))
+                      *step_kernel(md, tabs, opts, ws_sub, full=True), None)
         if st == 0:
             state[:3] = trial[:3]
             info[lay.I_ITERS] += info_sub[lay.I_ITERS]

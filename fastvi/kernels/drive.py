@@ -118,7 +118,7 @@ def _book(status, k, state, ws, info, sout):
 
 @hot
 def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, sout, ev,
-        stepk, stages):
+        stepk, stages, events=None):
     """Advance ``state`` (rows q, p, v, then scratch) by up to ``n_chunk`` steps, step k
     running from ``info[I_T0] + k h``; ``sout`` is the step's output scratch
     (``STEP_OUT_SIZE``); ``ev`` the :class:`.layout.Events` of the run (no events and no
@@ -141,6 +141,9 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
     calls (:func:`.step.step_kernel`), called through its address with pointers to the
     named tuples (:func:`.byref`).
 
+    ``events``: None for a run without events or dense output, whose loop is then compiled
+    without the event code (numba prunes what an argument that is None guards), or True.
+
     Adaptive steps (``info[I_KR] > 0``, another run-time switch): ``h`` is then ε, step k
     has the length of :func:`.adapt.next_step` and the run ends at ``info[I_TEND]``
     (``n_total`` only caps the steps); each sample is saved at the time reached.
@@ -156,11 +159,12 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
         k = int(info[I_STEPS])
         if k >= n_total or finished(info):
             break
-        if active:
-            if not room_for_crossings(ev):
-                return EVENTS_FULL
-            for a in range(state.shape[1]):
-                ev.qk[a] = state[0, a]
+        if events is not None:
+            if active:
+                if not room_for_crossings(ev):
+                    return EVENTS_FULL
+                for a in range(state.shape[1]):
+                    ev.qk[a] = state[0, a]
         if adaptive:
             hk = next_step(md, h, state, ws, info)
         else:
@@ -173,8 +177,9 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
         if status != 0:
             return status
         est = 0
-        if active:
-            est = after_step(md, tabs, h, ws.time[0], ws.time[1], k, ev.qk, ws.X, state, ev)
+        if events is not None:
+            if active:
+                est = after_step(md, tabs, h, ws.time[0], ws.time[1], k, ev.qk, ws.X, state, ev)
         if adaptive:
             advance(md, h, hk, state, ws, info)
             accept(md, info[I_T], finished(info), state, ws, save_every, smp, info, sout)

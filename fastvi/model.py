@@ -73,12 +73,10 @@ from numba import carray, types
 from ._numba import njit, ptr
 from .kernels import layout as lay
 from .kernels.layout import SECOND as _SECOND
-from .kernels.layout import SLOTS
+from .kernels.layout import FD_T, FD_T_POINTS, SLOTS
 
 __all__ = ["Model", "CALLBACK_SIGNATURE", "SLOTS"]
 
-#: relative step of the central difference in t of a constraint without ``∂g/∂t``
-_FD_T = 6.0554544523933395e-06
 
 #: The one signature of every compiled model callback: ``void(q*, v*, params*, out*)``.
 CALLBACK_SIGNATURE = types.void(
@@ -691,8 +689,12 @@ class Model:
             return np.zeros(self.m)
         if "constraint_time_derivative" in self._functions:
             return self._eval("constraint_time_derivative", q, params=params, shape=(self.m,), t=t)
-        dt = _FD_T * max(1.0, abs(t))
-        return (self.constraint_value(q, params, t + dt) - self.constraint_value(q, params, t - dt)) / (2 * dt)
+        # the kernels' rule (kernels.step._d_dt): the same points, weights and order of sums
+        dt = FD_T * max(1.0, abs(t))
+        out = np.zeros(self.m)
+        for at, weight in FD_T_POINTS:
+            out += weight * self.constraint_value(q, params, t + at * dt)
+        return out * (1.0 / (12.0 * dt))
 
     def force_value(self, t, q, v, params=None) -> np.ndarray:
         """F(t, q, v), shape (n,) (zeros for a model without force)."""

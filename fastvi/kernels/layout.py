@@ -63,6 +63,14 @@ SECOND = SLOTS[PHESS:FORCE]
 #: the optional derivatives of forces and time (finite differences when absent)
 TIME_DERIVATIVES = ("force_jacobian_q", "force_jacobian_v", "constraint_time_derivative")
 
+# ----------------------------------------------------------------------------- differences in time
+#: eps^(1/5): the relative step of the five-point difference in time (error ~ eps^(4/5)) by
+#: which the kernels and :class:`fastvi.Model` take ∂g/∂t and ∂V/∂t where no callback gives
+#: them: the time derivatives enter the hidden constraint and the energy balance
+FD_T = 7.4009597974140505e-04
+#: the five points, as multiples of the step, and their weights (divided by 12 steps)
+FD_T_POINTS = ((2.0, -1.0), (1.0, 8.0), (-1.0, -8.0), (-2.0, 1.0))
+
 # ----------------------------------------------------------------------------- flags vector
 # int64 vector built by Model._compile: sizes, which callbacks exist, structure of M
 F_N = 0  # n

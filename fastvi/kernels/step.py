@@ -39,7 +39,7 @@ from .._launch import _key
 from .._numba import byref, hot, hot_inline, own, ptr, quiet
 from .banded import (gt_times, mech_impulses_structured, mech_rows_sparse, newton_banded,
                      project_structured, schur_structured)
-from .layout import (CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
+from .layout import (FD_T, FD_T_POINTS, CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
                      F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_LINPOT, F_M, F_MASSFN, F_TIME,
                      F_TSLOT, FJQ, FJV, FORCE, GT, H_FG, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
                      NEEDS_FULL_NEWTON, NEWTON_FAILED, NEWTON_FULL, NONFINITE, OK, PGRAD, PHESS,
@@ -57,9 +57,6 @@ __all__ = ["make_workspace", "assemble", "residual", "linear_force", "step", "st
            "end_momentum", "velocity_residual", "hidden_residual", "constraint_rate"]
 
 _FD_REL = 6.0554544523933395e-06  # cbrt(machine epsilon): central differences' best step
-#: eps^(1/5): the best step of the five-point difference in time (error ~ eps^(4/5)); the
-#: time derivatives enter the hidden constraint and the energy balance, not just Newton
-_FD_T = 7.4009597974140505e-04
 #: the mechanics matrix is abandoned for the full Newton when successive increments shrink
 #: by less than this factor: each of its iterations costs a residual, and at θ = 0.25 it
 #: needs about as many as the full Newton costs in assembly and LU
@@ -239,12 +236,10 @@ def _d_dt(md, fn, q, t, out, scratch, k):
     difference (leaves the time entry at ``t``)."""
     slot = md.flags[F_TSLOT]
     prm = md.prm
-    dt = _FD_T * max(1.0, abs(t))
+    dt = FD_T * max(1.0, abs(t))
     for a in range(k):
         out[a] = 0.0
-    for e in range(4):
-        sgn = 2.0 - e if e < 2 else 1.0 - e  # +2, +1, −1, −2
-        wgt = -1.0 if e == 0 else (8.0 if e == 1 else (-8.0 if e == 2 else 1.0))
+    for sgn, wgt in FD_T_POINTS:
         prm[slot] = t + sgn * dt
         fn(ptr(q), ptr(q), ptr(prm), ptr(scratch))
         for a in range(k):

@@ -223,6 +223,42 @@ def _min_norm_solve(S: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.linalg.lstsq(S, b, rcond=1e-15)[0]
 
 
+def mass_metric(M: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """``M``, or for a singular ``M`` the definite ``M + Gᵀ W G`` that the kernels invert in
+    its place (:func:`fastvi.kernels.linalg.augmented_mass`): equal to ``M`` on ``ker G``,
+    so a projection onto the constraints in this metric is the one in the metric of ``M``."""
+    try:
+        np.linalg.cholesky(0.5 * (M + M.T))
+        return M
+    except np.linalg.LinAlgError:
+        from .kernels.linalg import augmented_mass
+
+        out = np.empty_like(M)
+        augmented_mass(np.ascontiguousarray(M), np.ascontiguousarray(G), out, M.shape[0], G.shape[0])
+        return out
+
+
+def tangent_definite(M: np.ndarray, G: np.ndarray, where: str = "`q0`") -> None:
+    """Refuse a singular mass matrix that is not definite on the tangent space ``ker G``:
+    there the motion would not be determined. Names the coordinates of the failing direction."""
+    _, sv, Vt = np.linalg.svd(G)
+    rank = int(np.sum(sv > 1e-12 * max(float(sv[0]), 1e-300)))
+    Z = Vt[rank:].T
+    if Z.shape[1] == 0:
+        return
+    lam, y = np.linalg.eigh(Z.T @ M @ Z)
+    scale = max(float(np.max(np.abs(np.diag(M)))), 1e-300)
+    if lam[0] > 1e-10 * scale:
+        return
+    u = Z @ y[:, 0]
+    coords = np.nonzero(np.abs(u) > 0.1 * np.abs(u).max())[0]
+    raise ValueError(
+        f"the mass matrix is singular on the tangent space of the constraints at {where}: the "
+        f"motion along {u[coords].round(3).tolist()} in coordinates {[f'q[{i}]' for i in coords]} "
+        f"has no inertia (Zᵀ M Z has eigenvalue {lam[0]:.3g}): give those coordinates mass, or "
+        "add the constraints that determine them")
+
+
 def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray, t0: float = 0.0):
     """Check M(q0), G(q0), and project (q0, v0) onto ``g(t0, q) = 0``, ``G v + g_t = 0``.
 
@@ -233,7 +269,8 @@ def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray, t0: fl
     if not np.all(np.isfinite(M)):
         raise ValueError(f"the mass matrix at `q0` is not finite: {M}")
     try:
-        np.linalg.cholesky(0.5 * (M + M.T))
+        if not model.mass_singular:  # a singular constant M is checked on ker G below
+            np.linalg.cholesky(0.5 * (M + M.T))
         # np.allclose(M, M.T, rtol=1e-10, atol=1e-14 max|M|), at a fifth of its cost
         absM = np.abs(M)
         sym = bool(np.all(np.abs(M - M.T) <= 1e-14 * absM.max() + 1e-10 * absM.T))
@@ -268,9 +305,11 @@ def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray, t0: fl
             f"the constraint Jacobian at `q0` must have full row rank {model.m}; "
             f"its singular values are {sv}"
         )
+    if model.mass_singular:
+        tangent_definite(M, G)
     q = q0.copy()
     for _ in range(0 if gmax <= 4e-16 * scale else 20):  # the loop's own test, before a move
-        Minv_Gt = np.linalg.solve(M, G.T)
+        Minv_Gt = np.linalg.solve(mass_metric(M, G), G.T)
         q = q - Minv_Gt @ _min_norm_solve(G @ Minv_Gt, g)
         g = model.constraint_value(q, prm, t0)
         G = model.constraint_jacobian_value(q, prm, t0)
@@ -282,7 +321,7 @@ def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray, t0: fl
     if gmax > SILENT_PROJECTION * scale:
         warnings.warn(f"`q0` was projected onto the constraints (max|g| was {gmax:.2e}; "
                       f"q moved by {moved:.2e})", stacklevel=3)
-    Minv_Gt = np.linalg.solve(M, G.T)
+    Minv_Gt = np.linalg.solve(mass_metric(M, G), G.T)
     gt = model.constraint_time_derivative_value(q, prm, t0)
     gv = G @ v0 + gt
     vscale = max(1.0, float(np.max(np.abs(v0))))

@@ -186,7 +186,7 @@ def _reduced(model, q, prm, G, free, fix):
     gscale = float(np.abs(G).max())
     if sv[-1] <= _RANK_RTOL * max(gscale, 1e-300):
         raise ValueError(_singular(G, free, fix, q, sv))
-    M = model.mass_matrix(q, prm)
+    M = valid.mass_metric(model.mass_matrix(q, prm), G)
     MFF = M[np.ix_(free, free)]
     try:
         L = np.linalg.cholesky(0.5 * (MFF + MFF.T))

@@ -371,6 +371,13 @@ class Model:
         With a constant matrix no kinetic-energy callbacks are called at all; with a
         diagonal one the kernels use ``M v`` and ``M⁻¹`` elementwise (and, in large
         mechanisms, the pattern of ``G`` for the Schur complement and the projection).
+        With constraints a constant ``M`` may be only positive semidefinite, as long as
+        it is definite on the tangent space of the constraints, ``Zᵀ M Z ≻ 0`` for a basis
+        ``Z`` of ``ker G(q)`` (a lamina or a slender rod in director coordinates has a zero
+        director inertia): the first integration checks this at ``q0`` and names the
+        coordinates where it fails, and the step never inverts ``M`` itself but
+        ``M + Gᵀ W G``, which equals ``M`` on ``ker G`` (``docs/method.md``, "Singular mass
+        matrices").
     potential, potential_grad : callable
         ``V(q)`` and ``∇V(q)``.
     kinetic_grad : callable, optional
@@ -494,6 +501,7 @@ class Model:
         if callable(mass):
             funcs["mass"] = mass
             self.mass_matrix_constant = None
+            self.mass_singular = False
             if kinetic_grad is None:
                 raise ValueError(
                     "`kinetic_grad` (∂T/∂q) is required when `mass` is a function of q"
@@ -505,7 +513,9 @@ class Model:
             if M.shape != (self.n, self.n):
                 raise ValueError(f"`mass` must be an ({self.n}, {self.n}) array, its diagonal ({self.n},) "
                                  f"or a function, got shape {M.shape}")
-            _check_spd(M, "mass")
+            #: M is singular: only definite on the tangent space of the constraints, which
+            #: :func:`fastvi._validate.initial_state` checks at ``q0``
+            self.mass_singular = _check_mass(M, "mass", self.m)
             self.mass_matrix_constant = M
             for key in ("kinetic_grad", "kinetic_hessian", "momentum_jacobian"):
                 if funcs[key] is not None:
@@ -619,7 +629,9 @@ class Model:
             M = self.mass_matrix_constant
             Mc = np.ascontiguousarray(M if M is not None else np.zeros((self.n, self.n)))
             # a diagonal constant M lets the kernels use M v and M⁻¹ elementwise
-            flags[lay.F_DIAG] = int(M is not None and np.count_nonzero(M - np.diag(np.diag(M))) == 0)
+            flags[lay.F_DIAG] = int(M is not None and not self.mass_singular
+                                    and np.count_nonzero(M - np.diag(np.diag(M))) == 0)
+            flags[lay.F_AUGMENT] = int(self.mass_singular)
             flags[lay.F_FORCE] = int(self.has_force)
             flags[lay.F_EX_FJQ] = int("force_jacobian_q" in self._functions)
             flags[lay.F_EX_FJV] = int("force_jacobian_v" in self._functions)
@@ -788,12 +800,32 @@ def _as_pattern(pattern, m: int, n: int):
     return np.array(mask)
 
 
-def _check_spd(M: np.ndarray, name: str) -> None:
+#: eigenvalues of a constant mass matrix below this times its largest count as zero
+MASS_RANK_RTOL = 1e-12
+
+
+def _check_mass(M: np.ndarray, name: str, m: int) -> bool:
+    """Check a constant mass matrix: symmetric and positive definite, or, with constraints,
+    positive semidefinite (then definiteness on the constraints' tangent space is checked at
+    ``q0``). Returns whether ``M`` is singular."""
     if not np.all(np.isfinite(M)):
         raise ValueError(f"`{name}` must be finite")
     if not np.allclose(M, M.T, rtol=1e-12, atol=1e-14 * np.max(np.abs(M))):
         raise ValueError(f"`{name}` must be symmetric")
     try:
         np.linalg.cholesky(M)
+        return False
     except np.linalg.LinAlgError:
-        raise ValueError(f"`{name}` must be positive definite") from None
+        pass
+    lam, vec = np.linalg.eigh(M)
+    top = max(float(lam[-1]), 0.0)
+    if top == 0.0 or lam[0] < -MASS_RANK_RTOL * top:
+        raise ValueError(f"`{name}` must be positive definite, or positive semidefinite in a "
+                         f"constrained model; its eigenvalues range over [{lam[0]:.3g}, {lam[-1]:.3g}]")
+    if m == 0:
+        zero = vec[:, lam <= MASS_RANK_RTOL * top]
+        null = np.nonzero(np.abs(zero).max(axis=1) > 1e-8)[0]
+        raise ValueError(f"`{name}` is singular (zero along coordinates {null.tolist()}) and the "
+                         "model has no constraints to fix those coordinates: give them mass, or "
+                         "add the constraints that determine them")
+    return True

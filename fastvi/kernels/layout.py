@@ -97,7 +97,12 @@ F_TSLOT = 13
 #: (``ws.Fg``) instead of at every quadrature point of every Newton iteration, and the
 #: full Newton matrix has no potential-Hessian block.
 F_LINPOT = 14
-FLAGS_SIZE = 15
+#: the constant M is singular (positive semidefinite, definite on the tangent space of the
+#: constraints: a lamina's or a rod's director inertia): wherever the step needs M⁻¹ it
+#: uses M̄ = M + Gᵀ W G (:func:`augmented_mass`), which agrees with M on ker G, so the
+#: converged step is that of M itself
+F_AUGMENT = 15
+FLAGS_SIZE = 16
 #: flag index of each optional second derivative, in SECOND order
 F_EXACT = (F_EX_PHESS, F_EX_CHESS, F_EX_KHESS, F_EX_MJAC)
 

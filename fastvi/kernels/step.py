@@ -39,9 +39,9 @@ from .._launch import _key
 from .._numba import byref, hot, hot_inline, own, ptr, quiet
 from .banded import (gt_times, mech_impulses_structured, mech_rows_sparse, newton_banded,
                      project_structured, schur_structured)
-from .layout import (FD_T, FD_T_POINTS, CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_EX_FJQ, F_EX_FJV, F_EX_GT,
-                     F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_LINPOT, F_M, F_MASSFN, F_TIME,
-                     F_TSLOT, FJQ, FJV, FORCE, GT, H_FG, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
+from .layout import (FD_T, FD_T_POINTS, CHESS, CJAC, CON, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_FJQ,
+                     F_EX_FJV, F_EX_GT, F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_LINPOT, F_M,
+                     F_MASSFN, F_TIME, F_TSLOT, FJQ, FJV, FORCE, GT, H_FG, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
                      NEEDS_FULL_NEWTON, NEWTON_FAILED, NEWTON_FULL, NONFINITE, OK, PGRAD, PHESS,
                      POT, KHESS, S_FULL,
                      S_G, S_GV, S_ITERS, S_RES, S_WORK, S_WORK_F, SI_A, SI_GCOL, SI_GPTR,
@@ -49,8 +49,8 @@ from .layout import (FD_T, FD_T_POINTS, CHESS, CJAC, CON, F_DIAG, F_EX_CHESS, F_
                      SI_HC_COLS, SI_HC_CPTR, SI_HC_NG, SI_HC_PPTR, SI_HC_ROWS, SI_S, SI_SC, SINGULAR,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, SOLVE_BANDED, SOLVE_DENSE, is_timed,
                      linear_potential, make_workspace, sizes)
-from .linalg import (invert, invert_unpivoted, lu_factor, lu_factor_small, lu_solve,
-                     lu_solve_small)
+from .linalg import (augmented_mass, invert, invert_unpivoted, lu_factor, lu_factor_small,
+                     lu_solve, lu_solve_small)
 
 __all__ = ["make_workspace", "assemble", "residual", "linear_force", "step", "step_kernel",
            "take_step", "step_once",
@@ -725,7 +725,8 @@ def newton_full(md_, tabs_, opts_, h, qk_, pk_, ws_, out_):
 @hot_inline
 def _mass_bar(md, qk, ws, n):
     """Prepare ``M̄⁻¹`` for this step: ``1/diag(M)``, or the LU of ``M(q_k)`` (of the
-    constant ``M`` once per trajectory). Returns a status code."""
+    constant ``M`` once per trajectory; of ``M + Gᵀ W G`` at ``q_k`` for a singular constant
+    ``M``, :func:`.linalg.augmented_mass`). Returns a status code."""
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     if flags[F_DIAG] != 0:
         _inverse_diagonal(md, ws, n)
@@ -733,6 +734,8 @@ def _mass_bar(md, qk, ws, n):
     Mb = ws.Mb
     if flags[F_MASSFN] != 0:
         fns[MASS](ptr(qk), ptr(qk), ptr(prm), ptr(Mb))
+    elif flags[F_AUGMENT] != 0:
+        augmented_mass(Mc, ws.G[0], Mb, n, flags[F_M])
     elif ws.hold[H_MBAR] != 0:
         return OK
     else:
@@ -1086,7 +1089,7 @@ def _exact_mechanics(md):
     force (the one impulse of the step acts at q_k, through the fixed G(q_k)), once its
     Schur complement is rebuilt from the current G(q_{k+1}) at every iteration."""
     flags = md.flags
-    return (flags[F_LINPOT] != 0 and flags[F_MASSFN] == 0
+    return (flags[F_LINPOT] != 0 and flags[F_MASSFN] == 0 and flags[F_AUGMENT] == 0
             and not (is_timed(md) and flags[F_FORCE] != 0))
 
 
@@ -1444,6 +1447,8 @@ def end_momentum(md_, q1_, P_, p1_, v1_, G1_, ws_, out_):
     else:
         if flags[F_MASSFN] != 0:
             fns[MASS](ptr(q1), ptr(q1), ptr(prm), ptr(Mlu))
+        elif flags[F_AUGMENT] != 0:
+            augmented_mass(Mc, G1, Mlu, n, m)
         else:
             for a in range(n):
                 for c in range(n):
@@ -1489,6 +1494,14 @@ def end_momentum(md_, q1_, P_, p1_, v1_, G1_, ws_, out_):
                 acc2 += Y[c, a] * eta[c]
             p1[a] = P[a] - acc
             v1[a] -= acc2
+        if flags[F_AUGMENT] != 0:
+            # v1 is that of M itself, and its momentum M v1 = P − G1ᵀ(η − W g_t): the
+            # multiplier of M̄ differs by W g_t for a rheonomic constraint
+            for a in range(n):
+                acc = 0.0
+                for c in range(n):
+                    acc += Mc[a, c] * v1[c]
+                p1[a] = acc
     else:
         for a in range(n):
             p1[a] = P[a]

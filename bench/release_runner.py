@@ -2,9 +2,9 @@
 
 Run as a child process by ``bench/test_bench_release.py`` — once with this tree, once with a
 worktree of the previous release — so that two versions of the package can be timed in one
-benchmark session. Reads commands ``<method> <n_steps> <newton> [sized] [model=chainN]`` from
-stdin, one per line (``sized``: ``specialize=True``, the size-specialized kernels, where the
-tree has them; ``model=chainN``: ``fastvi.scenes.chain(N)`` from the cost-growth study's start
+benchmark session. Reads commands ``<method> <n_steps> <newton> [sized|generic] [model=chainN]``
+from stdin, one per line (``sized``: ``specialize=True``, the size-specialized kernels, where the
+tree has them; ``generic``: ``specialize=False``; neither: the default; ``model=chainN``: ``fastvi.scenes.chain(N)`` from the cost-growth study's start
 instead of the double pendulum; ``model=sliderK``: the stiff panel's rod–slider with spring
 stiffness K, e.g. ``slider1e8``);
 answers each with one line of JSON: the thread CPU seconds of the integration (no
@@ -52,6 +52,7 @@ def main() -> None:
         method, n_steps, newton, *rest = line.split()
         name = next((t[6:] for t in rest if t.startswith("model=")), "double_pendulum")
         sized = "sized" in rest
+        generic = "generic" in rest
         if name not in scenes:
             scenes[name] = _scene(name)
         model, q0, v0 = scenes[name]
@@ -59,9 +60,9 @@ def main() -> None:
         kw = dict(h=H, n_steps=n_steps, method=method, save_every=n_steps)
         if has_newton:
             kw["newton"] = newton
-        if sized and has_sized:
-            kw["specialize"] = True
-        key = (method, newton, bool(sized), name)
+        if (sized or generic) and has_sized:
+            kw["specialize"] = bool(sized)
+        key = (method, newton, bool(sized), generic, name)
         if key not in warm:
             fastvi.integrate(model, q0, v0, **{**kw, "n_steps": 10, "save_every": 10})
             warm.add(key)

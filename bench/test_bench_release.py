@@ -6,8 +6,8 @@ Two versions of ``fastvi`` cannot share a process, so each runs in a child proce
 minutes and several GB — then load from its own numba cache). The children are asked in turn — release, current, current, release, … — to
 integrate the double pendulum (θ1 = θ2 = π/2 at rest, h = 0.01, ``N_STEPS`` steps, nothing
 saved but the end), each timing only the integration in its own thread CPU time. Both trees
-run twice per round: with the default kernels and with the size-specialized ones
-(``specialize=True``). The per-step medians and their ratios are printed and stored in the
+run with their defaults and with ``specialize=True`` every round, this tree also with
+``specialize=False`` (its default picks the sized stages once they are compiled). The per-step medians and their ratios are printed and stored in the
 benchmark JSON under ``"fastvi_release"``; the default path's trajectory must equal the
 release's bit for bit. Skipped when git or the tag is not available (e.g. a source tarball).
 """
@@ -67,8 +67,10 @@ class _Child:
         ready = json.loads(self.proc.stdout.readline())
         assert str(tree) in ready["ready"], (tree, ready)  # the intended package, not another
 
-    def run(self, method: str, n_steps: int, newton: str = "auto", sized: bool = False) -> dict:
-        self.proc.stdin.write(f"{method} {n_steps} {newton}{' sized' if sized else ''}\n")
+    def run(self, method: str, n_steps: int, newton: str = "auto", sized=None) -> dict:
+        """``sized``: None (the default), True (``specialize=True``) or False (``=False``)."""
+        flag = {None: "", True: " sized", False: " generic"}[sized]
+        self.proc.stdin.write(f"{method} {n_steps} {newton}{flag}\n")
         self.proc.stdin.flush()
         return json.loads(self.proc.stdout.readline())
 
@@ -92,11 +94,11 @@ _rows: list[dict] = []
 @pytest.mark.parametrize("method", METHODS)
 def test_step_cost_against_the_previous_release(benchmark, children, method, print_uncaptured):
     old, new = children
-    times = {"release": [], "release sized": [], "current": [], "sized": []}
+    contenders = (("release", old, None), ("release sized", old, True), ("generic", new, False),
+                  ("current", new, None), ("sized", new, True))
+    times = {name: [] for name, _, _ in contenders}
     iters = {}
     finals = {}
-    contenders = (("release", old, False), ("release sized", old, True), ("current", new, False),
-                  ("sized", new, True))
     for r in range(ROUNDS):
         for name, child, sized in (contenders if r % 2 == 0 else contenders[::-1]):
             out = child.run(method, N_STEPS, sized=sized)
@@ -104,11 +106,13 @@ def test_step_cost_against_the_previous_release(benchmark, children, method, pri
             iters[name] = out["iterations"]
             finals[name] = out["q"]
     # a speed-up that changed the result would not be one: same trajectory, bit for bit
-    assert finals["sized"] == finals["current"] == finals["release"] == finals["release sized"]
+    assert (finals["sized"] == finals["current"] == finals["generic"] == finals["release"]
+            == finals["release sized"])
     med = {k: statistics.median(v) for k, v in times.items()}
     ratio = med["release"] / med["sized"]
     row = dict(method=method, release_us=med["release"] * 1e6,
                release_sized_us=med["release sized"] * 1e6, current_us=med["current"] * 1e6,
+               generic_us=med["generic"] * 1e6,
                sized_us=med["sized"] * 1e6, ratio_generic=med["release"] / med["current"],
                ratio_sized=med["release sized"] / med["sized"],
                default_vs_release_sized=med["current"] / med["release sized"],
@@ -122,11 +126,12 @@ def test_step_cost_against_the_previous_release(benchmark, children, method, pri
     def report(write):
         write.sep(f"fastvi: this tree vs {RELEASE}, double pendulum, thread CPU per step (medians)")
         write("(speed-up = release / current; 'default / release sized' compares today's default "
-              "path with the release's specialize=True)")
+              "path with the release's specialize=True; 'generic' is specialize=False)")
         for row in _rows:
             write(f"{row['method']:<9} default: {RELEASE} {row['release_us']:7.3f} µs, current "
                   f"{row['current_us']:7.3f} µs ({row['ratio_generic']:5.2f}x) | specialized: "
                   f"{RELEASE} {row['release_sized_us']:7.3f} µs, current {row['sized_us']:7.3f} µs "
+                  f"(generic {row['generic_us']:7.3f} µs) "
                   f"({row['ratio_sized']:5.2f}x) | default / release sized "
                   f"{row['default_vs_release_sized']:5.2f} | Newton iterations/step "
                   f"{row['iterations']['current']:.2f}")

@@ -65,6 +65,15 @@ def flag(x, name: str) -> bool:
     return bool(x)
 
 
+def optional_flag(x, name: str):
+    """None (let fastvi choose), True or False, named in the error."""
+    if x is None:
+        return None
+    if not isinstance(x, (bool, np.bool_)):
+        raise TypeError(f"`{name}` must be None, True or False, got {x!r}")
+    return bool(x)
+
+
 def count(x, name: str, least: int) -> int:
     """An integer ``>= least`` named ``name`` in the error (an integral float is accepted)."""
     if isinstance(x, bool) or not isinstance(x, (int, np.integer)):

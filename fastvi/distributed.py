@@ -56,7 +56,7 @@ def integrate_ensemble(
     events=None,
     keep_events: int = 1,
     solver: str = "auto",
-    specialize: bool = False,
+    specialize: bool | None = None,
 ) -> EnsembleResult:
     """:func:`fastvi.integrate_ensemble` with the members spread over a Dask cluster.
 

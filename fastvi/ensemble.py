@@ -412,7 +412,7 @@ def integrate_ensemble(
     events=None,
     keep_events: int = 1,
     solver: str = "auto",
-    specialize: bool = False,
+    specialize: bool | None = None,
     progress: bool = False,
 ) -> EnsembleResult:
     r"""Integrate ``N`` members (initial states and/or parameters) of one model in parallel.
@@ -470,12 +470,11 @@ def integrate_ensemble(
         How each member solves a step's linear systems, as in :func:`fastvi.integrate`: a
         large mechanism's members solve banded or sparse (planned once for the ensemble), a
         small model's densely.
-    specialize : bool, default False
-        Run every member with the kernels compiled for the model's and method's sizes, as
-        :func:`fastvi.integrate` does with ``specialize=True``: the same trajectories bit
-        for bit, a member's step cheaper on small models (``docs/benchmarks.md``, "Ensembles"), and one
-        more compile of the step and the parallel loop per set of sizes (under a minute on
-        a fresh install, then cached on disk). Sizes above 64 stay run-time integers.
+    specialize : bool or None, default None
+        As in :func:`fastvi.integrate`: the members' mechanics iteration and end projection
+        compiled for the model's and method's sizes (the same trajectories bit for bit, a
+        small model's step 0.55–0.6× as costly), chosen by the ensemble's member steps when
+        ``None``.
     progress : bool, default False
         Show progress on stderr, in member-steps (one updating line on a terminal, a plain
         line every few seconds otherwise, as :func:`fastvi.integrate`): the members then
@@ -552,7 +551,7 @@ def _validate_threads(threads):
 
 
 def _options(h, t_end, n_steps, method, save, tol, max_iter, newton="auto", t0=0.0,
-             keep_events=1, solver="auto", specialize=False) -> dict:
+             keep_events=1, solver="auto", specialize=None) -> dict:
     """The validated scalar options of a run (cheap: the client of a Dask run calls it too)."""
     h = check.step_size(h)
     t0 = check.start_time(t0)
@@ -560,7 +559,7 @@ def _options(h, t_end, n_steps, method, save, tol, max_iter, newton="auto", t0=0
                 method=check.method(method), save=check.ensemble_save(save),
                 newton=check.newton_options(tol, max_iter, newton),
                 keep_events=check.count(keep_events, "keep_events", 1),
-                solver=check.solver(solver), specialize=check.flag(specialize, "specialize"))
+                solver=check.solver(solver), specialize=check.optional_flag(specialize, "specialize"))
 
 
 def _members(model: Model, Q0, V0, params):
@@ -628,15 +627,12 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
             used = numba.get_num_threads()
             numba.set_parallel_chunksize(max(1, N // (CHUNKS_PER_THREAD * used)))
             dims = (model.n, model.m, meth.s, meth.r, meth.J)
-            if opts.get("specialize", False):
-                dims = lay.parallel_markers(dims)
             # the members' step: the one integrate compiles for a workspace of this type
             t_step = time.perf_counter()
             ws = structure.workspace(model, meth, None, opts.get("solver", "auto"))
-            if opts.get("specialize", False):
-                ws = lay.specialize(ws)
+            sized = structure.sizing(opts.get("specialize"), model.n, N * total)
             stepk, stages = step_kernel(model.kernel_data(), meth.kernel_tables,
-                                        opts["newton"], ws, full=True)
+                                        opts["newton"], ws, full=True, sized=sized)
             compile_time += time.perf_counter() - t_step
             args = (fns, flags, Mc, KP, meth.kernel_tables,
                     opts["newton"], h, t0, dims, plan.si, plan.sb, ws.structured, X0, total, mode, every, H0,

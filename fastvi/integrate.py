@@ -134,7 +134,7 @@ def integrate(
     dense_output: bool = False,
     events=None,
     solver: str = "auto",
-    specialize: bool = False,
+    specialize: bool | None = None,
     adaptive: float | None = None,
     monitor: bool = True,
     t_span=None,
@@ -265,15 +265,18 @@ def integrate(
         (:mod:`fastvi.structure`). ``"dense"``/``"banded"``/``"sparse"`` force one (the
         trajectories agree at round-off; the full Newton matrix, which needs row
         interchanges, is banded under ``"sparse"``).
-    specialize : bool, default False
-        Compile the kernels for this model's and method's sizes ``(n, m, s, r, J)``, as
-        compile-time constants (:func:`fastvi.kernels.layout.specialize`): every small loop
-        of the step is unrolled. The trajectory is the generic kernels' bit for bit; a step
-        of the double pendulum costs about half
-        (``docs/decisions/0007-size-specialized-kernels.md``). The price is one compile per
-        size on a fresh install, ≈ 36 s of CPU with a peak of ≈ 0.4 GB of memory
-        (``python -m fastvi compile --report --only specialize``); then it is cached on
-        disk like the generic kernels. Worth it for long runs of one model.
+    specialize : bool or None, default None
+        Compile the step's mechanics iteration and end projection for this model's and
+        method's sizes ``(n, m, s, r, J)`` as compile-time constants, so that every small
+        loop in them is unrolled (:func:`fastvi.kernels.step.step_kernel`). The trajectory is
+        the generic kernels' bit for bit; a step of the double pendulum costs 0.55–0.6× as
+        much (``docs/decisions/0012-sized-stages.md``). The price is one compile per size,
+        ≈ 8 s of CPU on a fresh install (``python -m fastvi compile --report --only
+        specialize``), then cached on disk like the generic kernels. ``None`` chooses: the
+        sized stages are used whenever they are compiled already (in this process or on
+        disk), and compiled for a run of at least ``fastvi.structure.SIZED_MIN_STEPS``
+        steps of a model of at most ``SIZED_MAX_N`` coordinates, where the compile pays.
+        ``True`` always compiles them, ``False`` never uses them.
         :func:`fastvi.integrate_ensemble` takes the same option.
     adaptive : float, optional
         A time-reversible adaptive step (:mod:`fastvi.kernels.adapt`): the energy scale
@@ -354,7 +357,7 @@ def integrate(
     recover = valid.recover(recover)
     meth = valid.method(method)
     dense_output = valid.flag(dense_output, "dense_output")
-    specialize = valid.flag(specialize, "specialize")
+    specialize = valid.optional_flag(specialize, "specialize")
     if recover and (dense_output or events is not None):
         raise ValueError("`recover` cannot be combined with `dense_output`, `t_eval` or `events` (a "
                          "recovered step has no single polynomial); use a smaller `h` instead")
@@ -372,8 +375,7 @@ def integrate(
     state = np.zeros((6, n))
     state[0], state[1], state[2] = q0, M0 @ v0, v0
     ws = structure.workspace(model, meth, prm, solver)
-    if specialize:
-        ws = lay.specialize(ws)
+    sized = structure.sizing(specialize, n, total)
     chunk = total if not progress else max(1, total // _PROGRESS_CHUNKS)
     if adaptive is not None:  # steps not known: chunks of steps, sample buffers grown
         chunk = _adaptive_chunk(float(t_end) - t0, h, every, n, progress)
@@ -404,7 +406,7 @@ def integrate(
 
     sout = np.zeros(lay.STEP_OUT_SIZE)
     t_step = time.perf_counter()
-    stepk, stages = step_kernel(md, tabs, opts, ws)
+    stepk, stages = step_kernel(md, tabs, opts, ws, sized=sized)
     compile_time += time.perf_counter() - t_step
     # a run without events or dense output has a time loop compiled without their code
     evk = True if ev.count or ev.dense.shape[0] else None
@@ -427,7 +429,7 @@ def integrate(
                          stepk, stages, evk)
         if status == lay.NEEDS_FULL_NEWTON:  # compiled on first need; the step is retaken
             t_step = time.perf_counter()
-            stepk, stages = step_kernel(md, tabs, opts, ws, full=True)
+            stepk, stages = step_kernel(md, tabs, opts, ws, full=True, sized=sized)
             compile_time += time.perf_counter() - t_step
             status = 0
             continue
@@ -441,7 +443,7 @@ def integrate(
             break
         if status != 0 and recover:
             sub = _retry_in_substeps(md, model, meth, h, opts, state, recover, total, every, smp,
-                                     info, prm=prm, solver=solver, specialize=specialize)
+                                     info, prm=prm, solver=solver, sized=sized)
             if sub:
                 recovered.append((int(info[lay.I_STEPS]) - 1, sub))
                 status = 0
@@ -533,7 +535,7 @@ _RUN = Launcher(drive.run)
 
 
 def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, smp, info,
-                       prm=None, solver="auto", specialize=False):
+                       prm=None, solver="auto", sized=False):
     """Retake the failed step (state rows 0–2 still hold its start) as 2, 4, … substeps.
 
     Returns the number of substeps that succeeded (the step is then accepted and booked as
@@ -544,8 +546,6 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
         sub = 2**level
         trial = state.copy()
         ws_sub = structure.workspace(model, meth, model.params if prm is None else prm, solver)
-        if specialize:  # the kernel already compiled for these sizes
-            ws_sub = lay.specialize(ws_sub)
         smp_sub = _alloc(1, model.n)
         info_sub = np.zeros(lay.INFO_SIZE)
         info_sub[lay.I_FIRST] = 1
@@ -553,7 +553,8 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
         with quiet():
             st = _RUN(md, tabs, opts, h / sub, trial, ws_sub, sub, sub, sub, smp_sub, info_sub,
                       np.zeros(lay.STEP_OUT_SIZE), events_.prepare(model, meth, None, 0),
-                      *step_kernel(md, tabs, opts, ws_sub, full=True), None)
+                      *step_kernel(md, tabs, opts, ws_sub, full=True, sized=sized and "cached"),
+                      None)
         if st == 0:
             state[:3] = trial[:3]
             info[lay.I_ITERS] += info_sub[lay.I_ITERS]

@@ -345,3 +345,24 @@ def workspace(model, meth, prm=None, solver: str = "auto"):
     if np.any(p.si[:lay.SI_HEADER]):  # something structured: a solve or grouped differences
         ws = ws._replace(si=p.si.copy(), sb=p.sb.copy(), structured=True)
     return ws
+
+
+#: with ``specialize=None`` the stages are compiled for a model's sizes when a run takes at
+#: least this many steps (an ensemble: member steps) and they are not compiled yet: ≈ 8 s of
+#: compiling then saves about as much (0.3–0.8 µs a step of the double pendulum,
+#: docs/decisions/0012-sized-stages.md)
+SIZED_MIN_STEPS = 10_000_000
+#: … and only up to this many coordinates: the sized loops are unrolled, and a large
+#: model's step is set by its solves, not by loop overhead
+SIZED_MAX_N = 24
+
+
+def sizing(specialize, n: int, steps: int):
+    """What ``step_kernel(sized=…)`` gets for ``specialize`` (``None``: automatic), a model
+    of ``n`` coordinates and a run of ``steps`` steps: ``True`` (compile the sized stages),
+    ``"cached"`` (use them if compiled already) or ``False``."""
+    if specialize is not None:
+        return bool(specialize)
+    if n > SIZED_MAX_N:
+        return False
+    return True if steps >= SIZED_MIN_STEPS else "cached"

@@ -214,7 +214,7 @@ def test_projection_of_members_is_reported_in_one_warning(pendulum):
         (dict(h=-0.1), ValueError, "`h` must be positive"),
         (dict(method="P2L-Q3X"), ValueError, "P2L-Q3"),
         (dict(solver="superlu"), ValueError, "`solver` must be one of 'auto', 'dense', 'banded'"),
-        (dict(specialize="yes"), TypeError, "`specialize` must be True or False"),
+        (dict(specialize="yes"), TypeError, "`specialize` must be None, True or False"),
         (dict(Q0=[[0.0, -1.0], [0.5, -1.0]]), ValueError, r"member 1 \(`Q0\[1\]`, `V0\[1\]`\)"),
     ],
 )
@@ -263,15 +263,12 @@ def test_large_mechanism_members_solve_banded_and_equal_integrate_bit_for_bit():
     assert np.abs(ens.q - dense.q).max() < 1e-12
 
 
-# compiles the parallel loop for the double pendulum's sizes (≈ 80–95 s on an empty cache):
-# over the 8-minute budget of `make test` together with the rest, as the specialized
-# `integrate` test; `make test-slow` and `make bench` (bench/test_bench_ensemble.py asserts
-# the same equality on what it times) run it
-@pytest.mark.slow
+# the members take the sized stages of integrate (≈ 8 s to compile on an empty cache) through
+# the one generic parallel loop
 def test_specialized_members_are_the_generic_ones_bit_for_bit(double_pendulum, dp_members):
     Q0, V0 = dp_members
     kw = dict(h=H, n_steps=103, save=10, threads=2)
-    gen = fastvi.integrate_ensemble(double_pendulum, Q0, V0, **kw)
+    gen = fastvi.integrate_ensemble(double_pendulum, Q0, V0, specialize=False, **kw)
     sized = fastvi.integrate_ensemble(double_pendulum, Q0, V0, specialize=True, **kw)
     for name in ("q", "v", "p", "energy", "constraint_residual", "velocity_residual"):
         assert np.array_equal(getattr(gen, name), getattr(sized, name)), name

@@ -18,7 +18,7 @@ from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_IT
                      INFO_SIZE, NEEDS_FULL_NEWTON, POT, S_FULL, S_G, S_GV, S_ITERS, S_RES, S_WORK,
                      S_WORK_F, SAVE_DIAGNOSTICS, SAVE_FINAL, SAVE_STRIDE, STEP_OUT_SIZE,
                      EVENT_SLOTS, EVENTS_FULL, Events, ModelData, Samples, dim, is_timed,
-                     member_sizes, sizes, with_plan, workspace_for)
+                     sizes, with_plan, workspace_for)
 from .adapt import advance, finished, next_step
 from .events import after_step, event_values, room_for_crossings
 
@@ -278,9 +278,8 @@ def run_ensemble(fns, flags, Mc, P, tabs, opts, h, t0, dims, si, sb, structured,
                  eterm, Te, Qe, Ve, Ne, stepk, stages):
     """``run_member`` for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in parallel.
 
-    ``dims`` = (n, m, s, r, J), integers (the generic kernels) or parallel markers
-    (:func:`.layout.parallel_markers`: each member then runs the size-specialized kernels
-    of ``integrate(..., specialize=True)``), sizes each member's workspace, and ``si``,
+    ``dims`` = (n, m, s, r, J) sizes each member's workspace (the stages in ``stages`` may
+    be compiled for these sizes: :func:`.step.step_kernel`), and ``si``,
     ``sb`` are the structured-solve plan of the model and method (:func:`fastvi.structure.plan`;
     each member solves with its own copy of ``sb``; ``structured`` as in
     :class:`.layout.Workspace`). ``P``
@@ -300,7 +299,7 @@ def run_ensemble(fns, flags, Mc, P, tabs, opts, h, t0, dims, si, sb, structured,
     n = dim(dims[0])
     s = dim(dims[2])
     for i in prange(X0.shape[0]):
-        ws = with_plan(workspace_for(member_sizes(dims)), si, sb.copy(), structured)
+        ws = with_plan(workspace_for(dims), si, sb.copy(), structured)
         state = np.zeros((6, n))
         for a in range(n):
             state[0, a] = X0[i, 0, a]

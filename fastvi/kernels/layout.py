@@ -376,10 +376,7 @@ def with_plan(ws, si, sb, structured):
 def dim(x):
     """A size as the kernels read it: an int, or the length of a *size marker* — a tuple of
     that many ``None`` — which numba types as ``UniTuple(none, k)``, so that inside a kernel
-    the size is a compile-time constant (see :func:`specialize`); or the number of
-    dimensions of a *parallel marker* (:func:`parallel_markers`)."""
-    if isinstance(x, np.ndarray):
-        return x.ndim
+    the size is a compile-time constant (see :func:`specialize`)."""
     return len(x) if isinstance(x, tuple) else int(x)
 
 
@@ -390,9 +387,6 @@ def _dim(x):
     if isinstance(x, types.BaseTuple):
         k = len(x)
         return lambda x: k
-    if isinstance(x, types.Array):
-        k = x.ndim
-        return lambda x: k
     return None
 
 
@@ -401,54 +395,9 @@ exec(_workspace_for_source(), _scope)  # noqa: S102 - generated from the table a
 # not cached itself (generated source has no file): it is compiled into run_ensemble,
 # whose cache holds it
 workspace_for = nb.njit(nogil=True, error_model="numpy", boundscheck=False)(_scope["workspace_for"])
-workspace_for.__doc__ = """:func:`make_workspace` compiled, for the sizes ``dims = (n, m, s, r, J)``,
-integers or size markers (:func:`size_markers`), kept in the workspace's ``dims``: what a
-member of an ensemble allocates inside the parallel loop."""
-
-
-#: the largest size a parallel marker carries (NumPy's limit on an array's dimensions)
-PARALLEL_MARKER_MAX = 64
-
-
-def parallel_markers(dims):
-    """``(n, m, s, r, J)`` for the body of a parallel loop of size-specialized kernels.
-
-    numba's ``prange`` passes the variables its body uses as arguments of a generated
-    kernel, which takes arrays and scalars but not nested tuples, so the size markers of
-    :func:`specialize` cannot cross into it. An empty array of ``k`` dimensions can, and its
-    type carries ``k``; the body turns it back into a size marker
-    (:func:`from_parallel_marker`), so that each member runs the very kernels
-    ``integrate(..., specialize=True)`` runs. Sizes above ``PARALLEL_MARKER_MAX`` stay
-    run-time integers."""
-    return tuple(np.empty((0,) * int(k)) if int(k) <= PARALLEL_MARKER_MAX else int(k)
-                 for k in dims)
-
-
-def from_parallel_marker(x):
-    """The size marker (tuple of ``k`` ``None``) of a parallel marker; an int unchanged."""
-    return (None,) * x.ndim if isinstance(x, np.ndarray) else x
-
-
-@overload(from_parallel_marker)
-def _from_parallel_marker(x):
-    if isinstance(x, types.Integer):
-        return lambda x: x
-    if isinstance(x, types.Array):
-        # a tuple literal of x.ndim Nones: numba types it UniTuple(none, k), as size_markers
-        src = f"def impl(x):\n    return ({'None, ' * x.ndim})\n"
-        ns = {}
-        exec(src, ns)  # noqa: S102 - the source is built from an integer only
-        return ns["impl"]
-    return None
-
-
-@njit
-def member_sizes(dims):
-    """Inside a parallel loop's body: ``dims`` with its parallel markers turned back into
-    size markers (:func:`from_parallel_marker`)."""
-    return (from_parallel_marker(dims[0]), from_parallel_marker(dims[1]),
-            from_parallel_marker(dims[2]), from_parallel_marker(dims[3]),
-            from_parallel_marker(dims[4]))
+workspace_for.__doc__ = """:func:`make_workspace` compiled, for the sizes ``dims = (n, m, s, r, J)``
+kept in the workspace's ``dims``: what a member of an ensemble allocates inside the parallel
+loop."""
 
 
 @hot_inline
@@ -467,11 +416,12 @@ def size_markers(dims):
 def specialize(ws):
     """The workspace ``ws`` with its sizes turned into compile-time constants.
 
-    The kernels then compile once for these sizes ``(n, m, s, r, J)`` (cached on disk like
-    the generic ones), with every loop over coordinates, constraints, control points and
+    A kernel typed with it compiles once for these sizes ``(n, m, s, r, J)`` (cached on disk
+    like the generic ones), with every loop over coordinates, constraints, control points and
     quadrature points of known length, which LLVM unrolls (no loop set-up, vector-remainder
-    code or run-time alias checks around loops of length 2–4): a double-pendulum step
-    1.55–1.75× cheaper from this alone (``docs/decisions/0007-size-specialized-kernels.md``).
-    The arithmetic and its order are unchanged, so the trajectory equals the generic
-    kernel's bit for bit."""
+    code or run-time alias checks around loops of length 2–4). The step's sized stages are
+    compiled for it (:func:`.step.step_kernel`, ``sized``); the arithmetic and its order are
+    unchanged, so the trajectory equals the generic kernel's bit for bit. The sizes are the
+    workspace's last field, so the generic and the sized workspace share the layout of all
+    the others: the sized code reads the sizes from its type, never from memory."""
     return ws._replace(dims=size_markers(ws.dims))

@@ -33,7 +33,8 @@ from collections import namedtuple
 
 import numba
 import numpy as np
-from numba.core import types
+from numba.core import sigutils, types
+from numba.core.ccallback import CFunc
 
 from .._launch import _key
 from .._numba import byref, hot, hot_inline, own, ptr, quiet
@@ -49,6 +50,7 @@ from .layout import (FD_T, FD_T_POINTS, CHESS, CJAC, CON, F_AUGMENT, F_DIAG, F_E
                      SI_HC_COLS, SI_HC_CPTR, SI_HC_NG, SI_HC_PPTR, SI_HC_ROWS, SI_S, SI_SC, SINGULAR,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, SOLVE_BANDED, SOLVE_DENSE, is_timed,
                      linear_potential, make_workspace, sizes)
+from .layout import specialize as layout_specialize
 from .linalg import (augmented_mass, invert, invert_unpivoted, lu_factor, lu_factor_small,
                      lu_solve, lu_solve_small)
 
@@ -1542,11 +1544,88 @@ def _no_work(md_, tabs_, h, qk_, q1_, ws_, n, m, s, J, out_):
     return 0.0
 
 
-def _cfunc(fn, sig):
-    return numba.cfunc(sig, cache=True, error_model="numpy", boundscheck=False, _nrt=False)(fn)
+def _cfunc(fn, sig, compile=True):
+    """``fn`` as a C function of signature ``sig``, cached on disk; with ``compile`` false,
+    only if numba's disk cache holds it (else None, and nothing is compiled).
+
+    What ``numba.cfunc(sig, cache=True)`` does, with its cache lookup apart (numba's
+    ``CFunc.compile`` takes the same steps)."""
+    cf = CFunc(fn, sigutils.normalize_signature(sig), locals={},
+               options=dict(error_model="numpy", boundscheck=False, _nrt=False))
+    cf.enable_caching()
+    if compile:
+        cf.compile()
+        return cf
+    try:
+        cres = cf._cache.load_overload(cf._sig, cf._targetdescr.target_context)
+    except Exception:  # noqa: BLE001 - an unreadable cache is a cache miss
+        cres = None
+    if cres is None:
+        return None
+    cf._library = cres.library
+    cf._wrapper_name = cres.fndesc.llvm_cfunc_wrapper_name
+    cf._wrapper_address = cf._library.get_pointer_to_function(cf._wrapper_name)
+    return cf
 
 
-def step_kernel(md, tabs, opts, ws, full=False):
+class _SizedStage(types.WrapperAddressProtocol):
+    """A stage compiled for the size-specialized twin of a workspace (:func:`.layout.specialize`),
+    called through the generic stage's signature.
+
+    numba types it as the generic stage (a first-class function of that signature), so the
+    step and the time loops that hold it are not compiled again for it. The two workspaces
+    have the same layout but for their last field, the sizes, which the sized code takes
+    from its type and never reads from memory, so a pointer to the generic workspace serves
+    the sized code as it is."""
+
+    def __init__(self, cf, sig):
+        self.cf, self.sig = cf, sig
+
+    def __wrapper_address__(self):
+        return self.cf.address
+
+    def signature(self):
+        return self.sig
+
+
+#: the stages compiled for a workspace's sizes where :func:`step_kernel` is asked to
+#: (``sized``): the mechanics iteration and the end projection, where a small model's
+#: step spends its time in loops of 2–12 iterations. The step itself, the full Newton and
+#: the time loops stay generic: sizing them too was no faster and compiled 36 s, not ~8 s
+#: (``docs/decisions/0012-sized-stages.md``).
+SIZED_STAGES = ("newton_mech", "end_momentum")
+
+
+def _stage_signatures(md, tabs, opts, ws):
+    """The C signatures of the stages for workspaces of the type of ``ws``."""
+    P, arg, i64, f64 = types.CPointer, numba.typeof, types.int64, types.float64
+    tmd, ttabs, topts, tws = P(arg(md)), P(arg(tabs)), P(arg(opts)), P(arg(ws))
+    a1, a2 = P(arg(np.zeros(1))), P(arg(np.zeros((1, 1))))
+    return dict(newton_mech=i64(tmd, ttabs, topts, f64, a1, a1, tws, a1),
+                newton_full=i64(tmd, ttabs, topts, f64, a1, a1, tws, a1),
+                end_momentum=i64(tmd, a1, a1, a1, a1, a2, tws, a1),
+                step_work=f64(tmd, ttabs, f64, a1, a1, tws, i64, i64, i64, i64, a1))
+
+
+def _sized(key, md, tabs, opts, ws, stages, compile):
+    """``stages`` with :data:`SIZED_STAGES` compiled for the sizes of ``ws``: compiled now
+    with ``compile``, else only if in this process or numba's disk cache; else None."""
+    skey = (key, "sized", _key(layout_specialize(ws).dims))
+    if skey not in _OPTIONAL:
+        generic = _stage_signatures(md, tabs, opts, ws)
+        sized = _stage_signatures(md, tabs, opts, layout_specialize(ws))
+        fns = dict(newton_mech=newton_mech, end_momentum=end_momentum)
+        entries = {}
+        for name in SIZED_STAGES:
+            cf = _cfunc(fns[name].py_func, sized[name], compile)
+            if cf is None:
+                return None
+            entries[name] = _SizedStage(cf, generic[name])
+        _OPTIONAL[skey] = entries
+    return stages._replace(**_OPTIONAL[skey])
+
+
+def step_kernel(md, tabs, opts, ws, full=False, sized=False):
     """The step for these kinds of model, method, options and workspace, compiled once as a
     C function (cached on disk) that the time loops call through its address; and the
     :class:`Stages` it calls. Returns ``(step, stages)``.
@@ -1566,6 +1645,12 @@ def step_kernel(md, tabs, opts, ws, full=False):
     returns ``NEEDS_FULL_NEWTON`` with nothing kept, and the driver asks again with
     ``full=True`` and retakes the step — the same trajectory, bit for bit. The work of forces
     and time over a step is compiled only for a model with forces or time.
+
+    ``sized``: ``True`` compiles the stages of :data:`SIZED_STAGES` for the sizes of ``ws``
+    (compile-time constants, :func:`.layout.specialize`) and puts them in ``stages``;
+    ``"cached"`` does so only if they are compiled already (in this process or in numba's
+    disk cache); ``False`` keeps the generic stages. The sized stages do the same
+    arithmetic in the same order: the trajectory is the same bit for bit.
     """
     key = (_key(md), _key(opts), _key(ws.dims), ws.structured is None)
     full = full or opts.mode == NEWTON_FULL or not tabs.mech or (key, "newton_full") in _OPTIONAL
@@ -1580,6 +1665,9 @@ def step_kernel(md, tabs, opts, ws, full=False):
         stages = stages._replace(newton_full=_OPTIONAL[(key, "newton_full")], full=1)
     if timed:
         stages = stages._replace(step_work=_OPTIONAL[(key, "step_work")])
+    if sized and ws.structured is None:
+        with quiet():
+            stages = _sized(key, md, tabs, opts, ws, stages, sized is True) or stages
     return stepk, stages
 
 
@@ -1587,18 +1675,16 @@ def _compile(key, md, tabs, opts, ws, wanted):
     """The step of kernel type ``key`` with its placeholder stages (if not compiled yet), and
     the optional stages ``wanted``, into :data:`_STEPS` and :data:`_OPTIONAL`."""
     P, arg, i64, f64 = types.CPointer, numba.typeof, types.int64, types.float64
-    tmd, ttabs, topts, tws = P(arg(md)), P(arg(tabs)), P(arg(opts)), P(arg(ws))
-    a1, a2 = P(arg(np.zeros(1))), P(arg(np.zeros((1, 1))))
-    sigs = dict(newton_full=i64(tmd, ttabs, topts, f64, a1, a1, tws, a1),
-                step_work=f64(tmd, ttabs, f64, a1, a1, tws, i64, i64, i64, i64, a1))
+    sigs = _stage_signatures(md, tabs, opts, ws)
     if key not in _STEPS:
-        placeholder = Stages(_cfunc(newton_mech.py_func, sigs["newton_full"]),
+        placeholder = Stages(_cfunc(newton_mech.py_func, sigs["newton_mech"]),
                              _cfunc(_no_full_newton, sigs["newton_full"]),
-                             _cfunc(end_momentum.py_func, i64(tmd, a1, a1, a1, a1, a2, tws, a1)),
+                             _cfunc(end_momentum.py_func, sigs["end_momentum"]),
                              _cfunc(_no_work, sigs["step_work"]), 0)
         # the step's own body becomes the C function (not a call of the njit `step`, whose
         # code numba would compile once more into the wrapper)
-        sig = i64(tmd, ttabs, topts, f64, a2, tws, types.boolean, a1, P(arg(placeholder)))
+        sig = i64(P(arg(md)), P(arg(tabs)), P(arg(opts)), f64, P(arg(np.zeros((1, 1)))),
+                  P(arg(ws)), types.boolean, P(arg(np.zeros(1))), P(arg(placeholder)))
         _STEPS[key] = (_cfunc(step.py_func, sig), placeholder)
     for name in wanted:
         fn = newton_full if name == "newton_full" else _step_work

@@ -2,7 +2,8 @@
 
 Public API: :class:`Model`, :func:`integrate`, :class:`Result`, :class:`IntegrationError`,
 :func:`integrate_ensemble`, :class:`EnsembleResult`, :class:`ModelCheckError`,
-:class:`Status`, :func:`method`, and the ready-made mechanisms in :mod:`fastvi.scenes`.
+:class:`Status`, :func:`method`, :class:`Drawing` (how :meth:`Result.animate` draws a
+model), and the ready-made mechanisms in :mod:`fastvi.scenes`.
 Optional: :mod:`fastvi.baselines` (RK4, SciPy), :mod:`fastvi.distributed` (Dask),
 :mod:`fastvi.symbolic` (SymPy).
 """
@@ -11,6 +12,7 @@ from . import _numba  # noqa: F401  (numba settings first)
 from . import scenes
 from .check import ModelCheckError
 from .consistent import consistent_state
+from .drawing import Drawing
 from .integrate import IntegrationError, Result, integrate
 from .ensemble import EnsembleResult, integrate_ensemble
 from .model import CALLBACK_SIGNATURE, Model
@@ -28,6 +30,7 @@ __all__ = [
     "EnsembleResult",
     "ModelCheckError",
     "consistent_state",
+    "Drawing",
     "Status",
     "Method",
     "method",

@@ -482,7 +482,7 @@ def integrate(
                    **({} if adaptive is None else {"adaptive": adaptive})),
         status=status, method=meth, h=h, model_name=model.name,
         failed_step=None if status >= 0 else int(info[lay.I_FAILED]),
-        **ev_out,
+        drawing=getattr(model, "drawing", None), **ev_out,
     )
     # the monitor reads the grid samples, before the last sample moves to an event
     verdict = monitor_.judge(result, every=every, newton_tol=opts.tol) if monitor else None

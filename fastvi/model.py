@@ -427,6 +427,12 @@ class Model:
     name : str, optional
         A label used in summaries and error messages.
 
+    Attributes
+    ----------
+    drawing : fastvi.drawing.Drawing or None
+        How to draw a configuration, for :meth:`fastvi.Result.animate` (None unless set;
+        every scene has one). Not pickled: a scene model is rebuilt with its drawing.
+
     Notes
     -----
     The callbacks are compiled on first use (≈ 0.1 s each). A compiled callback is reused
@@ -468,6 +474,7 @@ class Model:
         self.params = _as_params(params)
         self.name = name or "model"
         self._recipe = None  # set by scenes / pickling support
+        self.drawing = None  # a fastvi.drawing.Drawing (the scenes set one)
         #: ∇²V = 0 was declared (``potential_hessian=0``): ∇V is evaluated once a trajectory
         self.linear_potential = _is_zero(potential_hessian)
         if self.linear_potential:

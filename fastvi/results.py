@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import drawing as _drawing
 from .status import MESSAGES, Status
 from .tables import Method, method as _method
 
@@ -198,6 +199,91 @@ class TrajectoryResult(ResultBase):
         fig.tight_layout()
         return _finish_figure(fig, path)
 
+    def animate(self, path, *, drawing=None, fps=30, duration=None, every=None, trail=1.0,
+                trail_points=None, dpi=80, progress=None):
+        """Write an animation of the mechanism: a GIF (Pillow) or an MP4 video (ffmpeg).
+
+        Drawn from the model's :class:`fastvi.drawing.Drawing` (``model.drawing``; every
+        scene has one), with the axis limits fixed from the whole run and the time written
+        in a corner. Frames are evenly spaced in time: from the dense output when the run
+        kept it (``dense_output=True``), else the nearest saved sample (the coordinates are
+        never interpolated: that would shorten the rods). Needs matplotlib; the figure has
+        its own canvas, so the process's backend is never changed.
+
+        Parameters
+        ----------
+        path : str or path-like
+            The file: ``.gif`` or ``.mp4`` (needs the ``ffmpeg`` program).
+        drawing : fastvi.drawing.Drawing, optional
+            Instead of the model's (a Result read by :meth:`Result.load` or unpickled keeps
+            only a scene's drawing).
+        fps : float, default 30
+            Frames per second of the animation.
+        duration : float, optional
+            Seconds of animation for the whole run: ``round(duration · fps)`` frames. Default:
+            the run in real time, at most 20 s (a longer run plays faster; the time label then
+            shows the speed-up).
+        every : int, optional
+            Instead of ``duration``: a frame at every ``every``-th saved sample.
+        trail : float, default 1.0
+            Seconds of simulated time of the path left behind by ``trail_points`` (0 or None:
+            no trail, ``numpy.inf``: the whole path).
+        trail_points : sequence of int, optional
+            Indices of the drawing's points that leave a trail (default: the last moving
+            point, a pendulum's tip).
+        dpi : float, default 80
+            Pixels per inch (the figure is about 5.5 inches wide). A GIF keeps every frame in
+            memory until it is written (≈ 0.2 MB a frame at the default size).
+        progress : bool, optional
+            A progress bar (tqdm) while the frames are drawn; default: on a terminal, from
+            100 frames on.
+
+        Returns
+        -------
+        pathlib.Path
+            The file written.
+
+        Raises
+        ------
+        ValueError
+            The model has no drawing (the message says how to give one), or an argument is
+            out of range.
+        RuntimeError
+            An ``.mp4`` path without ffmpeg installed.
+        """
+        from .animation import render
+
+        return render(self, path, _new_figure(path, (5.5, 5.5)), drawing=drawing, fps=fps,
+                      duration=duration, every=every, trail=trail, trail_points=trail_points,
+                      dpi=dpi, progress=progress)
+
+    def plot_trajectory(self, points=None, path=None, *, drawing=None):
+        """The paths of chosen points of the mechanism over the run, in the plane or in space.
+
+        The mechanism is drawn at the first sample (faded) and the last, and the path of
+        each chosen point through every saved sample (or, with dense output, eight times
+        as many points of the trajectory). Needs matplotlib and a drawing (see
+        :meth:`animate`).
+
+        Parameters
+        ----------
+        points : sequence of int, optional
+            Indices of the drawing's points whose paths are drawn (default: every moving
+            point that the drawing marks).
+        path : str or path-like, optional
+            Save the figure there (PNG, PDF, … by extension).
+        drawing : fastvi.drawing.Drawing, optional
+            Instead of the model's.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from .animation import draw_paths
+
+        fig = draw_paths(self, _new_figure(path, (6, 6)), points=points, drawing=drawing)
+        return _finish_figure(fig, path)
+
 
 class NoDenseOutput:
     """:attr:`Result.sol` of a run without ``dense_output=True``: false in a test, and
@@ -261,6 +347,8 @@ class Result(TrajectoryResult):
     h : float
     failed_step : int or None
     model_name : str
+    drawing : fastvi.drawing.Drawing or None
+        The model's drawing, for :meth:`animate` and :meth:`plot_trajectory`.
     """
 
     t: np.ndarray
@@ -283,6 +371,7 @@ class Result(TrajectoryResult):
     q_events: list | None = None
     v_events: list | None = None
     sol: object = field(default_factory=NoDenseOutput)
+    drawing: object = field(default=None, repr=False, compare=False)
 
     @property
     def work_driven(self):
@@ -303,7 +392,8 @@ class Result(TrajectoryResult):
         return super().summary().replace(f": {self._label()},", f": method {self._label()},", 1)
 
     def save(self, path) -> None:
-        """Write the arrays, stats and method to a ``.npz`` file (read back by :meth:`load`)."""
+        """Write the arrays, stats and method to a ``.npz`` file (read back by :meth:`load`),
+        and a scene's drawing as the scene's name and arguments."""
         stats = dict(self.stats)
         rec = stats.pop("recovered_steps", [])
         np.savez_compressed(
@@ -315,7 +405,7 @@ class Result(TrajectoryResult):
             stats_recovered_steps=np.asarray(rec, dtype=np.int64).reshape(-1, 2),
             **({} if self.work is None else {"work": self.work}),
             **({} if self.work_forces is None else {"work_forces": self.work_forces}),
-            **{f"stats_{k}": v for k, v in stats.items()},
+            **{f"stats_{k}": v for k, v in stats.items()}, **_drawing.saved(self.drawing),
         )
 
     @classmethod
@@ -350,7 +440,7 @@ class Result(TrajectoryResult):
             return cls(**arrays, stats=stats, status=Status(int(data["status"])),
                        method=_method(str(data["method"])), h=float(data["h"]),
                        failed_step=None if failed < 0 else failed, model_name=name, work=work,
-                       work_forces=forces)
+                       work_forces=forces, drawing=_drawing.loaded(data))
 
 
 # ---------------------------------------------------------------------------- plotting helpers

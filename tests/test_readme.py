@@ -57,7 +57,7 @@ def test_readme_python_blocks_run(tmp_path):
 API = ROOT / "docs" / "api.rst"
 PUBLIC_MODULES = ["fastvi.check", "fastvi.symbolic", "fastvi.scenes", "fastvi.tables", "fastvi.status",
                   "fastvi.model", "fastvi.ensemble", "fastvi.distributed", "fastvi.baselines",
-                  "fastvi.events"]
+                  "fastvi.events", "fastvi.drawing"]
 # Public modules held to the full docstring rule below for every name.
 STRICT_MODULES = ["fastvi.check", "fastvi.symbolic"]
 SECTIONS = ("Parameters", "Returns", "Raises", "Attributes", "Notes", "Examples", "References",

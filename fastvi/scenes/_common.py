@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..drawing import for_scene
+
 
 def check_positive(**values: float) -> None:
     """Raise naming the first argument that is not a positive finite number."""
@@ -12,9 +14,11 @@ def check_positive(**values: float) -> None:
             raise ValueError(f"`{key}` must be positive and finite, got {val!r}")
 
 
-def attach(model, scene: str, kwargs: dict, **helpers):
-    """Record how to rebuild the scene (pickling) and attach its helpers to the model."""
+def attach(model, scene: str, kwargs: dict, drawing=None, **helpers):
+    """Record how to rebuild the scene (pickling) and attach its drawing and helpers."""
     model._recipe = (scene, dict(kwargs))
+    if drawing is not None:
+        model.drawing = for_scene(drawing, scene, kwargs)
     for name, fn in helpers.items():
         setattr(model, name, fn)
     return model

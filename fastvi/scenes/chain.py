@@ -27,6 +27,7 @@ import numpy as np
 
 from ..model import Model
 from . import damping as damping_
+from ..drawing import cartesian
 from ._common import attach, check_positive
 
 #: the smallest chain (a single link is :func:`fastvi.scenes.pendulum`)
@@ -102,6 +103,11 @@ def pattern(N: int):
             rows.append(i)
             cols.append(a)
     return np.array(rows), np.array(cols)
+
+
+def drawing(N: int):
+    """The chain's :class:`fastvi.drawing.Drawing`: the pivot, then the N bodies, each link a bar."""
+    return cartesian(2 * N, [(i, i + 1) for i in range(N)], before=[(0.0, 0.0)])
 
 
 def state_from_angles(thetas, omegas=None, lengths=None):
@@ -190,7 +196,8 @@ def chain(N: int, m=1.0, l=1.0, g: float = 9.81, damping: float = 0.0) -> Model:
     Model
         With exact second derivatives, ``initial_state(thetas, omegas=None) -> (q0, v0)``
         (angles from the downward vertical; a consistent state: ``g(q0) = 0``,
-        ``G(q0) v0 = 0`` to round-off) and ``angles(q) -> thetas`` (..., N).
+        ``G(q0) v0 = 0`` to round-off), ``angles(q) -> thetas`` (..., N) and a ``drawing``
+        (the pivot, then the bodies).
 
     Notes
     -----
@@ -223,4 +230,4 @@ def chain(N: int, m=1.0, l=1.0, g: float = 9.81, damping: float = 0.0) -> Model:
 
     kw = dict(N=N, m=ms if len(set(ms)) > 1 else ms[0], l=ls if len(set(ls)) > 1 else ls[0], g=g,
               damping=c)
-    return attach(model, "chain", kw, initial_state=initial_state, angles=angles)
+    return attach(model, "chain", kw, drawing=drawing(N), initial_state=initial_state, angles=angles)

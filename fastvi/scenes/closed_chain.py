@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Model
+from ..drawing import cartesian
 from ._common import attach, check_positive
 
 MIN_LINKS = 3
@@ -140,7 +141,8 @@ def closed_chain(N: int = 8, m: float = 1.0, l: float = 1.0, d: float | None = N
     -------
     Model
         With ``initial_state() -> (q0, v0)``: at rest on a circular arc through both pivots
-        (consistent: ``g(q0) = 0`` to round-off).
+        (consistent: ``g(q0) = 0`` to round-off), and a ``drawing`` (pivot A, the bodies,
+        pivot D).
     """
     if isinstance(N, bool) or not isinstance(N, (int, np.integer)) or N < MIN_LINKS:
         raise ValueError(f"`N` must be an integer >= {MIN_LINKS}, got {N!r}")
@@ -158,4 +160,6 @@ def closed_chain(N: int = 8, m: float = 1.0, l: float = 1.0, d: float | None = N
     def initial_state():
         return _arc(N, l, d).ravel(), np.zeros(n)
 
-    return attach(model, "closed_chain", dict(N=N, m=m, l=l, d=d, g=g), initial_state=initial_state)
+    drawing = cartesian(n, [(i, i + 1) for i in range(N)], before=[(0.0, 0.0)], after=[(d, 0.0)])
+    return attach(model, "closed_chain", dict(N=N, m=m, l=l, d=d, g=g), drawing=drawing,
+                  initial_state=initial_state)

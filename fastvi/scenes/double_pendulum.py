@@ -13,6 +13,7 @@ import numpy as np
 
 from ..model import Model
 from . import damping as damping_
+from ..drawing import cartesian
 from ._common import attach, check_positive
 
 # params = (m1, m2, l1, l2, g)
@@ -106,7 +107,8 @@ def double_pendulum(m1: float = 1.0, m2: float = 1.0, l1: float = 1.0, l2: float
     Defaults are paper B's parameters. The model has
     ``initial_state(theta1, theta2, omega1=0, omega2=0) -> (q0, v0)`` and
     ``angles(q) -> (theta1, theta2)``, and ``flips = (inner_flip, outer_flip)``: terminal
-    events for a rod passing over the top (``integrate(..., events=model.flips)``). ``damping = c > 0`` adds the force ``−c ṙ_i`` on
+    events for a rod passing over the top (``integrate(..., events=model.flips)``), and a
+    ``drawing`` (pivot, m1, m2). ``damping = c > 0`` adds the force ``−c ṙ_i`` on
     both masses (:mod:`fastvi.scenes.damping`; ``params`` then end with ``c``): with unit
     masses the angle equations simply gain ``−c θ̇``.
     """
@@ -122,5 +124,7 @@ def double_pendulum(m1: float = 1.0, m2: float = 1.0, l1: float = 1.0, l2: float
     def initial_state(theta1, theta2, omega1=0.0, omega2=0.0):
         return state_from_angles(theta1, theta2, omega1, omega2, l1, l2)
 
+    drawing = cartesian(4, [(0, 1), (1, 2)], before=[(0.0, 0.0)], labels=("pivot", "m1", "m2"))
     return attach(model, "double_pendulum", dict(m1=m1, m2=m2, l1=l1, l2=l2, g=g, damping=c),
-                  initial_state=initial_state, angles=angles, flips=(inner_flip, outer_flip))
+                  drawing=drawing, initial_state=initial_state, angles=angles,
+                  flips=(inner_flip, outer_flip))

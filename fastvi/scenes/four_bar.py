@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Model
+from ..drawing import cartesian
 from ._common import attach, check_positive
 from .double_pendulum import _V, _dV  # same masses-then-g layout: V = g (mB yB + mC yC)
 
@@ -66,7 +67,7 @@ def four_bar(mB: float = 1.0, mC: float = 1.0, a: float = 1.0, L: float = 2.0, g
     The model has ``initial_state(theta, omega=0.0) -> (q0, v0)`` on the parallelogram
     branch (crank angle ``theta`` from the ground line, coupler parallel to the ground),
     ``crank_angle(q)`` and ``coupler_tilt(q)`` (the coupler's angle to the ground: 0 on the
-    parallelogram branch).
+    parallelogram branch), and a ``drawing`` (A, B, C, D).
     """
     check_positive(mB=mB, mC=mC, a=a, L=L, g=g)
     model = Model(
@@ -88,5 +89,7 @@ def four_bar(mB: float = 1.0, mC: float = 1.0, a: float = 1.0, L: float = 2.0, g
         q = np.asarray(q)
         return np.arctan2(q[..., 3] - q[..., 1], q[..., 2] - q[..., 0])
 
-    return attach(model, "four_bar", dict(mB=mB, mC=mC, a=a, L=L, g=g), initial_state=initial_state,
-                  crank_angle=crank_angle, coupler_tilt=coupler_tilt)
+    drawing = cartesian(4, [(0, 1), (1, 2), (2, 3)], before=[(0.0, 0.0)], after=[(L, 0.0)],
+                        labels=("A", "B", "C", "D"))
+    return attach(model, "four_bar", dict(mB=mB, mC=mC, a=a, L=L, g=g), drawing=drawing,
+                  initial_state=initial_state, crank_angle=crank_angle, coupler_tilt=coupler_tilt)

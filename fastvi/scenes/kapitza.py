@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Model
+from ..drawing import Drawing
 from ._common import attach, check_positive
 
 
@@ -68,7 +69,8 @@ def kapitza_pendulum(m: float = 1.0, l: float = 1.0, g: float = 9.81, a: float =
     Model
         ``time_dependent=True`` with exact ``∂g/∂t``; helpers
         ``initial_state(theta, theta_dot=0.0, t0=0.0) -> (q0, v0)`` (consistent at ``t0``:
-        the pivot's velocity included), ``angle(q, t) -> theta`` and ``pivot(t) -> y_p``.
+        the pivot's velocity included), ``angle(q, t) -> theta``, ``pivot(t) -> y_p`` and a
+        ``drawing`` (the moving pivot, the bob).
     """
     check_positive(m=m, l=l, g=g, a=a, omega=omega)
     model = Model(
@@ -90,5 +92,9 @@ def kapitza_pendulum(m: float = 1.0, l: float = 1.0, g: float = 9.81, a: float =
         q = np.asarray(q)
         return np.arctan2(q[..., 0], pivot(t) - q[..., 1])
 
+    def points(t, q):  # the pivot moves: the drawing reads the time
+        return np.array([[0.0, pivot(t)], [q[0], q[1]]])
+
+    drawing = Drawing(2, points, [(0, 1)], pivots=(0,), labels=("pivot", "bob"), time_dependent=True)
     return attach(model, "kapitza_pendulum", dict(m=m, l=l, g=g, a=a, omega=omega),
-                  initial_state=initial_state, angle=angle, pivot=pivot)
+                  drawing=drawing, initial_state=initial_state, angle=angle, pivot=pivot)

@@ -28,6 +28,7 @@ import numpy as np
 
 from .._numba import njit
 from ..model import Model
+from ..drawing import cartesian
 from ._common import attach, check_positive
 
 MIN_CELLS = 1
@@ -178,7 +179,8 @@ def ladder(N: int = 8, m: float = 1.0, a: float = 1.0, L: float = 1.0, g: float 
     Model
         With ``initial_state(thetas, omegas=None) -> (q0, v0)`` (rail angles from the +x
         axis, consistent on the parallelogram branch), ``rail_sines(q)`` (zero at a cell's
-        singular position) and ``rung_tilts(q)`` (zero on the parallelogram branch).
+        singular position), ``rung_tilts(q)`` (zero on the parallelogram branch) and a
+        ``drawing`` (the ground pivots, then B_i, C_i level by level).
     """
     if isinstance(N, bool) or not isinstance(N, (int, np.integer)) or N < MIN_CELLS:
         raise ValueError(f"`N` must be an integer >= {MIN_CELLS}, got {N!r}")
@@ -195,5 +197,10 @@ def ladder(N: int = 8, m: float = 1.0, a: float = 1.0, L: float = 1.0, g: float 
             raise ValueError(f"`thetas` must have N = {N} entries, got shape {th.shape}")
         return state_from_angles(th, omegas, a, L)
 
-    return attach(model, "ladder", dict(N=N, m=m, a=a, L=L, g=g), initial_state=initial_state,
-                  rail_sines=lambda q: rail_sines(q, a), rung_tilts=rung_tilts)
+    # points B_0, C_0 (the ground pivots), B_1, C_1, …: B_i is point 2i, C_i point 2i + 1
+    bars = [(2 * i + s, 2 * i + 2 + s) for i in range(N) for s in (0, 1)]  # the rails
+    bars += [(2 * i, 2 * i + 1) for i in range(1, N + 1)]  # the rungs
+    drawing = cartesian(n, bars, before=[(0.0, 0.0), (L, 0.0)])
+    return attach(model, "ladder", dict(N=N, m=m, a=a, L=L, g=g), drawing=drawing,
+                  initial_state=initial_state, rail_sines=lambda q: rail_sines(q, a),
+                  rung_tilts=rung_tilts)

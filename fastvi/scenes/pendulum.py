@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Model
+from ..drawing import cartesian
 from ._common import attach, check_positive
 
 # params = (m, l, g)
@@ -42,7 +43,7 @@ def pendulum(m: float = 1.0, l: float = 1.0, g: float = 9.81) -> Model:
     """Planar pendulum (n = 2, m = 1) with exact second derivatives.
 
     The model has ``initial_state(theta, omega=0.0) -> (q0, v0)`` with ``theta`` measured
-    from the downward vertical, and ``angle(q) -> theta``.
+    from the downward vertical, ``angle(q) -> theta``, and a ``drawing`` (pivot, bob).
     """
     check_positive(m=m, l=l, g=g)
     model = Model(
@@ -60,4 +61,6 @@ def pendulum(m: float = 1.0, l: float = 1.0, g: float = 9.81) -> Model:
         q = np.asarray(q)
         return np.arctan2(q[..., 0], -q[..., 1])
 
-    return attach(model, "pendulum", dict(m=m, l=l, g=g), initial_state=initial_state, angle=angle)
+    drawing = cartesian(2, [(0, 1)], before=[(0.0, 0.0)], labels=("pivot", "bob"))
+    return attach(model, "pendulum", dict(m=m, l=l, g=g), drawing=drawing,
+                  initial_state=initial_state, angle=angle)

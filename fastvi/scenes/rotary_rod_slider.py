@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Model
+from ..drawing import Drawing
 from ._common import attach, check_positive
 
 # params = (l, mA, mB, k, r0, g)
@@ -132,7 +133,7 @@ def rotary_rod_slider(l: float = 2.0, mA: float = 2.0, mB: float = 5.0, k: float
     Model
         With ``initial_state(theta=0, r=r0, omega=0, r_dot=0) -> (q0, v0)`` (consistent:
         ``φ = θ``, ``φ̇ = θ̇``), ``energy_parts(q, v)`` (see :func:`energy_parts`) and
-        ``slider_position(q) -> (x, y)``.
+        ``slider_position(q) -> (x, y)``, and a ``drawing`` (O, the rod O–A, the slider B).
     """
     check_positive(l=l, mA=mA, mB=mB, k=k, r0=r0, g=g)
     model = Model(
@@ -153,5 +154,10 @@ def rotary_rod_slider(l: float = 2.0, mA: float = 2.0, mB: float = 5.0, k: float
         q = np.asarray(q, float)
         return q[..., 1] * np.cos(q[..., 2]), q[..., 1] * np.sin(q[..., 2])
 
-    return attach(model, "rotary_rod_slider", kw, initial_state=initial_state,
+    def points(q):  # O, the rod's tip A (no mass: not marked), the slider B
+        return np.array([[0.0, 0.0], [l * np.cos(q[0]), l * np.sin(q[0])],
+                         [q[1] * np.cos(q[2]), q[1] * np.sin(q[2])]])
+
+    drawing = Drawing(2, points, [(0, 1)], pivots=(0,), labels=("O", "A", "B"), sizes=(7.0, 0.0, 12.0))
+    return attach(model, "rotary_rod_slider", kw, drawing=drawing, initial_state=initial_state,
                   energy_parts=parts, slider_position=slider_position)

@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Model
+from ..drawing import cartesian
 from ._common import attach, check_positive
 
 
@@ -123,7 +124,7 @@ def slider_crank(r: float = 0.3, L: float = 1.0, m_a: float = 0.5, m_c: float = 
     Model
         ``time_dependent=True`` (the callbacks take ``t`` first, unused when free), exact
         derivatives; helpers ``initial_state(phi, omega=drive)`` (exact, consistent at
-        ``t0 = phi/Ω`` when driven) and ``crank_angle(q)``.
+        ``t0 = phi/Ω`` when driven), ``crank_angle(q)`` and a ``drawing`` (O, A, C, B).
     """
     check_positive(r=r, L=L, m_a=m_a, m_c=m_c, m_b=m_b, g=g)
     if not r < L:
@@ -149,5 +150,7 @@ def slider_crank(r: float = 0.3, L: float = 1.0, m_a: float = 0.5, m_c: float = 
         q = np.asarray(q)
         return np.arctan2(q[..., 1], q[..., 0])
 
+    # points O (the crank's pivot), A, C, B: C, the rod's mass, sits on the bar A–B
+    drawing = cartesian(6, [(0, 1), (1, 3)], before=[(0.0, 0.0)], labels=("O", "A", "C", "B"))
     return attach(model, "slider_crank", dict(r=r, L=L, m_a=m_a, m_c=m_c, m_b=m_b, g=g, drive=drive),
-                  initial_state=initial_state, crank_angle=crank_angle)
+                  drawing=drawing, initial_state=initial_state, crank_angle=crank_angle)

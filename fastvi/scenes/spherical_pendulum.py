@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Model
+from ..drawing import cartesian
 from ._common import attach, check_positive
 
 # params = (m, l, g)
@@ -105,8 +106,8 @@ def spherical_pendulum(m: float = 1.0, l: float = 1.0, g: float = 9.81) -> Model
     -------
     Model
         With ``initial_state(theta, phi, theta_dot=0, phi_dot=0) -> (q0, v0)`` (``theta``
-        the polar angle from the downward vertical), ``angles(q) -> (theta, phi)`` and
-        ``angular_momentum(q, p) -> q × p``.
+        the polar angle from the downward vertical), ``angles(q) -> (theta, phi)``,
+        ``angular_momentum(q, p) -> q × p`` and a 3-D ``drawing`` (pivot, bob).
 
     Examples
     --------
@@ -128,5 +129,6 @@ def spherical_pendulum(m: float = 1.0, l: float = 1.0, g: float = 9.81) -> Model
     def initial_state(theta: float, phi: float, theta_dot: float = 0.0, phi_dot: float = 0.0):
         return state_from_angles(theta, phi, theta_dot, phi_dot, l)
 
-    return attach(model, "spherical_pendulum", dict(m=m, l=l, g=g), initial_state=initial_state,
-                  angles=angles, angular_momentum=angular_momentum)
+    drawing = cartesian(3, [(0, 1)], dim=3, before=[(0.0, 0.0, 0.0)], labels=("pivot", "bob"))
+    return attach(model, "spherical_pendulum", dict(m=m, l=l, g=g), drawing=drawing,
+                  initial_state=initial_state, angles=angles, angular_momentum=angular_momentum)

@@ -29,6 +29,7 @@ from numba import njit
 
 from ..model import Model
 from . import damping as damping_
+from ..drawing import cartesian
 from ._common import attach, check_positive
 from .chain import _dV, _per_link, _V
 
@@ -124,7 +125,8 @@ def tree(branches: int = 3, links: int = 3, m=1.0, l=1.0, g: float = 9.81, dampi
     Model
         With exact second derivatives, its declared pattern of ``G``,
         ``initial_state(thetas, omegas=None) -> (q0, v0)`` (link angles from the downward
-        vertical in body order, a consistent state) and ``angles(q) -> thetas`` (..., N).
+        vertical in body order, a consistent state), ``angles(q) -> thetas`` (..., N) and a
+        ``drawing`` (the pivot, then the bodies).
 
     Notes
     -----
@@ -180,4 +182,6 @@ def tree(branches: int = 3, links: int = 3, m=1.0, l=1.0, g: float = 9.81, dampi
 
     kw = dict(branches=branches, links=links, m=ms if len(set(ms)) > 1 else ms[0],
               l=ls if len(set(ls)) > 1 else ls[0], g=g, damping=c)
-    return attach(model, "tree", kw, initial_state=initial_state, angles=angles)
+    # point 0 is the pivot, point i + 1 body i
+    drawing = cartesian(2 * N, [(k + 1, i + 1) for i, k in enumerate(par)], before=[(0.0, 0.0)])
+    return attach(model, "tree", kw, drawing=drawing, initial_state=initial_state, angles=angles)

@@ -22,6 +22,7 @@ from ._common import attach, check_positive
 from .chain import _G, _V, _dV, _ddg, _g
 from .chain import pattern as _chain_pattern
 from .chain import angles as _chain_angles
+from .chain import drawing as _chain_drawing
 from .chain import state_from_angles as _chain_state
 
 # params = (m1, m2, m3, l1, l2, l3, g): the layout of a 3-link `chain`, whose callbacks
@@ -66,7 +67,8 @@ def triple_pendulum(m=(1.0, 1.0, 1.0), l=(1.0, 1.0, 1.0), g: float = 9.81) -> Mo
         Gravitational acceleration (along ``−y``).
 
     The model has ``initial_state(theta1, theta2, theta3, omega1=0, omega2=0, omega3=0)
-    -> (q0, v0)`` (angles from the downward vertical) and ``angles(q) -> (θ1, θ2, θ3)``.
+    -> (q0, v0)`` (angles from the downward vertical), ``angles(q) -> (θ1, θ2, θ3)`` and a
+    ``drawing`` (the pivot, then the three bodies).
     ``params = (m1, m2, m3, l1, l2, l3, g)``.
     """
     m = _triple("m", m)
@@ -82,5 +84,5 @@ def triple_pendulum(m=(1.0, 1.0, 1.0), l=(1.0, 1.0, 1.0), g: float = 9.81) -> Mo
     def initial_state(theta1, theta2, theta3, omega1=0.0, omega2=0.0, omega3=0.0):
         return state_from_angles(theta1, theta2, theta3, omega1, omega2, omega3, *l)
 
-    return attach(model, "triple_pendulum", dict(m=m, l=l, g=g),
+    return attach(model, "triple_pendulum", dict(m=m, l=l, g=g), drawing=_chain_drawing(3),
                   initial_state=initial_state, angles=angles)

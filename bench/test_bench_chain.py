@@ -1,4 +1,4 @@
-"""Cost growth (issues 6 and 12): cost per step of ``P2L-Q3G`` on an N-link chain, N = 16 … 256,
+"""Cost growth: cost per step of ``P2L-Q3G`` on an N-link chain, N = 16 … 256,
 structured (banded) and dense linear solves side by side.
 
 ``fastvi.scenes.chain(N)``: n = 2N Cartesian coordinates, m = N constraints, unit masses and
@@ -11,8 +11,7 @@ timed up to N = 64 only (≈ 200 ms a step at N = 128).
 The time per step is the integration loop's (``stats["integration_time"]``, median over the
 rounds; the set-up — pattern detection, ordering, initial projection — is reported apart).
 The report prints, per N, both paths, their ratio, Newton iterations per step, the local
-log–log slopes and the least-squares exponent over N = 16 … 256 (goal of issue 12: ≤ 1.2,
-and chain(128) ≤ 1 ms a step). ``test_tree_sparse_against_banded`` times trees (a hub with
+log–log slopes and the least-squares exponent over N = 16 … 256. ``test_tree_sparse_against_banded`` times trees (a hub with
 branches, a pattern no narrow band fits) on the banded and the sparse LU side by side and
 prints the ratio. Run with ``make bench`` or
 ``.venv/bin/python -m pytest bench/test_bench_chain.py --benchmark-only``.
@@ -57,7 +56,7 @@ def _print_report(write):
               f"{dense:>10} {ratio:>9} {r['iterations']:>8.2f} {1e3 * r['setup']:>9.0f}")
     f = fit_exponent(_rows, "per_step")
     write(f"fitted exponent of cost per step vs N, N = {f['sizes'][0]}…{f['sizes'][-1]}: "
-          f"{f['exponent']:.2f} (goal ≤ 1.2); local slopes "
+          f"{f['exponent']:.2f}; local slopes "
           + ", ".join(f"{k}: {v:.2f}" for k, v in f["local"].items()))
     dense = {N: r for N, r in _rows.items() if r.get("dense")}
     if len(dense) >= 2:

@@ -1,4 +1,4 @@
-"""Yardstick benchmark (issue 2, item 9): generic cfunc kernel vs hand-specialized kernel.
+"""Yardstick benchmark: generic cfunc kernel vs hand-specialized kernel.
 
 Double pendulum (Cartesian, paper B's parameters), θ1 = θ2 = π/2 at rest, 10⁴ steps at
 h = 0.01, for ``P1L-Q2G``, ``P2L-Q3G``, ``P3L-Q4G``:

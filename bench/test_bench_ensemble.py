@@ -1,4 +1,4 @@
-"""Ensemble benchmark (issue 5): 256 double-pendulum members × 1000 steps of P2L-Q3G, h = 0.01.
+"""Ensemble benchmark: 256 double-pendulum members × 1000 steps of P2L-Q3G, h = 0.01.
 
 Contenders, all on the same members (angles uniform in [-1.5, 1.5]², at rest, seed 2024),
 over the same time span t ∈ [0, 10]:
@@ -23,7 +23,7 @@ member-steps per second, a SciPy "member-step" being 1/1000 of one member's time
 kernels (2 threads, rounds alternated) and asserts equal final states.
 
 The report at the end prints the thread speed-up, median(1 thread) / median(2 threads)
-(goal ≥ 1.7 on a 2-core machine), and every throughput; run with
+and every throughput; run with
 ``.venv/bin/python -m pytest bench/test_bench_ensemble.py --benchmark-only`` (or ``make bench``).
 Everything is compiled (or loaded from numba's cache) before timing.
 """

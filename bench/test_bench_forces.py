@@ -1,4 +1,4 @@
-"""What a force or a time-dependent constraint costs per step (issue 13).
+"""What a force or a time-dependent constraint costs per step.
 
 Pairs of the same mechanism, conservative and forced / rheonomic, integrated side by side
 in one session (``P2L-Q3G``, 5 000 steps, only the end saved, everything compiled first):

@@ -1,4 +1,4 @@
-"""Methods benchmark (issue 6, item 1): fastvi against RK4 and SciPy on the same models.
+"""Methods benchmark: fastvi against RK4 and SciPy on the same models.
 
 Two scenes, each integrated over the span of 10⁴ steps of h = 0.01 (T = 100 s):
 

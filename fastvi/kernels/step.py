@@ -1590,10 +1590,13 @@ class _SizedStage(types.WrapperAddressProtocol):
 
 #: the stages compiled for a workspace's sizes where :func:`step_kernel` is asked to
 #: (``sized``): the mechanics iteration and the end projection, where a small model's
-#: step spends its time in loops of 2–12 iterations. The step itself, the full Newton and
-#: the time loops stay generic: sizing them too was no faster and compiled 36 s, not ~8 s
+#: step spends its time in loops of 2–12 iterations — or, for a run that always takes the
+#: full Newton (``newton="full"``, a method without the mechanics matrix), the full Newton
+#: in place of the mechanics iteration. The step itself and the time loops stay generic:
+#: sizing the step too saved 8–10 % for 3 s more of compiling per size
 #: (``docs/decisions/0012-sized-stages.md``).
 SIZED_STAGES = ("newton_mech", "end_momentum")
+SIZED_STAGES_FULL = ("newton_full", "end_momentum")
 
 
 def _stage_signatures(md, tabs, opts, ws):
@@ -1608,15 +1611,17 @@ def _stage_signatures(md, tabs, opts, ws):
 
 
 def _sized(key, md, tabs, opts, ws, stages, compile):
-    """``stages`` with :data:`SIZED_STAGES` compiled for the sizes of ``ws``: compiled now
-    with ``compile``, else only if in this process or numba's disk cache; else None."""
-    skey = (key, "sized", _key(layout_specialize(ws).dims))
+    """``stages`` with :data:`SIZED_STAGES` (or :data:`SIZED_STAGES_FULL`) compiled for the
+    sizes of ``ws``: compiled now with ``compile``, else only if in this process or numba's
+    disk cache; else None."""
+    names = SIZED_STAGES_FULL if opts.mode == NEWTON_FULL or not tabs.mech else SIZED_STAGES
+    skey = (key, "sized", _key(layout_specialize(ws).dims), names)
     if skey not in _OPTIONAL:
         generic = _stage_signatures(md, tabs, opts, ws)
         sized = _stage_signatures(md, tabs, opts, layout_specialize(ws))
-        fns = dict(newton_mech=newton_mech, end_momentum=end_momentum)
+        fns = dict(newton_mech=newton_mech, newton_full=newton_full, end_momentum=end_momentum)
         entries = {}
-        for name in SIZED_STAGES:
+        for name in names:
             cf = _cfunc(fns[name].py_func, sized[name], compile)
             if cf is None:
                 return None

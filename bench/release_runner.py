@@ -12,6 +12,7 @@ compile: every method is warmed up first), the Newton iterations per step and th
 state. ``newton`` is ignored by a release that has no such option.
 """
 
+import importlib
 import inspect
 import json
 import sys
@@ -24,19 +25,27 @@ import fastvi
 H = 0.01
 
 
+def _study(module: str, released: str):
+    """A module of the speed study: ``module`` of a tree that has the ``studies/`` folder,
+    ``released`` of a release that shipped the studies in the package."""
+    try:
+        return importlib.import_module(module)
+    except ModuleNotFoundError:
+        return importlib.import_module(released)
+
+
 def _scene(name):
     if name.startswith("slider"):  # the stiff panel's rod–slider, e.g. slider1e8 (k = 1e8)
-        from fastvi.studies import peers
+        peers = _study("studies.peers", "fastvi.studies.peers")
 
         k = float(name[6:])
         model = fastvi.scenes.rotary_rod_slider(k=k)
         return (model, *model.initial_state(0.0, peers.SLIDER_R0 + peers.slider_stretch(k)))
     if name.startswith("chain"):
-        from fastvi.studies.wpd import chain_angles
-
         N = int(name[5:])
+        growth = _study("studies.wpd.growth", "fastvi.studies.wpd")
         model = fastvi.scenes.chain(N)
-        return (model, *model.initial_state(chain_angles(N)))
+        return (model, *model.initial_state(growth.chain_angles(N)))
     model = fastvi.scenes.double_pendulum()
     return (model, *model.initial_state(np.pi / 2, np.pi / 2))
 

@@ -24,7 +24,7 @@ import pytest
 
 import fastvi
 from fastvi import structure
-from fastvi.studies.wpd import GROWTH_H, GROWTH_METHOD, chain_angles, fit_exponent, growth_steps
+from studies.wpd.growth import GROWTH_H, GROWTH_METHOD, chain_angles, fit_exponent, growth_steps
 
 SIZES = (16, 32, 64, 128, 256)
 DENSE_UP_TO = 64

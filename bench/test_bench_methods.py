@@ -13,9 +13,9 @@ Contenders, all on the same :class:`fastvi.Model` callbacks:
   ``P2L-Q3G-NE-CE``: ``fastvi.integrate`` (validation, every step saved, the ``Result``);
 * ``RK4`` and ``RK4+proj``: :func:`fastvi.baselines.rk4` (index-1 form, numba), 10⁴ steps;
 * SciPy ``RK45``, ``DOP853`` at ``rtol = atol = 1e-8`` and ``Radau`` at ``1e-6`` (Radau at
-  1e-8 takes ~10 s per round here): :func:`fastvi.studies.wpd.scipy_run`, the index-1
-  right-hand side of :func:`fastvi.baselines.solve_ivp` with the cfuncs frozen in (µs per
-  call), dense output every 0.1 s (every 0.01 s would cost SciPy ~25 % more).
+  1e-8 takes ~10 s per round here): :func:`fastvi.baselines.solve_ivp`, the index-1
+  right-hand side with the cfuncs frozen in (µs per call), dense output every 0.1 s (every
+  0.01 s would cost SciPy ~25 % more).
 
 Speed and error come from the same runs: every benchmark stores in ``extra_info`` the
 maximum energy error ``max|H − H(0)|``, the maximum constraint residuals ``max|g|`` and
@@ -35,8 +35,7 @@ import pytest
 from scipy.integrate import solve_ivp as scipy_solve_ivp
 
 import fastvi
-from fastvi.baselines import rk4
-from fastvi.studies.wpd import scipy_run
+from fastvi.baselines import rk4, solve_ivp
 from fastvi.studies.reference import chain_cartesian, chain_pendulum_reference
 
 H = 0.01
@@ -113,7 +112,8 @@ def _runner(name, model, q0, v0):
         return lambda: rk4(model, q0, v0, h=H, n_steps=N_STEPS, project=name == "RK4+proj")
     method = name.split()[1]
     t_eval = np.linspace(0.0, T_END, int(round(T_END / SCIPY_DT)) + 1)
-    return lambda: scipy_run(model, q0, v0, t_end=T_END, method=method, tol=SCIPY_TOL[method],
+    tol = SCIPY_TOL[method]
+    return lambda: solve_ivp(model, q0, v0, t_end=T_END, method=method, rtol=tol, atol=tol,
                              t_eval=t_eval)
 
 
@@ -142,7 +142,8 @@ def test_methods_1e4_steps(benchmark, scenes, scene, name):
     run = _runner(name, model, q0, v0)
     # compile (or load from numba's cache) and warm up outside the timing
     if name.startswith("SciPy"):
-        scipy_run(model, q0, v0, t_end=0.1, method=name.split()[1], tol=1e-6, t_eval=[0.0, 0.1])
+        solve_ivp(model, q0, v0, t_end=0.1, method=name.split()[1], rtol=1e-6, atol=1e-6,
+                  t_eval=[0.0, 0.1])
     elif name.startswith("RK4"):
         rk4(model, q0, v0, h=H, n_steps=10, project=name == "RK4+proj")
     else:

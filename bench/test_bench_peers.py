@@ -3,14 +3,14 @@
 ``fastvi.integrate`` as a user calls it — the default method ``P2L-Q3G``, the default
 kernels, a fixed step ``h`` chosen for each level of energy error — against CyRK's C++
 DOP853 on the hand-written Cartesian index-1 right-hand side of the same double pendulum
-(:mod:`fastvi.studies.peers`, variant (a)), over T = 1000 s and T = 10⁴ s from
+(:mod:`studies.peers`, variant (a)), over T = 1000 s and T = 10⁴ s from
 θ1 = θ2 = π/2 at rest, at two levels of max|ΔH| (≈ 1e-2 and ≈ 1e-4 J). Over the longer
 span a variational step's energy error stays bounded while DOP853's drifts, so DOP853 needs
 a tighter tolerance for the same max|ΔH|.
 
 **Equal error.** On this chaotic motion one start's max|ΔH| is a 1.3–4× lottery, so each
 setting's error is the median over :data:`STARTS` starts 1e-12 rad apart
-(:func:`fastvi.studies.wpd.peer_starts`). DOP853's tolerance runs over a quarter-decade
+(:func:`studies.wpd.peer_runs.peer_starts`). DOP853's tolerance runs over a quarter-decade
 grid; its cost at fastvi's error is interpolated log–log between the two grid tolerances
 that bracket that error, both timed.
 
@@ -32,7 +32,8 @@ import pytest
 pytest.importorskip("CyRK")
 
 import fastvi  # noqa: E402
-from fastvi.studies import peers, wpd  # noqa: E402
+from studies import peers  # noqa: E402
+from studies.wpd import peer_runs  # noqa: E402
 
 #: (T, level, method, h): the default method at a fixed step giving ≈ the level's max|ΔH|
 #: (its error ∝ h⁴: docs/wpd.md's P2L-Q3G rows scaled)
@@ -49,7 +50,7 @@ _dop_dH: dict[float, dict] = {}
 @pytest.fixture(scope="module")
 def setup():
     model = fastvi.scenes.double_pendulum()
-    starts = wpd.peer_starts(STARTS)
+    starts = peer_runs.peer_starts(STARTS)
     peers.warm_up_peers(methods=("DOP853",))
     ys = [peers.cartesian_start(th) for th in starts]
     return dict(model=model, starts=starts, ys=ys)
@@ -69,7 +70,7 @@ def _dop(y0, tol, T):
 
 def _fastvi(model, theta, method, h, T):
     q0, v0 = model.initial_state(*theta)
-    return wpd.fastvi_peer_run(model, q0, v0, method, h, T)
+    return peer_runs.fastvi_peer_run(model, q0, v0, method, h, T)
 
 
 def _bracket(dop_dH: dict, target: float):

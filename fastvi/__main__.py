@@ -1,7 +1,10 @@
 """Command line: python -m fastvi <command> [options].
 
-Each command is a function ``main(argv) -> int`` in a study module, imported only when used
-(so optional extras such as matplotlib are needed only by the commands that plot).
+Each command is a function ``main(argv) -> int`` in a module, imported only when used (so
+optional extras such as matplotlib are needed only by the commands that plot). ``compile``
+and ``demo`` ship with fastvi; ``paper-b``, ``orders`` and ``wpd`` regenerate pages of the
+documentation and run from the root of a source checkout, whose ``studies/`` folder holds
+them (they are not installed: docs/decisions/0011-studies-in-the-package.md).
 """
 
 from __future__ import annotations
@@ -14,10 +17,12 @@ import sys
 COMMANDS = {
     "compile": ("fastvi.warmup", "compile the kernels into the cache, or time a cold first session (--report)"),
     "demo": ("fastvi.studies.demo", "integrate the double pendulum and print a summary"),
-    "paper-b": ("fastvi.studies.paper_b", "reproduce paper B's tables and figures"),
-    "orders": ("fastvi.studies.orders", "measure convergence orders of every combination (docs/orders.md)"),
-    "wpd": ("fastvi.studies.wpd", "work-precision diagrams against RK4 and SciPy"),
+    "paper-b": ("studies.paper_b", "reproduce paper B's tables and figures (source checkout)"),
+    "orders": ("studies.orders", "measure convergence orders of every combination (source checkout)"),
+    "wpd": ("studies.wpd", "work-precision diagrams against RK4, SciPy and CyRK (source checkout)"),
 }
+#: the package of the commands that run from a source checkout only
+CHECKOUT_ONLY = "studies"
 
 
 def main(argv=None) -> int:
@@ -31,7 +36,17 @@ def main(argv=None) -> int:
         parser.print_help()
         return 0 if argv else 2
     args = parser.parse_args(argv[:1])
-    module = importlib.import_module(COMMANDS[args.command][0])
+    name = COMMANDS[args.command][0]
+    try:
+        module = importlib.import_module(name)
+    except ModuleNotFoundError as exc:
+        if exc.name not in (CHECKOUT_ONLY, name):
+            raise
+        print(f"python -m fastvi {args.command}: this command regenerates a page of fastvi's "
+              "documentation and runs from the root of a source checkout of fastvi (its "
+              f"'{CHECKOUT_ONLY}/' folder), not from an installed package: clone the repository, "
+              f"cd into it and run 'python -m fastvi {args.command}' there.", file=sys.stderr)
+        return 2
     return int(module.main(argv[1:]) or 0)
 
 

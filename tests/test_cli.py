@@ -53,6 +53,24 @@ def test_studies_do_not_default_to_the_package_docs(command, default, capsys):
     assert "(default: docs" not in out
 
 
+def test_a_study_outside_a_checkout_says_it_needs_one(monkeypatch, capsys):
+    """From an installed package (no ``studies/`` folder on the path) a study command says
+    where it runs instead of a traceback."""
+    import fastvi.__main__ as cli
+
+    real = cli.importlib.import_module
+
+    def installed_only(name, *args):
+        if name.split(".")[0] == cli.CHECKOUT_ONLY:
+            raise ModuleNotFoundError(f"No module named {cli.CHECKOUT_ONLY!r}", name=cli.CHECKOUT_ONLY)
+        return real(name, *args)
+
+    monkeypatch.setattr(cli.importlib, "import_module", installed_only)
+    assert main(["wpd", "--help"]) == 2
+    err = capsys.readouterr().err
+    assert "source checkout" in err and "python -m fastvi wpd" in err
+
+
 def test_makefile_regenerates_the_package_docs_explicitly():
     with open(os.path.join(ROOT, "Makefile"), encoding="utf-8") as fh:
         text = fh.read()

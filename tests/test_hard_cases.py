@@ -178,7 +178,7 @@ def test_the_full_newton_compiled_on_first_need_gives_the_same_run():
     iteration fails there) retakes that step once the stage is compiled: the same samples,
     events and dense output, bit for bit, as a run that had the stage from the start."""
     from fastvi.kernels import step as step_kernels
-    from fastvi.studies import peers
+    from studies import peers
 
     k = 1e8
     model = fastvi.scenes.rotary_rod_slider(k=k)

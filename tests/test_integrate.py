@@ -243,25 +243,23 @@ def test_kernel_cache_is_stamped_with_every_compiled_source():
     assert loc.get_source_stamp() == (stamp, plain.get_source_stamp())
 
 
-def test_a_study_edit_leaves_the_kernels_cached_and_recompiles_the_studies(monkeypatch):
-    """The kernels' stamp leaves out fastvi/studies (no kernel compiles a study); a study's
-    compiled loop (it inlines kernels) carries the kernels' stamp and the studies' own."""
+def test_the_step_profile_carries_the_kernels_stamp_and_its_own(monkeypatch):
+    """The step profile's compiled loops (``bench/step_profile.py``, outside the package) inline
+    the kernels: they opt in, so their stamp is the kernels' and their own file's; an edit of
+    the package's own studies helpers (no compiled code) leaves the kernels' stamp alone."""
+    from bench import step_profile
     from fastvi import _numba
-    from fastvi.studies import profile
 
-    kernels, studies = _numba._package_stamp(), _numba._sources_stamp(True)
-    assert kernels != studies
-    loc = _numba._InTree.from_function(profile.loop_residual.py_func, profile.__file__)
-    assert loc is not None and loc.get_source_stamp() == (kernels, studies)
-    # an edited study: the studies' stamp moves, the kernels' does not
+    kernels = _numba._package_stamp()
+    loc = _numba._InTree.from_function(step_profile.loop_residual.py_func, step_profile.__file__)
+    assert loc is not None and loc.get_source_stamp()[0] == kernels
     real = Path.read_bytes
     def edited(path):
         text = real(path)
-        return text + b"\n# edited\n" if path.name == "wpd.py" else text
+        return text + b"\n# edited\n" if path.name == "reference.py" else text
     monkeypatch.setattr(_numba, "_STAMPS", {})
     monkeypatch.setattr(Path, "read_bytes", edited)
     assert _numba._package_stamp() == kernels
-    assert _numba._sources_stamp(True) != studies
     # and an edited kernel moves the kernels' stamp
     def kernel_edited(path):
         text = real(path)

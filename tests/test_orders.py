@@ -10,7 +10,7 @@ import pytest
 import fastvi
 from fastvi.kernels.layout import make_workspace
 from tests.kernel_helpers import one_step
-from fastvi.studies import orders
+from studies import orders
 from fastvi.studies.convergence import observed_order
 from fastvi.studies.reference import chain_cartesian, chain_pendulum_reference
 from fastvi.tables import lagrange_basis

@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from fastvi.studies import paper_b
+from studies import paper_b
 
 
 def _rows(dH, growth=None, rk_growth=1.0, rk_dH=1e-9):

@@ -72,7 +72,7 @@ def test_specialize_is_a_flag_or_none():
 # slider's sizes
 @pytest.mark.slow
 def test_specialized_stiff_fallback_is_the_generic_trajectory_bit_for_bit():
-    from fastvi.studies import peers
+    from studies import peers
 
     k = 1e8
     model = fastvi.scenes.rotary_rod_slider(k=k)

@@ -68,7 +68,7 @@ def test_kernel_residual_equals_the_numpy_twin(label, model, q, v, name):
 
 
 def _chain_start():
-    from fastvi.studies.wpd import chain_angles
+    from studies.wpd.growth import chain_angles
 
     ch = fastvi.scenes.chain(6)  # n = 12: the constant-mass part's loops over the coordinates
     q, v = ch.initial_state(chain_angles(6))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._cli import study_parser
+from .cli import study_parser
 
 
 def main(argv=None) -> int:

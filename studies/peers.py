@@ -2,7 +2,7 @@ r"""Compiled peers for the speed-vs-error study: DOP853, LSODA and Radau from Cy
 
 A speed-minded user who does not need exact constraints integrates a hand-written compiled
 right-hand side with a compiled adaptive solver. This module is that user's code, so that
-``python -m fastvi wpd`` (:mod:`fastvi.studies.wpd`) can race fastvi against it:
+``python -m fastvi wpd`` (:mod:`studies.wpd`) can race fastvi against it:
 
 * the **solver**: CyRK's C++ solvers (``CyRK.nbsolve2_ivp``: DOP853, LSODA, Radau; the
   right-hand side is a numba ``cfunc`` called through a C function pointer, no Python in
@@ -48,7 +48,7 @@ right-hand side with a compiled adaptive solver. This module is that user's code
 Energies (and, for (a), the constraint residuals ``max |g_i(q)|`` in fastvi's own
 normalisation) are evaluated afterwards by compiled loops at **every accepted step** of the
 solver (CyRK stores each step; no dense output is requested): a denser sample than fastvi's
-saved steps (every 0.1 s in the study, ``fastvi.studies.wpd.PEER_SAMPLE_DT``), so never in
+saved steps (every 0.1 s in the study, ``studies.wpd.config.PEER_SAMPLE_DT``), so never in
 the peer's favour.
 
 CyRK is an optional dependency (the ``bench`` extra): ``pip install -e .[bench]`` or

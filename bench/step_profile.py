@@ -1,10 +1,14 @@
 """Where a step's time goes: each part of the step kernel timed in its own compiled loop.
 
-``python -m fastvi.studies.profile`` prints, for the double pendulum, the CPU time per call of
-the whole step (both Newton variants) and of its parts — the residual, the residual with the
-full Newton matrix, the dense LU and solve of that matrix, the mechanics-matrix solve, the end
-projection, one model callback — together with the calls per step, so that the parts can be
-added up and compared with the step (``docs/benchmarks.md``, "The step").
+``python -m bench.step_profile [METHOD …]`` (from the repository root) prints, for the double
+pendulum, the CPU time per call of the whole step (both Newton variants) and of its parts —
+the residual, the residual with the full Newton matrix, the dense LU and solve of that matrix,
+the mechanics-matrix solve, the end projection, one model callback — together with the calls
+per step, so that the parts can be added up and compared with the step (``docs/benchmarks.md``,
+"The step"); ``bench/test_bench_step_parts.py`` runs it under ``make bench``.
+
+The profile calls the kernels one by one, so it reads fastvi's internals (``fastvi.kernels``):
+it is a developer's measurement, kept beside the benchmarks, not a part of the package.
 """
 
 from __future__ import annotations
@@ -21,6 +25,10 @@ from fastvi.kernels.layout import make_workspace
 from fastvi.kernels.linalg import lu_factor, lu_solve
 from fastvi.kernels.step import (_exact_mechanics, _mech_solve, assemble, end_momentum, residual,
                                  step_kernel, step_once, take_step)
+
+#: compiled loops that inline fastvi's kernels: cached under the package's stamp and this file's
+#: (``fastvi._numba.STAMP_OPT_IN``), so that an edited kernel recompiles them
+FASTVI_CACHE_STAMP = True
 
 __all__ = ["profile_step", "main", "loop_step", "loop_residual", "loop_assemble", "loop_lu",
            "loop_solve", "loop_mech", "loop_end", "loop_callback"]

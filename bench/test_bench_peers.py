@@ -1,7 +1,9 @@
 """fastvi with default settings against the compiled peer, under pytest-benchmark.
 
 ``fastvi.integrate`` as a user calls it — the default method ``P2L-Q3G``, the default
-kernels, a fixed step ``h`` chosen for each level of energy error — against CyRK's C++
+kernels (with the stages compiled for the model's sizes in the cache, which the default
+uses; ``specialize=False``, a first session's generic kernels, is timed beside it), a fixed
+step ``h`` chosen for each level of energy error — against CyRK's C++
 DOP853 on the hand-written Cartesian index-1 right-hand side of the same double pendulum
 (:mod:`studies.peers`, variant (a)), over T = 1000 s and T = 10⁴ s from
 θ1 = θ2 = π/2 at rest, at two levels of max|ΔH| (≈ 1e-2 and ≈ 1e-4 J). Over the longer
@@ -68,9 +70,9 @@ def _dop(y0, tol, T):
     return r["cpu"], dict(dH=r["dH"] if r["ok"] else np.inf, steps=r["steps"])
 
 
-def _fastvi(model, theta, method, h, T):
+def _fastvi(model, theta, method, h, T, **options):
     q0, v0 = model.initial_state(*theta)
-    return peer_runs.fastvi_peer_run(model, q0, v0, method, h, T)
+    return peer_runs.fastvi_peer_run(model, q0, v0, method, h, T, **options)
 
 
 def _bracket(dop_dH: dict, target: float):
@@ -87,7 +89,10 @@ def _bracket(dop_dH: dict, target: float):
                          ids=[f"T{T:g}-{lv:g}J" for T, lv, _, _ in LEVELS])
 def test_fastvi_vs_dop853(benchmark, setup, T, level, method, h):
     model, starts = setup["model"], setup["starts"]
-    _fastvi(model, starts[0], method, h, 1.0)  # compiles (or loads) the kernels
+    # compiles (or loads) the kernels, the stages sized for the model included, which the
+    # default (specialize=None) then takes, as after one long run or `python -m fastvi compile`
+    _fastvi(model, starts[0], method, h, 1.0, specialize=True)
+    _fastvi(model, starts[0], method, h, 1.0, specialize=False)
     infos = [_fastvi(model, th, method, h, T)[1] for th in starts]
     assert all(i["ok"] for i in infos) and max(i["g"] for i in infos) < 1e-13
     dH = float(np.median([i["dH"] for i in infos]))
@@ -95,6 +100,7 @@ def test_fastvi_vs_dop853(benchmark, setup, T, level, method, h):
     loose, tight = _bracket(e, dH)
     y0 = setup["ys"][0]
     jobs = {"fastvi": lambda: _fastvi(model, starts[0], method, h, T),
+            "generic": lambda: _fastvi(model, starts[0], method, h, T, specialize=False),
             "loose": lambda: _dop(y0, loose, T), "tight": lambda: _dop(y0, tight, T)}
     cpus = {name: [] for name in jobs}
 
@@ -109,6 +115,7 @@ def test_fastvi_vs_dop853(benchmark, setup, T, level, method, h):
     x = (np.log(dH) - np.log(e[loose])) / (np.log(e[tight]) - np.log(e[loose]))
     dop = float(np.exp(np.log(med["loose"]) + x * (np.log(med["tight"]) - np.log(med["loose"]))))
     _report[(T, level)] = dict(method=method, h=h, dH=dH, fastvi=med["fastvi"], dop=dop,
+                               generic=med["generic"],
                                loose=loose, tight=tight, dH_loose=e[loose], dH_tight=e[tight])
     benchmark.extra_info.update(_report[(T, level)], T=T, starts=STARTS)
     assert 0.0 < x <= 1.0 and dop > 0.0
@@ -129,4 +136,5 @@ def _print_report(write):
         write(f"T = {T:g} s, ~{level:g} J: {r['method']} h = {r['h']:g}: max|dH| {r['dH']:.2e} J, "
               f"{1e3 * r['fastvi']:.1f} ms | DOP853 (a) at rtol = atol {r['loose']:.2g} … "
               f"{r['tight']:.2g} (max|dH| {r['dH_loose']:.1e} … {r['dH_tight']:.1e}): "
-              f"{1e3 * r['dop']:.1f} ms | fastvi / DOP853 = {r['fastvi'] / r['dop']:.2f}")
+              f"{1e3 * r['dop']:.1f} ms | fastvi / DOP853 = {r['fastvi'] / r['dop']:.2f} "
+              f"(specialize=False: {r['generic'] / r['dop']:.2f})")

@@ -13,6 +13,7 @@ import fastvi
 from fastvi import structure
 
 from ..machine import environment
+from .runs import compile_kernels
 
 
 GROWTH_METHOD = "P2L-Q3G"
@@ -53,7 +54,7 @@ def chain_cost(N: int, method: str = GROWTH_METHOD, h: float = GROWTH_H) -> dict
     q0, v0 = model.initial_state(chain_angles(N))
     steps = growth_steps(N)
     meth = fastvi.method(method)
-    fastvi.integrate(model, q0, v0, h=h, n_steps=2, method=method)
+    compile_kernels(model, q0, v0, method, h)
     per = []
     for _ in range(2):
         res = fastvi.integrate(model, q0, v0, h=h, n_steps=steps, method=method, save_every=steps)

@@ -22,6 +22,7 @@ from .. import peers
 from .config import (ADAPTIVE, DOP_A, DOP_B, LONG_RUN, NO_SAMPLES, PEER_ADAPTIVE_KR,
                      PEER_LONG_RUN, PEER_PILOT_T, PEER_SAMPLE_DT, PEER_START_SEED,
                      PEER_START_SPREAD, THETA0)
+from .runs import compile_kernels
 
 
 @dataclass
@@ -55,18 +56,20 @@ class PeerPoint:
         return self.label.startswith("P")
 
 
-def fastvi_peer_run(model, q0, v0, method, h, T, params=None, sample_dt=PEER_SAMPLE_DT):
+def fastvi_peer_run(model, q0, v0, method, h, T, params=None, sample_dt=PEER_SAMPLE_DT,
+                    **options):
     """One public ``fastvi.integrate`` call as the peer panels time it, energies saved every
     ``sample_dt`` seconds: ``(cpu, info)`` with the process CPU time of the call and ``info``
     holding ``dH`` (max|H − H0| over the samples), ``g`` (max|g|), ``steps``, ``ok`` and the
     final ``end`` configuration. Default settings otherwise, as a user calls it. ``method``
     ``"<name> adaptive"`` runs the adaptive step (``adaptive=PEER_ADAPTIVE_KR``, ``h`` its ε;
-    saved every ``sample_dt`` s on average: :func:`adaptive_sample_every`)."""
+    saved every ``sample_dt`` s on average: :func:`adaptive_sample_every`). ``options`` go to
+    ``fastvi.integrate`` as they are (the benchmarks' other settings)."""
     name, adaptive = _adaptive_label(method)
     every = peer_save_every(model, q0, v0, method, h, T, params, sample_dt)
     c0 = time.process_time()
     res = fastvi.integrate(model, q0, v0, h=h, t_end=T, method=name, save_every=every,
-                           params=params, on_failure="return", adaptive=adaptive)
+                           params=params, on_failure="return", adaptive=adaptive, **options)
     cpu = time.process_time() - c0
     ok = bool(res.success) and bool(np.isclose(res.t[-1], T))
     dH = float(np.max(np.abs(res.energy - res.energy[0]))) if len(res.energy) else np.inf
@@ -164,7 +167,7 @@ def peer_pendulum_sweep(pcfg, log) -> list[PeerPoint]:
     q0, v0 = model.initial_state(*THETA0)
     prm = peers.DP_PARAMS
     for method in panel_methods(pcfg) | {pcfg["growth"]["fastvi"][0]}:
-        fastvi.integrate(model, q0, v0, h=0.01, n_steps=2, method=method)  # compile / load
+        compile_kernels(model, q0, v0, method, 0.01)
     specs = []
     for T in pcfg["T"]:
         for method, hs in pcfg["fastvi"][T].items():

@@ -20,6 +20,7 @@ from .. import peers
 from .config import STIFF_H_MAX, STIFF_LONG_RUN, STIFF_REF_TOL, STIFF_SAMPLE_DT, STIFF_TARGET_REL
 from .fronts import front_at
 from .peer_runs import PeerPoint, cyrk_job, fastvi_job, interleaved
+from .runs import compile_kernels
 from .style import fmt, pyplot, save
 
 
@@ -45,8 +46,8 @@ def peer_stiff_sweep(pcfg, log) -> list[PeerPoint]:
     # one model, k passed as a parameter (a new model per k would compile its kernels anew)
     model = fastvi.scenes.rotary_rod_slider(k=s["ks"][0])
     q0, v0 = model.initial_state(0.0, peers.SLIDER_R0)
-    for method in s["methods"]:  # compile / load outside the timing
-        fastvi.integrate(model, q0, v0, h=1e-4, n_steps=2, method=method)
+    for method in s["methods"]:
+        compile_kernels(model, q0, v0, method, 1e-4)
     for k in s["ks"]:
         q0, v0 = model.initial_state(0.0, peers.SLIDER_R0 + peers.slider_stretch(k))
         y0, prm = peers.slider_start(k), peers.slider_params(k)

@@ -18,33 +18,22 @@ from numba.core.imputils import impl_ret_borrowed
 warnings.filterwarnings("ignore", category=nb.NumbaExperimentalFeatureWarning)
 
 _PACKAGE = Path(__file__).resolve().parent
-#: the studies compile loops around the kernels, but no kernel compiles a study: an edit of a
-#: study invalidates the studies' cached code only, not every kernel's
-_STUDIES = _PACKAGE / "studies"
-_STAMPS: dict = {}
+_STAMP: list = []
 
 
-def _sources_stamp(studies: bool) -> str:
-    """Hash of the package sources that compiled code is made of (once per process): the
-    modules defining ``njit``/``hot``/``cfunc`` functions, the named tuples the kernels take
-    and the status codes they return — outside :data:`_STUDIES`, or with ``studies`` those
-    inside it."""
-    if studies not in _STAMPS:
+def _package_stamp() -> str:
+    """The stamp of every kernel (once per process): the hash of the package sources that
+    compiled code is made of — the modules defining ``njit``/``hot``/``cfunc`` functions, the
+    named tuples the kernels take and the status codes they return."""
+    if not _STAMP:
         h = hashlib.sha256()
         for path in sorted(_PACKAGE.rglob("*.py")):
-            if path.is_relative_to(_STUDIES) != studies:
-                continue
             text = path.read_bytes()
             if any(word in text for word in (b"njit", b"cfunc", b"@hot", b"namedtuple")) or path.name == "status.py":
                 h.update(str(path.relative_to(_PACKAGE)).encode())
                 h.update(text)
-        _STAMPS[studies] = h.hexdigest()
-    return _STAMPS[studies]
-
-
-def _package_stamp() -> str:
-    """The stamp of every kernel: the hash of the compiled sources outside the studies."""
-    return _sources_stamp(False)
+        _STAMP.append(h.hexdigest())
+    return _STAMP[0]
 
 
 #: a module-level name that opts a module outside the package into the package stamp
@@ -57,23 +46,18 @@ class _PackageStampMixin:
 
     numba checks only the file that defines a cached function, but ``drive.run`` inlines
     ``step`` from another file: an edit to ``step.py`` alone would leave a stale ``run`` in
-    the cache. Stamping every kernel with the hash of the whole package (less the studies,
-    which no kernel compiles) closes that hole. The studies' own compiled loops carry that
-    stamp and the hash of the studies, so that editing a study recompiles the studies alone.
-    A module outside the package that compiles fastvi's kernels into its own (a benchmark's
+    the cache. Stamping every kernel with the hash of the package's compiled sources closes
+    that hole. A module outside the package that compiles fastvi's kernels into its own (a benchmark's
     hand-written kernel) opts in with a true module-level ``FASTVI_CACHE_STAMP``; its stamp
     is then the package's and its own file's. Other modules (users' callbacks) keep numba's
     own rule.
     """
 
     _outside = False
-    _study = False
 
     def get_source_stamp(self):
         if self._outside:
             return (_package_stamp(), super().get_source_stamp())
-        if self._study:
-            return (_package_stamp(), _sources_stamp(True))
         return _package_stamp()
 
     @classmethod
@@ -89,8 +73,6 @@ class _PackageStampMixin:
         loc = super().from_function(py_func, py_file)
         if loc is not None and not inside:
             loc._outside = True
-        elif loc is not None and path.is_relative_to(_STUDIES):
-            loc._study = True
         return loc
 
 

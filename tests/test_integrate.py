@@ -257,13 +257,13 @@ def test_the_step_profile_carries_the_kernels_stamp_and_its_own(monkeypatch):
     def edited(path):
         text = real(path)
         return text + b"\n# edited\n" if path.name == "reference.py" else text
-    monkeypatch.setattr(_numba, "_STAMPS", {})
+    monkeypatch.setattr(_numba, "_STAMP", [])
     monkeypatch.setattr(Path, "read_bytes", edited)
     assert _numba._package_stamp() == kernels
     # and an edited kernel moves the kernels' stamp
     def kernel_edited(path):
         text = real(path)
         return text + b"\n# edited\n" if path.name == "step.py" else text
-    monkeypatch.setattr(_numba, "_STAMPS", {})
+    monkeypatch.setattr(_numba, "_STAMP", [])
     monkeypatch.setattr(Path, "read_bytes", kernel_edited)
     assert _numba._package_stamp() != kernels

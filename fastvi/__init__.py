@@ -2,7 +2,7 @@
 
 Public API: :class:`Model`, :func:`integrate`, :class:`Result`, :class:`IntegrationError`,
 :func:`integrate_ensemble`, :class:`EnsembleResult`, :class:`ModelCheckError`,
-:class:`Status`, :func:`method`, and the ready-made mechanisms in :mod:`fastvi.scenes`.
+:class:`Status`, :func:`method`, :func:`sensitivity`, and the ready-made mechanisms in :mod:`fastvi.scenes`.
 Optional: :mod:`fastvi.baselines` (RK4, SciPy), :mod:`fastvi.distributed` (Dask),
 :mod:`fastvi.symbolic` (SymPy).
 """
@@ -13,6 +13,7 @@ from .check import ModelCheckError
 from .consistent import consistent_state
 from .integrate import IntegrationError, Result, integrate
 from .ensemble import EnsembleResult, integrate_ensemble
+from .sensitivity import SensitivityResult, sensitivity, tangent_space
 from .model import CALLBACK_SIGNATURE, Model
 from .status import Status
 from .tables import Method, method
@@ -28,6 +29,9 @@ __all__ = [
     "EnsembleResult",
     "ModelCheckError",
     "consistent_state",
+    "sensitivity",
+    "SensitivityResult",
+    "tangent_space",
     "Status",
     "Method",
     "method",

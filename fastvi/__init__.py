@@ -13,6 +13,7 @@ from .check import ModelCheckError
 from .consistent import consistent_state
 from .integrate import IntegrationError, Result, integrate
 from .ensemble import EnsembleResult, integrate_ensemble
+from .adjoint import AdjointResult, adjoint
 from .sensitivity import SensitivityResult, sensitivity, tangent_space
 from .model import CALLBACK_SIGNATURE, Model
 from .status import Status
@@ -32,6 +33,8 @@ __all__ = [
     "sensitivity",
     "SensitivityResult",
     "tangent_space",
+    "adjoint",
+    "AdjointResult",
     "Status",
     "Method",
     "method",

@@ -28,7 +28,7 @@ from .results import Result
 from .status import Status
 from .tables import Method
 
-__all__ = ["Run", "prepare", "directions", "initial_tangent", "theta_derivative", "finish"]
+__all__ = ["Run", "prepare", "directions", "param_indices", "linear_part", "initial_tangent", "theta_derivative", "finish"]
 
 
 @dataclass
@@ -149,7 +149,7 @@ def directions(wrt, n: int, k: int, param_index) -> tuple[np.ndarray, list[str]]
     each."""
     if isinstance(wrt, str):
         wrt = (wrt,)
-    idx = list(range(k)) if param_index is None else _param_index(param_index, k)
+    idx = list(range(k)) if param_index is None else param_indices(param_index, k)
     if isinstance(wrt, np.ndarray) or (isinstance(wrt, (list, tuple)) and wrt
                                        and not isinstance(wrt[0], str)):
         D = np.asarray(wrt, dtype=float)
@@ -186,7 +186,7 @@ def directions(wrt, n: int, k: int, param_index) -> tuple[np.ndarray, list[str]]
     return np.array(rows), labels
 
 
-def _param_index(param_index, k: int) -> list[int]:
+def param_indices(param_index, k: int) -> list[int]:
     idx = np.atleast_1d(np.asarray(param_index))
     if idx.dtype.kind not in "iu" or idx.ndim != 1:
         raise TypeError(f"`param_index` must be a sequence of parameter indices, got {param_index!r}")

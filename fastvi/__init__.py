@@ -14,6 +14,7 @@ from .consistent import consistent_state
 from .integrate import IntegrationError, Result, integrate
 from .ensemble import EnsembleResult, integrate_ensemble
 from .adjoint import AdjointResult, adjoint
+from .fit import TrajectoryFit
 from .sensitivity import SensitivityResult, sensitivity, tangent_space
 from .model import CALLBACK_SIGNATURE, Model
 from .status import Status
@@ -35,6 +36,7 @@ __all__ = [
     "tangent_space",
     "adjoint",
     "AdjointResult",
+    "TrajectoryFit",
     "Status",
     "Method",
     "method",

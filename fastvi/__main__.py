@@ -17,6 +17,8 @@ COMMANDS = {
     "paper-b": ("fastvi.studies.paper_b", "reproduce paper B's tables and figures"),
     "orders": ("fastvi.studies.orders", "measure convergence orders of every combination (docs/orders.md)"),
     "wpd": ("fastvi.studies.wpd", "work-precision diagrams against RK4 and SciPy"),
+    "sensitivities": ("fastvi.studies.sensitivities",
+                      "cost, order and symplecticity of the flow's derivatives; a parameter fit"),
 }
 
 

@@ -16,12 +16,17 @@ import numpy as np
 
 from . import _discrete as disc
 from . import _validate as valid
+from ._launch import Launcher
 from ._numba import quiet
 from .kernels.adjoint import make_checkpoints, make_records, run_adjoint, run_checkpointed
 from .kernels.tangent import make_tangent_work, point_terms
 from .results import Result
 
 __all__ = ["adjoint", "AdjointResult"]
+
+#: the forward and backward loops, called through their compiled entry points (_launch.py)
+_FORWARD = Launcher(run_checkpointed)
+_BACKWARD = Launcher(run_adjoint)
 
 
 @dataclass
@@ -121,9 +126,9 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     ck = make_checkpoints(-(-run.total // C), n, m, N)
     t_loop = time.perf_counter()
     with quiet():
-        status = run_checkpointed(run.md, run.tabs, run.opts, run.h, run.state, run.ws,
-                                  run.total, run.every, run.smp, run.info, run.sout, run.ev,
-                                  run.stepk, run.stages, ck, C)
+        status = _FORWARD(run.md, run.tabs, run.opts, run.h, run.state, run.ws,
+                          run.total, run.every, run.smp, run.info, run.sout, run.ev,
+                          run.stepk, run.stages, ck, C)
     loop_time = time.perf_counter() - t_loop
     result = disc.finish(run, int(status), loop_time, 0.0, "the adjoint")
     pidx = list(range(k)) if param_index is None else disc.param_indices(param_index, k)
@@ -135,9 +140,9 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     t_back = time.perf_counter()
     info = run.info.copy()
     with quiet():
-        status = run_adjoint(run.md, run.tabs, run.tx, run.opts, run.h, run.state, run.ws,
-                             run.total, run.every, run.smp, info, run.sout, run.ev, run.stepk,
-                             run.stages, tw, ck, rec, Lq, Lp, lq, lp, lth)
+        status = _BACKWARD(run.md, run.tabs, run.tx, run.opts, run.h, run.state, run.ws,
+                           run.total, run.every, run.smp, info, run.sout, run.ev, run.stepk,
+                           run.stages, tw, ck, rec, Lq, Lp, lq, lp, lth)
     back_time = time.perf_counter() - t_back
     if status != 0:
         run.info[:] = info

@@ -16,10 +16,14 @@ import numpy as np
 from . import _discrete as disc
 from . import _validate as valid
 from .kernels.tangent import make_tangent_work, point_terms, run_tangent
+from ._launch import Launcher
 from ._numba import quiet
 from .results import Result
 
 __all__ = ["sensitivity", "SensitivityResult", "tangent_space"]
+
+#: the time loop, called through its compiled entry points (no per-call typing: _launch.py)
+_RUN_TANGENT = Launcher(run_tangent)
 
 
 @dataclass
@@ -197,9 +201,9 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     dQ[0], dP[0] = dq0, dp0
     t_loop = time.perf_counter()
     with quiet():
-        status = run_tangent(run.md, run.tabs, run.tx, run.opts, run.h, run.state, run.ws,
-                             run.total, run.every, run.smp, run.info, run.sout, run.ev,
-                             run.stepk, run.stages, tw, dQ, dP)
+        status = _RUN_TANGENT(run.md, run.tabs, run.tx, run.opts, run.h, run.state, run.ws,
+                              run.total, run.every, run.smp, run.info, run.sout, run.ev,
+                              run.stepk, run.stages, tw, dQ, dP)
     loop_time = time.perf_counter() - t_loop
     result = disc.finish(run, int(status), loop_time, 0.0, "the sensitivity")
     K = result.t.shape[0]
@@ -228,8 +232,9 @@ def _velocity_derivatives(run, result, dq, dp, pidx, dth):
 
 
 def tangent_space(model, q, v, *, params=None) -> np.ndarray:
-    r"""An orthonormal basis (2n, 2(n − m)) of the tangent space of the constrained phase
-    space at ``(q, p = M(q) v)``, in ``(δq, δp)``: the null space of
+    r"""An orthonormal basis of the tangent space of the constrained phase space.
+
+    At ``(q, p = M(q) v)``, in ``(δq, δp)``: the null space of
 
     .. math::
 
@@ -238,7 +243,21 @@ def tangent_space(model, q, v, *, params=None) -> np.ndarray:
     the linearised constraint ``G δq = 0`` and hidden constraint ``δ(G M⁻¹ p) = 0``
     (``H_v = ∂(G v)/∂q``, ``C_q = ∂(M v)/∂q``). Directions in this space are the meaningful
     perturbations of a state; :func:`sensitivity` maps them to tangent vectors at every
-    later step. ``(q, v)`` must be consistent. Time-dependent constraints are not supported.
+    later step.
+
+    Parameters
+    ----------
+    model : Model
+        Without time-dependent constraints.
+    q, v : array_like (n,)
+        A consistent state.
+    params : array_like (k,), optional
+        Parameters (default: the model's).
+
+    Returns
+    -------
+    ndarray (2n, 2(n − m))
+        Orthonormal columns ``(δq, δp)``.
     """
     n, m = model.n, model.m
     q = valid.vector(q, "q", n)

@@ -16,16 +16,19 @@ fixed increments: ``q_k`` moves every control point, so ``R_q = Σ_{μ=0}^{s} �
 absolute control points, of which the Newton matrix has the columns μ ≥ 1 only.
 
 All of these blocks come from one call of :func:`.step.assemble` on an *extended* step
-(:func:`extended_tables`): the basis padded with a zero function in front (index 0, the
-base point) and one at the end, and the constraint points with a dummy point in front. Its
-unknowns are ``(ΔQ^0 = 0, ΔQ^1 … ΔQ^s, 0; 0, η_0 … η_{J−1})``; its rows ``E_0 … E_s`` (the
-last one is ``P``) and the constraint rows; its columns hold ``∂/∂Q^0`` and, the first
-constraint point being an interior one of the extended step, the constraint Hessian at
-``q_k`` that the step's own matrix does not need. ``K`` is gathered from it: the step's
-exact Newton matrix, assembled by the step's own code with its second derivatives (the
-callbacks, or the same finite differences as the full Newton). Derivatives by the
-parameters are five-point differences in ``θ`` (the kernels' rule for differences in time,
-``layout.FD_T``) of the extended residual and of the projection.
+(:func:`extended_tables`): the step's own basis ``ℓ_0 … ℓ_s`` with one more function, the
+constant 1 (zero slope, one at every constraint point). Its unknowns are
+``(ΔQ^1 … ΔQ^s, T; η_0 … η_{J−1})`` with the translation ``T = 0``; as the basis functions
+of the rows run over ``ℓ_0 … ℓ_s`` its rows are ``E_0 … E_{s−1}``, then ``P``, then the
+constraint rows, and the column of ``T`` is ``R_q`` (moving ``q_k`` translates every
+quadrature and constraint point and leaves the velocities alone). The one term that
+``assemble`` has no reason to form, the constraint Hessian at ``q_k`` (the step's first
+constraint point is ``q_k`` itself, fixed within a step), is added to that column here.
+``K`` is gathered from the rest: the step's exact Newton matrix, assembled by the step's
+own code with its second derivatives (the callbacks, or the same finite differences as the
+full Newton). Derivatives by the parameters are five-point differences in ``θ`` (the
+kernels' rule for differences in time, ``layout.FD_T``) of the extended residual and of
+the projection.
 
 :func:`linearise` computes and factors these blocks once a step; :func:`push` applies the
 step's derivative to any number of directions (one solve each), :func:`pull` its transpose
@@ -37,7 +40,7 @@ from collections import namedtuple
 
 import numpy as np
 
-from .._numba import byref, hot, own, ptr
+from .._numba import byref, hot, hot_inline, own, ptr
 from .drive import run
 from .layout import (CHESS, CJAC, F_EX_CHESS, F_EX_MJAC, F_MASSFN, FD_T, FD_T_POINTS, I_FAILED,
                      I_SLOT, I_STEPS, MASS, MJAC, NONFINITE, OK, SINGULAR, SINGULAR_CONSTRAINTS,
@@ -66,7 +69,7 @@ PointWork = namedtuple("PointWork", [
 
 #: the linearised step (:func:`linearise`) and the tangent state of the directions
 TangentWork = namedtuple("TangentWork", [
-    "ws",  # Workspace of the extended step (n, m, s + 2, r, J + 1)
+    "ws",  # Workspace of the extended step (n, m, s + 1, r, J)
     "pt",  # PointWork at q_{k+1}: M (factored), G, He, Hv, Cq
     "rows",  # (N,) int64: the rows of the extended Newton matrix that are the step's equations
     "cols",  # (N,) int64: its columns that are the step's unknowns
@@ -96,26 +99,22 @@ TangentWork = namedtuple("TangentWork", [
 
 # ----------------------------------------------------------------------------- set-up (Python)
 def extended_tables(tabs, s, J):
-    """The :class:`.layout.Tables` of the extended step: the basis ``ℓ_0 … ℓ_s`` at indices
-    1 … s + 1 between two zero functions, the constraint points at 1 … J + 1 after a dummy
-    point at 0 (see the module docstring)."""
-    def pad(T, first):
-        out = np.zeros((s + 3, T.shape[1] + first))
-        out[1:s + 2, first:] = T
-        return out
-
-    d = np.zeros(J + 2)
-    d[1:] = tabs.d
-    return tabs._replace(L=pad(tabs.L, 0), Ld=pad(tabs.Ld, 0), Lc=pad(tabs.Lc, 1), d=d)
+    """The :class:`.layout.Tables` of the extended step: the basis ``ℓ_0 … ℓ_s`` and the
+    constant function at index s + 1 (value 1 at every quadrature and constraint point,
+    slope 0; see the module docstring)."""
+    one = np.ones((1, tabs.L.shape[1]))
+    return tabs._replace(L=np.vstack([tabs.L, one]),
+                         Ld=np.vstack([tabs.Ld, np.zeros_like(one)]),
+                         Lc=np.vstack([tabs.Lc, np.ones((1, tabs.Lc.shape[1]))]))
 
 
 def _index_maps(n, m, s, J):
     """Rows and columns of the extended Newton matrix that are the step's own."""
-    sx = s + 2
-    rows = [(nu + 1) * n + a for nu in range(s) for a in range(n)]
-    rows += [sx * n + j * m + c for j in range(1, J + 1) for c in range(m)]
-    cols = [mu * n + a for mu in range(1, s + 1) for a in range(n)]
-    cols += [sx * n + (j + 1) * m + c for j in range(J) for c in range(m)]
+    sx = s + 1
+    rows = [nu * n + a for nu in range(s) for a in range(n)]
+    rows += [sx * n + (j - 1) * m + c for j in range(1, J + 1) for c in range(m)]
+    cols = [(mu - 1) * n + a for mu in range(1, s + 1) for a in range(n)]
+    cols += [sx * n + j * m + c for j in range(J) for c in range(m)]
     return np.array(rows, dtype=np.int64), np.array(cols, dtype=np.int64)
 
 
@@ -136,11 +135,11 @@ def make_tangent_work(n, m, s, r, J, d, pidx):
     rows, cols = _index_maps(n, m, s, J)
     z = np.zeros
     return TangentWork(
-        make_workspace(n, m, s + 2, r, J + 1), make_point_work(n, m), rows, cols, z((N, N)),
+        make_workspace(n, m, s + 1, r, J), make_point_work(n, m), rows, cols, z((N, N)),
         z(N, dtype=np.int64), z((N + n, n)), z((n, N)), np.asarray(pidx, dtype=np.int64),
         z((N + n, npar)), z((n, npar)), z((mm, n)), z((mm, mm)), z(mm, dtype=np.int64),
         z(n, dtype=np.int64), z((d, n)), z((d, n)), z((d, npar)), z((d, N)), z((d, n)),
-        z((d, n)), z((s + 2) * n + (J + 1) * m), z(n), z(n), z((mm, n)), z(mm), z(mm), z(n),
+        z((d, n)), z((s + 1) * n + J * m), z(n), z(n), z((mm, n)), z(mm), z(mm), z(n),
         z(n), z(n), z(N), z(n), z(n), z(STEP_OUT_SIZE))
 
 
@@ -226,13 +225,32 @@ def lu_solve_transposed(A, piv, b, N):
 
 
 # ----------------------------------------------------------------------------- linearisation
+@hot_inline
+def _step_sizes(wx):
+    """``(n, m, s, N)`` of the step whose extended workspace is ``wx``."""
+    n, m, sx, _, J = sizes(wx)
+    return n, m, sx - 1, (sx - 1) * n + J * m
+
+
+@hot_inline
+def _start_jacobian(md, qk, wx, n, m):
+    """``wx.G[0] = G(q_k)``: the extended step's first constraint point, as the step has it."""
+    G0 = wx.G[0]
+    for c in range(m):
+        for a in range(n):
+            G0[c, a] = 0.0  # a callback with a declared pattern writes only its non-zeros
+    md.fns[CJAC](ptr(qk), ptr(qk), ptr(md.prm), ptr(G0))
+
+
 @hot
-def _theta_differences(md_, tx_, h, q1, P, tw_, n, m, N, prow):
+def _theta_differences(md_, tx_, h, q1, P, tw_):
     """``tw.Rth`` (the rows of R and of P) and ``tw.Pth`` (the projection at fixed
     ``q_{k+1}`` and ``P``): five-point differences in each parameter of ``tw.pidx``. Leaves
     ``md.prm`` as it found it. Returns a status code."""
     md, tw = own(md_), own(tw_)
     wx = tw.ws
+    n, m, s, N = _step_sizes(wx)
+    prow = s * n
     prm, Rd, rows, Rth, Pth, G1s = md.prm, tw.Rd, tw.rows, tw.Rth, tw.Pth, tw.G1s
     wxp = byref(wx)
     st = OK
@@ -247,6 +265,8 @@ def _theta_differences(md_, tx_, h, q1, P, tw_, n, m, N, prow):
         for sgn, wgt in FD_T_POINTS:
             prm[l] = th0 + sgn * dt
             linear_force(md, wx, tw.qk)
+            if m > 0:
+                _start_jacobian(md, tw.qk, wx, n, m)
             st = assemble(md_, tx_, h, tw.qk, tw.pk, wxp, False)
             if st != OK:
                 break
@@ -284,49 +304,54 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
     projection); ``tx`` the :func:`extended_tables`. Factors ``K``, ``M(q_{k+1})`` and
     ``G M⁻¹ Gᵀ``. Returns a status code (``SINGULAR``: the Newton matrix at the solution is
     singular, and the step has no derivative there)."""
-    md, tw = own(md_), own(tw_)
-    wx = tw.ws
-    n, m, sx, _, Jx = sizes(wx)
-    s = sx - 2
-    J = Jx - 1
+    md, tx, tw = own(md_), own(tx_), own(tw_)
+    wx, pw = tw.ws, tw.pt
+    n, m, s, N = _step_sizes(wx)
     sn = s * n
-    N = sn + J * m
-    prow = (s + 1) * n
+    tcol = sn  # the translation's column, and the first row of P
     Xx, A = wx.X, wx.A
     rows, cols, K, Tq, PX = tw.rows, tw.cols, tw.K, tw.Tq, tw.PX
-    for k in range(Xx.shape[0]):
-        Xx[k] = 0.0
     for k in range(sn):
-        Xx[n + k] = X[k]
-    for k in range(J * m):
-        Xx[sx * n + m + k] = X[sn + k]
+        Xx[k] = X[k]
+    for a in range(n):
+        Xx[sn + a] = 0.0
+    for k in range(N - sn):
+        Xx[sn + n + k] = X[sn + k]
     wx.time[0] = time[0]
     wx.time[1] = time[1]
+    if m > 0:
+        _start_jacobian(md, tw.qk, wx, n, m)
     st = assemble(md_, tx_, h, tw.qk, tw.pk, byref(wx), True)
     if st != OK:
         return st
+    if m > 0:
+        # ∂/∂q_k of −ℓ_ν(d_0) G(q_k)ᵀ η_0: the step holds G(q_k) fixed, its matrix has no
+        # such term
+        Hs = pw.Hs
+        _hessian(md, tw.qk, X[sn:sn + m], Hs, pw, n, m)
+        for nu in range(s + 1):
+            cl = tx.Lc[nu, 0]
+            if cl != 0.0:
+                for a in range(n):
+                    for b in range(n):
+                        A[nu * n + a, tcol + b] -= cl * Hs[a, b]
     for i in range(N):
         ri = rows[i]
         for j in range(N):
             K[i, j] = A[ri, cols[j]]
+        for b in range(n):
+            Tq[i, b] = A[ri, tcol + b]
     for a in range(n):
         for j in range(N):
-            PX[a, j] = A[prow + a, cols[j]]
-    # R_q and P_q at fixed increments: the sums of the absolute control points' columns
-    for i in range(N + n):
-        ri = rows[i] if i < N else prow + i - N
+            PX[a, j] = A[sn + a, cols[j]]
         for b in range(n):
-            acc = 0.0
-            for mu in range(s + 1):
-                acc += A[ri, mu * n + b]
-            Tq[i, b] = acc
+            Tq[N + a, b] = A[sn + a, tcol + b]
     if lu_factor(K, tw.piv, N) != 0:
         return SINGULAR
     if tw.pidx.shape[0] > 0:
-        st = _theta_differences(md_, tx_, h, q1, P, tw_, n, m, N, prow)
+        st = _theta_differences(md_, tx_, h, q1, P, tw_)
         if st != OK:
             return st
-    pw = tw.pt
     point(md_, q1, v1, eta, byref(pw))
     if m > 0:
         M, G, Yg, S = pw.M, pw.G, tw.Yg, tw.S
@@ -360,9 +385,8 @@ def push(tw_):
     ``p = P − Gᵀη`` and of the hidden constraint ``G M⁻¹ p = 0``. Returns a status code."""
     tw = own(tw_)
     pw = tw.pt
-    n, m, sx, _, Jx = sizes(tw.ws)
-    sn = (sx - 2) * n
-    N = sn + (Jx - 1) * m
+    n, m, s, N = _step_sizes(tw.ws)
+    sn = s * n
     npar = tw.pidx.shape[0]
     K, Tq, Rth, PX, B, dP = tw.K, tw.Tq, tw.Rth, tw.PX, tw.B, tw.dP
     G, He, Hv, Cq, Yg = pw.G, pw.He, pw.Hv, pw.Cq, tw.Yg
@@ -428,9 +452,8 @@ def pull(tw_, lq, lp, lth):
     code."""
     tw = own(tw_)
     pw = tw.pt
-    n, m, sx, _, Jx = sizes(tw.ws)
-    sn = (sx - 2) * n
-    N = sn + (Jx - 1) * m
+    n, m, s, N = _step_sizes(tw.ws)
+    sn = s * n
     npar = tw.pidx.shape[0]
     Tq, Rth, PX = tw.Tq, tw.Rth, tw.PX
     G, He, Hv, Cq, Yg = pw.G, pw.He, pw.Hv, pw.Cq, tw.Yg

@@ -19,7 +19,7 @@ from . import events as events_
 from . import monitor as monitor_
 from . import scipy_compat as compat
 from . import structure
-from .integrate import IntegrationError, _alloc, _filled
+from .integrate import IntegrationError, _filled, _first_sample
 from .kernels import layout as lay
 from .kernels.step import linear_force, step_kernel
 from .kernels.tangent import extended_tables, point_terms
@@ -106,13 +106,7 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
     state = np.zeros((6, n))
     state[0], state[1], state[2] = q0, model.mass_matrix(q0, prm) @ v0, v0
     K = total // every + 1 + (1 if total % every else 0)
-    smp = _alloc(K, n)
-    smp.t[0] = t0
-    smp.q[0], smp.v[0], smp.p[0] = q0, v0, state[1]
-    smp.energy[0] = 0.5 * v0 @ state[1] + model.potential_energy(q0, prm, t0)
-    if model.m:
-        smp.g[0] = np.max(np.abs(model.constraint_value(q0, prm, t0)))
-        smp.gv[0] = np.max(np.abs(model.constraint_jacobian_value(q0, prm, t0) @ v0))
+    smp = _first_sample(model, K, t0, q0, v0, state[1], prm)
     info = np.zeros(lay.INFO_SIZE)
     info[lay.I_SLOT] = 1
     info[lay.I_FIRST] = 1

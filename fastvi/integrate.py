@@ -87,6 +87,20 @@ def _samples_after_chunk(slot: int, chunk: int, every: int) -> int:
     return slot + chunk // every + 1
 
 
+def _first_sample(model, K: int, t0: float, q0, v0, p0, prm) -> Samples:
+    """Room for ``K`` samples, the first one the initial state with its energy and
+    residuals."""
+    smp = _alloc(K, model.n)
+    smp.t[0] = t0
+    smp.q[0], smp.v[0], smp.p[0] = q0, v0, p0
+    smp.energy[0] = 0.5 * v0 @ p0 + model.potential_energy(q0, prm, t0)
+    if model.m:
+        smp.g[0] = np.max(np.abs(model.constraint_value(q0, prm, t0)))
+        smp.gv[0] = np.max(np.abs(model.constraint_jacobian_value(q0, prm, t0) @ v0
+                                  + model.constraint_time_derivative_value(q0, prm, t0)))
+    return smp
+
+
 def _room(smp: Samples, K: int) -> Samples:
     """``smp``, or a copy with room for at least ``K`` samples (doubling: an adaptive run
     does not know its number of steps in advance)."""
@@ -380,14 +394,7 @@ def integrate(
         K = _samples_after_chunk(1, chunk, every)
     else:
         K = total // every + 1 + (1 if total % every else 0)
-    smp = _alloc(K, n)
-    smp.t[0] = t0
-    smp.q[0], smp.v[0], smp.p[0] = q0, v0, state[1]
-    smp.energy[0] = 0.5 * v0 @ state[1] + model.potential_energy(q0, prm, t0)
-    if model.m:
-        smp.g[0] = np.max(np.abs(model.constraint_value(q0, prm, t0)))
-        smp.gv[0] = np.max(np.abs(model.constraint_jacobian_value(q0, prm, t0) @ v0
-                                  + model.constraint_time_derivative_value(q0, prm, t0)))
+    smp = _first_sample(model, K, t0, q0, v0, state[1], prm)
     info = np.zeros(lay.INFO_SIZE)
     info[lay.I_SLOT] = 1
     info[lay.I_FIRST] = 1

@@ -133,6 +133,10 @@ def run_adjoint(md, tabs, tx, opts, h, state, ws, n_total, every, smp, info, sou
     for l in range(lth.shape[0]):
         lth[l] = 0.0
     nseg = (n_total + C - 1) // C
+    # one step a call of `run`, saving nothing, in int64s of run time: literals would have
+    # numba compile `run` once more, for the literals' types
+    one = nseg - nseg + 1
+    no_samples = one - 1
     for seg in range(nseg - 1, -1, -1):
         _restore(ck, seg, state, ws, info)
         k0 = ck.steps[seg]
@@ -141,8 +145,8 @@ def run_adjoint(md, tabs, tx, opts, h, state, ws, n_total, every, smp, info, sou
             for a in range(n):
                 rec.qk[j, a] = state[0, a]
                 rec.pk[j, a] = state[1, a]
-            st = run(md, tabs, opts, h, state, ws, 1, n_total, 0, smp, info, sout, ev, stepk,
-                     stages, None)
+            st = run(md, tabs, opts, h, state, ws, one, n_total, no_samples, smp, info, sout, ev,
+                     stepk, stages, None)
             if st != 0:
                 return st
             for k in range(ws.X.shape[0]):

@@ -372,6 +372,16 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
     return OK
 
 
+@hot_inline
+def _minus_product(out, x, A, y, n):
+    """``out = x − A y`` (n,)."""
+    for a in range(n):
+        acc = x[a]
+        for b in range(n):
+            acc -= A[a, b] * y[b]
+        out[a] = acc
+
+
 @hot
 def push(tw_):
     r"""Apply the linearised step to every direction: ``tw.dq``, ``tw.dp`` (with the
@@ -412,17 +422,9 @@ def push(tw_):
             for j in range(N):
                 acc -= PX[a, j] * y[j]
             dP[c, a] = acc
-        for a in range(n):
-            acc = dP[c, a]
-            for b in range(n):
-                acc -= He[a, b] * dq1[b]
-            z[a] = acc
+        _minus_product(z, tw.dP[c], He, dq1, n)
         if m > 0:
-            for a in range(n):
-                acc = z[a]
-                for b in range(n):
-                    acc -= Cq[a, b] * dq1[b]
-                u[a] = acc
+            _minus_product(u, z, Cq, dq1, n)
             for e in range(m):
                 acc = 0.0
                 for a in range(n):
@@ -539,13 +541,16 @@ def run_tangent(md, tabs, tx, opts, h, state, ws, n_total, save_every, smp, info
     n = state.shape[1]
     m = sizes(tw.ws)[1]
     d = tw.dq.shape[0]
+    # one step a call of `run`, in an int64 of run time: a literal 1 would have numba compile
+    # `run` once more, for the literal's type
+    one = n_total - n_total + 1
     while int(info[I_STEPS]) < n_total:
         k = int(info[I_STEPS])
         for a in range(n):
             tw.qk[a] = state[0, a]
             tw.pk[a] = state[1, a]
         slot = int(info[I_SLOT])
-        st = run(md, tabs, opts, h, state, ws, 1, n_total, save_every, smp, info, sout, ev,
+        st = run(md, tabs, opts, h, state, ws, one, n_total, save_every, smp, info, sout, ev,
                  stepk, stages, None)
         if st != 0:
             return st

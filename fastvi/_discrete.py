@@ -19,7 +19,7 @@ from . import events as events_
 from . import monitor as monitor_
 from . import scipy_compat as compat
 from . import structure
-from .integrate import IntegrationError, _filled, _first_sample
+from .integrate import IntegrationError, _buffers, _filled
 from .kernels import layout as lay
 from .kernels.step import linear_force, step_kernel
 from .kernels.tangent import extended_tables, point_terms
@@ -106,11 +106,7 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
     state = np.zeros((6, n))
     state[0], state[1], state[2] = q0, model.mass_matrix(q0, prm) @ v0, v0
     K = total // every + 1 + (1 if total % every else 0)
-    smp = _first_sample(model, K, t0, q0, v0, state[1], prm)
-    info = np.zeros(lay.INFO_SIZE)
-    info[lay.I_SLOT] = 1
-    info[lay.I_FIRST] = 1
-    info[lay.I_T0] = t0
+    smp, info = _buffers(model, K, t0, q0, v0, state[1], prm)
     return Run(model, meth, prm, t0, h, total, every, q0, v0, md, tabs,
                extended_tables(tabs, meth.s, meth.J), ws, opts,
                events_.prepare(model, meth, None, 0), stepk, stages, state, info,

@@ -178,6 +178,8 @@ def directions(wrt, n: int, k: int, param_index) -> tuple[np.ndarray, list[str]]
 
 def param_indices(param_index, k: int) -> list[int]:
     idx = np.atleast_1d(np.asarray(param_index))
+    if idx.size == 0:
+        return []
     if idx.dtype.kind not in "iu" or idx.ndim != 1:
         raise TypeError(f"`param_index` must be a sequence of parameter indices, got {param_index!r}")
     out = []

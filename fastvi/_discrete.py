@@ -44,7 +44,7 @@ class Run:
     every: int
     q0: np.ndarray
     v0: np.ndarray
-    md: object
+    model_data: object
     tabs: object
     tx: object
     ws: object
@@ -117,7 +117,7 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
 def linear_part(run: Run, tw) -> None:
     """Set the extended step's constant −∇V of a linear potential (the step sets its own at
     a trajectory's first step)."""
-    linear_force(run.md, tw.ws, run.q0)
+    linear_force(run.model_data, tw.ws, run.q0)
 
 
 # ----------------------------------------------------------------------------- directions
@@ -217,7 +217,7 @@ def initial_tangent(run: Run, D: np.ndarray, initial_state=None):
             d = theta_derivative(lambda p: np.concatenate(_state_of(initial_state, p, n)), prm, l)
             dq += np.outer(dth[:, j], d[:n])
             dv += np.outer(dth[:, j], d[n:])
-    M, G, _, Hv, Cq = point_terms(run.md, q0, v0, np.zeros(m))
+    M, G, _, Hv, Cq = point_terms(run.model_data, q0, v0, np.zeros(m))
     theta = {l: (theta_derivative(lambda p: model.constraint_value(q0, p, run.t0), prm, l),
                  theta_derivative(lambda p: model.constraint_jacobian_value(q0, p, run.t0) @ v0,
                                   prm, l),

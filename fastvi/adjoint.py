@@ -126,7 +126,7 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     ck = make_checkpoints(-(-run.total // C), n, m, N)
     t_loop = time.perf_counter()
     with quiet():
-        status = _FORWARD(run.md, run.tabs, run.opts, run.h, run.state, run.ws,
+        status = _FORWARD(run.model_data, run.tabs, run.opts, run.h, run.state, run.ws,
                           run.total, run.every, run.smp, run.info, run.sout, run.ev,
                           run.stepk, run.stages, ck, C)
     loop_time = time.perf_counter() - t_loop
@@ -140,7 +140,7 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     t_back = time.perf_counter()
     info = run.info.copy()
     with quiet():
-        status = _BACKWARD(run.md, run.tabs, run.tx, run.opts, run.h, run.state, run.ws,
+        status = _BACKWARD(run.model_data, run.tabs, run.tx, run.opts, run.h, run.state, run.ws,
                            run.total, run.every, run.smp, info, run.sout, run.ev, run.stepk,
                            run.stages, tw, ck, rec, Lq, Lp, lq, lp, lth)
     back_time = time.perf_counter() - t_back
@@ -177,7 +177,7 @@ def _cotangents(run, result, cotangent, pidx):
     Lq, Lp = Jq.copy(), np.zeros((K, n))
     for i in range(K):
         q, v = result.q[i], result.v[i]
-        M, _, _, _, Cq = point_terms(run.md, q, v, np.zeros(model.m))
+        M, _, _, _, Cq = point_terms(run.model_data, q, v, np.zeros(model.m))
         Lp[i] = np.linalg.solve(M, Jv[i])
         Lq[i] -= Cq.T @ Lp[i]
         for j, l in enumerate(pidx):

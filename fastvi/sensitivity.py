@@ -201,7 +201,7 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     dQ[0], dP[0] = dq0, dp0
     t_loop = time.perf_counter()
     with quiet():
-        status = _RUN_TANGENT(run.md, run.tabs, run.tx, run.opts, run.h, run.state, run.ws,
+        status = _RUN_TANGENT(run.model_data, run.tabs, run.tx, run.opts, run.h, run.state, run.ws,
                               run.total, run.every, run.smp, run.info, run.sout, run.ev,
                               run.stepk, run.stages, tw, dQ, dP)
     loop_time = time.perf_counter() - t_loop
@@ -222,7 +222,7 @@ def _velocity_derivatives(run, result, dq, dp, pidx, dth):
     zero = np.zeros(model.m)
     for i in range(dq.shape[0]):
         q, v = result.q[i], result.v[i]
-        M, _, _, _, Cq = point_terms(run.md, q, v, zero)
+        M, _, _, _, Cq = point_terms(run.model_data, q, v, zero)
         rhs = dp[i] - Cq @ dq[i]
         for j, l in enumerate(pidx):
             rhs -= np.outer(disc.theta_derivative(lambda th: model.mass_matrix(q, th) @ v,

@@ -109,7 +109,7 @@ def test_derivatives_stay_in_the_tangent_space(label, model, q, v, method):
     assert np.sum(sv > 1e-12 * sv[0]) == model.n - model.m
 
 
-def test_the_trajectory_is_integrates_bit_for_bit(double_pendulum, dp_start):
+def test_the_trajectory_is_the_one_integrate_computes_bit_for_bit(double_pendulum, dp_start):
     q0, v0 = dp_start
     S = fastvi.sensitivity(double_pendulum, q0, v0, h=0.01, n_steps=300, save_every=7,
                            wrt=("v0",))

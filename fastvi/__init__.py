@@ -2,8 +2,8 @@
 
 Public API: :class:`Model`, :func:`integrate`, :class:`Result`, :class:`IntegrationError`,
 :func:`integrate_ensemble`, :class:`EnsembleResult`, :class:`ModelCheckError`,
-:class:`Status`, :func:`method`, :class:`Drawing` (how :meth:`Result.animate` draws a
-model), and the ready-made mechanisms in :mod:`fastvi.scenes`.
+:class:`Status`, :func:`method`, :func:`sensitivity`, :class:`Drawing` (how
+:meth:`Result.animate` draws a model), and the ready-made mechanisms in :mod:`fastvi.scenes`.
 Optional: :mod:`fastvi.baselines` (RK4, SciPy), :mod:`fastvi.distributed` (Dask),
 :mod:`fastvi.symbolic` (SymPy).
 """
@@ -15,11 +15,14 @@ from .consistent import consistent_state
 from .drawing import Drawing
 from .integrate import IntegrationError, Result, integrate
 from .ensemble import EnsembleResult, integrate_ensemble
+from .adjoint import AdjointResult, adjoint
+from .fit import TrajectoryFit
+from .sensitivity import SensitivityResult, sensitivity, tangent_space
 from .model import CALLBACK_SIGNATURE, Model
 from .status import Status
 from .tables import Method, method
 
-__version__ = "0.1.0"
+__version__ = "0.3.0.dev0"
 
 __all__ = [
     "Model",
@@ -31,6 +34,12 @@ __all__ = [
     "ModelCheckError",
     "consistent_state",
     "Drawing",
+    "sensitivity",
+    "SensitivityResult",
+    "tangent_space",
+    "adjoint",
+    "AdjointResult",
+    "TrajectoryFit",
     "Status",
     "Method",
     "method",

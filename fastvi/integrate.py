@@ -87,6 +87,24 @@ def _samples_after_chunk(slot: int, chunk: int, every: int) -> int:
     return slot + chunk // every + 1
 
 
+def _buffers(model, K: int, t0: float, q0, v0, p0, prm):
+    """``(smp, info)`` of a run from ``t0``: room for ``K`` samples, the first one the
+    initial state with its energy and residuals, and the run's counters."""
+    smp = _alloc(K, model.n)
+    smp.t[0] = t0
+    smp.q[0], smp.v[0], smp.p[0] = q0, v0, p0
+    smp.energy[0] = 0.5 * v0 @ p0 + model.potential_energy(q0, prm, t0)
+    if model.m:
+        smp.g[0] = np.max(np.abs(model.constraint_value(q0, prm, t0)))
+        smp.gv[0] = np.max(np.abs(model.constraint_jacobian_value(q0, prm, t0) @ v0
+                                  + model.constraint_time_derivative_value(q0, prm, t0)))
+    info = np.zeros(lay.INFO_SIZE)
+    info[lay.I_SLOT] = 1
+    info[lay.I_FIRST] = 1
+    info[lay.I_T0] = t0
+    return smp, info
+
+
 def _room(smp: Samples, K: int) -> Samples:
     """``smp``, or a copy with room for at least ``K`` samples (doubling: an adaptive run
     does not know its number of steps in advance)."""
@@ -382,18 +400,7 @@ def integrate(
         K = _samples_after_chunk(1, chunk, every)
     else:
         K = total // every + 1 + (1 if total % every else 0)
-    smp = _alloc(K, n)
-    smp.t[0] = t0
-    smp.q[0], smp.v[0], smp.p[0] = q0, v0, state[1]
-    smp.energy[0] = 0.5 * v0 @ state[1] + model.potential_energy(q0, prm, t0)
-    if model.m:
-        smp.g[0] = np.max(np.abs(model.constraint_value(q0, prm, t0)))
-        smp.gv[0] = np.max(np.abs(model.constraint_jacobian_value(q0, prm, t0) @ v0
-                                  + model.constraint_time_derivative_value(q0, prm, t0)))
-    info = np.zeros(lay.INFO_SIZE)
-    info[lay.I_SLOT] = 1
-    info[lay.I_FIRST] = 1
-    info[lay.I_T0] = t0
+    smp, info = _buffers(model, K, t0, q0, v0, state[1], prm)
     if adaptive is not None:
         info[lay.I_KR], info[lay.I_E0] = adaptive, smp.energy[0]
         info[lay.I_T], info[lay.I_TEND] = t0, float(t_end)

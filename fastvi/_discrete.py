@@ -1,0 +1,273 @@
+"""What the forward sensitivities and the discrete adjoint share: validating and setting up a
+run of the linearised flow, the derivative of the consistent initial state, and the
+:class:`fastvi.Result` of the run.
+
+The trajectory of such a run is taken by the compiled step of :func:`fastvi.integrate`
+(:func:`fastvi.kernels.drive.run`, one step at a time), so it equals ``integrate``'s bit for
+bit; :mod:`fastvi.kernels.tangent` differentiates each step after it.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _validate as valid
+from . import events as events_
+from . import monitor as monitor_
+from . import scipy_compat as compat
+from . import structure
+from .integrate import IntegrationError, _buffers, _filled
+from .kernels import layout as lay
+from .kernels.step import linear_force, step_kernel
+from .kernels.tangent import extended_tables, point_terms
+from .model import Model
+from .results import Result
+from .status import Status
+from .tables import Method
+
+__all__ = ["Run", "prepare", "directions", "param_indices", "linear_part", "initial_tangent", "theta_derivative", "finish"]
+
+
+@dataclass
+class Run:
+    """A validated run: the kernels' arguments and the sizes of its output."""
+
+    model: Model
+    meth: Method
+    prm: np.ndarray
+    t0: float
+    h: float
+    total: int
+    every: int
+    q0: np.ndarray
+    v0: np.ndarray
+    model_data: object
+    tabs: object
+    tx: object
+    ws: object
+    opts: object
+    ev: object
+    stepk: object
+    stages: object
+    state: np.ndarray
+    info: np.ndarray
+    sout: np.ndarray
+    smp: object
+    K: int
+    started: float
+    compile_time: float
+    check_time: float
+    monitor: bool
+
+
+def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every, tol, max_iter,
+            newton, params, solver, check, monitor, what) -> Run:
+    """Validate the arguments of a run of the linearised flow (as :func:`fastvi.integrate`
+    does, and refusing what ``what`` — the caller's name — does not differentiate) and
+    allocate its kernels' arguments."""
+    started = time.perf_counter()
+    if not isinstance(model, Model):
+        raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
+    if model.time_dependent:
+        raise NotImplementedError(
+            f"{what} does not support time-dependent potentials or constraints yet (model "
+            f"{model.name!r} has `time_dependent=True`): the derivative of the hidden constraint "
+            "G v + g_t = 0 would need ∂g_t/∂q; forces F(t, q, v) are supported")
+    n = model.n
+    q0 = valid.vector(q0, "q0", n)
+    v0 = valid.vector(v0, "v0", n)
+    prm = valid.params(params, model).copy()
+    h = valid.step_size(h)
+    t0, t_end = compat.span(t_span, t0, t_end, n_steps)
+    t0 = valid.start_time(t0)
+    total, h, h_last = compat.steps(h, t_end, n_steps, t0)
+    if h_last:
+        raise ValueError(
+            f"{what} needs a whole number of steps of `h`: t_end − t0 = {float(t_end) - t0:g} "
+            f"is {total} steps of h = {h:g} and a shorter one of {h_last:g}; pass `n_steps`, or an "
+            f"`h` that divides the span (e.g. h = {(float(t_end) - t0) / (total + 1):.6g})")
+    every = valid.save_every(save_every)
+    opts = valid.newton_options(tol, max_iter, newton)
+    meth = valid.method(method)
+    check_time = time.perf_counter()
+    if check and not model._checked:
+        model.check(q0, v0, params=prm, n_random=1, t=t0)
+    check_time = time.perf_counter() - check_time
+    q0, v0 = valid.initial_state(model, q0, v0, prm, t0)
+    compile_time = time.perf_counter()
+    md = model.kernel_data(prm, t0)
+    tabs = meth.kernel_tables
+    ws = structure.workspace(model, meth, prm, solver)
+    stepk, stages = step_kernel(md, tabs, opts, ws, full=True)
+    compile_time = time.perf_counter() - compile_time
+    state = np.zeros((6, n))
+    state[0], state[1], state[2] = q0, model.mass_matrix(q0, prm) @ v0, v0
+    K = total // every + 1 + (1 if total % every else 0)
+    smp, info = _buffers(model, K, t0, q0, v0, state[1], prm)
+    return Run(model, meth, prm, t0, h, total, every, q0, v0, md, tabs,
+               extended_tables(tabs, meth.s, meth.J), ws, opts,
+               events_.prepare(model, meth, None, 0), stepk, stages, state, info,
+               np.zeros(lay.STEP_OUT_SIZE), smp, K, started, compile_time, check_time,
+               valid.flag(monitor, "monitor"))
+
+
+def linear_part(run: Run, tw) -> None:
+    """Set the extended step's constant −∇V of a linear potential (the step sets its own at
+    a trajectory's first step)."""
+    linear_force(run.model_data, tw.ws, run.q0)
+
+
+# ----------------------------------------------------------------------------- directions
+def theta_derivative(f, prm: np.ndarray, l: int) -> np.ndarray:
+    """``∂f/∂θ_l`` at ``prm`` by the kernels' five-point difference (``layout.FD_T``)."""
+    dt = lay.FD_T * max(1.0, abs(float(prm[l])))
+    acc = 0.0
+    for sgn, wgt in lay.FD_T_POINTS:
+        p = prm.copy()
+        p[l] += sgn * dt
+        acc = acc + wgt * np.asarray(f(p), dtype=float)
+    return acc / (12.0 * dt)
+
+
+def directions(wrt, n: int, k: int, param_index) -> tuple[np.ndarray, list[str]]:
+    """``(D, labels)``: the raw directions (d, 2n + k) in ``(δq0, δv0, δθ)`` of ``wrt`` — a
+    sequence of the names ``"q0"``, ``"v0"``, ``"params"`` (``param_index`` the parameters
+    of ``"params"``, default all) or an array (2n + k, d) of directions — and a label for
+    each."""
+    if isinstance(wrt, str):
+        wrt = (wrt,)
+    idx = list(range(k)) if param_index is None else param_indices(param_index, k)
+    if isinstance(wrt, np.ndarray) or (isinstance(wrt, (list, tuple)) and wrt
+                                       and not isinstance(wrt[0], str)):
+        D = np.asarray(wrt, dtype=float)
+        if D.ndim == 1:
+            D = D[:, None]
+        if D.ndim != 2 or D.shape[0] != 2 * n + k or not np.all(np.isfinite(D)):
+            raise ValueError(f"`wrt` as an array must hold finite directions (δq0, δv0, δθ) as "
+                             f"columns, shape ({2 * n + k}, d) for n = {n}, k = {k}; got shape "
+                             f"{D.shape}")
+        return np.ascontiguousarray(D.T), [f"direction[{i}]" for i in range(D.shape[1])]
+    rows, labels = [], []
+    names = list(wrt)
+    for name in names:
+        if name not in ("q0", "v0", "params"):
+            raise ValueError(f"`wrt` entries must be 'q0', 'v0' or 'params', got {name!r}")
+        if names.count(name) > 1:
+            raise ValueError(f"`wrt` names {name!r} twice")
+        if name == "params":
+            for l in idx:
+                r = np.zeros(2 * n + k)
+                r[2 * n + l] = 1.0
+                rows.append(r)
+                labels.append(f"params[{l}]")
+        else:
+            off = 0 if name == "q0" else n
+            for i in range(n):
+                r = np.zeros(2 * n + k)
+                r[off + i] = 1.0
+                rows.append(r)
+                labels.append(f"{name}[{i}]")
+    if not rows:
+        raise ValueError("`wrt` is empty (or 'params' with an empty `param_index`): nothing to "
+                         "differentiate")
+    return np.array(rows), labels
+
+
+def param_indices(param_index, k: int) -> list[int]:
+    idx = np.atleast_1d(np.asarray(param_index))
+    if idx.size == 0:
+        return []
+    if idx.dtype.kind not in "iu" or idx.ndim != 1:
+        raise TypeError(f"`param_index` must be a sequence of parameter indices, got {param_index!r}")
+    out = []
+    for i in idx:
+        if not 0 <= i < k:
+            raise ValueError(f"`param_index` entry {int(i)} is out of range for k = {k} parameters")
+        if int(i) in out:
+            raise ValueError(f"`param_index` lists parameter {int(i)} twice")
+        out.append(int(i))
+    return out
+
+
+def initial_tangent(run: Run, D: np.ndarray, initial_state=None):
+    r"""The tangent vectors ``(δq0, δp0)`` (d, n) each of the raw directions ``D``
+    (d, 2n + k) in ``(δq0, δv0, δθ)``: the derivative of the consistent initial state.
+
+    With ``W = M⁻¹Gᵀ``, ``S = G W`` at ``(q0, v0)`` (the metric of the projection
+    :func:`fastvi.integrate` applies to initial data)::
+
+        δq* = δq − W S⁻¹ (G δq + g_θ δθ)
+        δv* = δv − W S⁻¹ (G δv + H_v δq* + (G_θ v) δθ)
+        δp* = M δv* + C_q δq* + (M_θ v) δθ
+
+    ``initial_state(params) -> (q0, v0)``, if given, adds its own derivative by the
+    parameters to ``(δq, δv)`` (five-point differences). Returns ``(dq, dp, pidx, dth)``
+    with ``pidx`` the parameters some direction moves and ``dth`` (d, len(pidx)).
+    """
+    model, prm, q0, v0 = run.model, run.prm, run.q0, run.v0
+    n, m, k = model.n, model.m, prm.shape[0]
+    dq, dv, dth_all = D[:, :n].copy(), D[:, n:2 * n].copy(), D[:, 2 * n:]
+    pidx = [l for l in range(k) if np.any(dth_all[:, l] != 0.0)]
+    dth = dth_all[:, pidx]
+    if initial_state is not None and pidx:
+        for j, l in enumerate(pidx):
+            d = theta_derivative(lambda p: np.concatenate(_state_of(initial_state, p, n)), prm, l)
+            dq += np.outer(dth[:, j], d[:n])
+            dv += np.outer(dth[:, j], d[n:])
+    M, G, _, Hv, Cq = point_terms(run.model_data, q0, v0, np.zeros(m))
+    theta = {l: (theta_derivative(lambda p: model.constraint_value(q0, p, run.t0), prm, l),
+                 theta_derivative(lambda p: model.constraint_jacobian_value(q0, p, run.t0) @ v0,
+                                  prm, l),
+                 theta_derivative(lambda p: model.mass_matrix(q0, p) @ v0, prm, l))
+             for l in pidx} if (m or model.mass_matrix_constant is None) else {}
+    g_th = np.array([theta[l][0] for l in pidx]).reshape(len(pidx), m) if theta else np.zeros((len(pidx), m))
+    gv_th = np.array([theta[l][1] for l in pidx]).reshape(len(pidx), m) if theta else np.zeros((len(pidx), m))
+    mv_th = np.array([theta[l][2] for l in pidx]).reshape(len(pidx), n) if theta else np.zeros((len(pidx), n))
+    if m:
+        W = np.linalg.solve(M, G.T)
+        S = G @ W
+        dq = dq - np.linalg.solve(S, G @ dq.T + g_th.T @ dth.T).T @ W.T
+        dv = dv - np.linalg.solve(S, G @ dv.T + Hv @ dq.T + gv_th.T @ dth.T).T @ W.T
+    dp = dv @ M.T + dq @ Cq.T + dth @ mv_th
+    return np.ascontiguousarray(dq), np.ascontiguousarray(dp), pidx, np.ascontiguousarray(dth)
+
+
+def _state_of(initial_state, p, n):
+    q, v = initial_state(p)
+    return valid.vector(q, "initial_state(params)[0]", n), valid.vector(v, "initial_state(params)[1]", n)
+
+
+# ----------------------------------------------------------------------------- the result
+def finish(run: Run, status: int, loop_time: float, extra_compile: float, what: str) -> Result:
+    """The :class:`fastvi.Result` of the run (its samples up to the last good step), judged
+    by the reliability monitor like :func:`fastvi.integrate`'s; raises
+    :class:`fastvi.IntegrationError` where the run or its derivative failed, naming ``what``."""
+    info, model = run.info, run.model
+    out = _filled(run.smp, int(info[lay.I_SLOT]))
+    st = Status(status) if status <= 0 else Status.SUCCESS
+    wall = time.perf_counter() - run.started
+    result = Result(
+        t=out.t, q=out.q, v=out.v, p=out.p, energy=out.energy,
+        work=out.work if model.timed else None, work_forces=out.work_forces if model.timed else None,
+        constraint_residual=out.g, velocity_residual=out.gv, newton_iterations=out.iters,
+        stats=dict(steps=int(info[lay.I_STEPS]), newton_iterations=int(info[lay.I_ITERS]),
+                   max_residual=float(info[lay.I_MAXRES]), full_newton_steps=int(info[lay.I_FULL]),
+                   recovered_steps=[], integration_time=loop_time, setup_time=wall - loop_time,
+                   compile_time=run.compile_time + extra_compile, check_time=run.check_time,
+                   wall_time=wall),
+        status=st, method=run.meth, h=run.h, model_name=model.name,
+        failed_step=None if st >= 0 else int(info[lay.I_FAILED]))
+    if st < 0:
+        k = int(info[lay.I_FAILED])
+        raise IntegrationError(st, k, run.t0 + k * run.h, float(info[lay.I_RES]), result,
+                               f"{what} is not defined from this step on")
+    if run.monitor:
+        verdict = monitor_.judge(result, every=run.every, newton_tol=run.opts.tol)
+        result.stats.update(monitor_.stats(verdict))
+        if not verdict.ok:
+            result, k, t_fail, detail = monitor_.cut(result, verdict, every=run.every)
+            raise IntegrationError(Status.UNRELIABLE, k, t_fail, float("nan"), result, detail)
+    return result

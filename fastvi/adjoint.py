@@ -1,0 +1,194 @@
+r"""The discrete adjoint: gradients of a cost of the trajectory, :func:`adjoint`.
+
+One backward sweep of the transposed linearised steps (:mod:`fastvi.kernels.adjoint`)
+gives the gradient of a cost by the initial state and every parameter at once: for a cost
+that depends on many parameters it replaces one forward direction per parameter
+(:func:`fastvi.sensitivity`) by one transposed solve a step (``docs/sensitivities.md``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _discrete as disc
+from . import _validate as valid
+from ._launch import Launcher
+from ._numba import quiet
+from .kernels.adjoint import make_checkpoints, make_records, run_adjoint, run_checkpointed
+from .kernels.tangent import make_tangent_work, point_terms
+from .results import Result
+
+__all__ = ["adjoint", "AdjointResult"]
+
+#: the forward and backward loops, called through their compiled entry points (_launch.py)
+_FORWARD = Launcher(run_checkpointed)
+_BACKWARD = Launcher(run_adjoint)
+
+
+@dataclass
+class AdjointResult:
+    """The trajectory of :func:`adjoint` and the gradient of the cost.
+
+    Attributes
+    ----------
+    result : Result
+        The trajectory (equal bit for bit to :func:`fastvi.integrate`'s).
+    grad_q0, grad_v0 : ndarray (n,)
+        ``∂J/∂q0`` and ``∂J/∂v0`` of the raw initial data (through their consistent
+        projection, as :func:`fastvi.sensitivity` differentiates it).
+    grad_params : ndarray (len(param_index),)
+        ``∂J/∂θ_l`` for ``l`` in ``param_index``.
+    param_index : list of int
+    lam_q, lam_p : ndarray (n,)
+        The adjoint at ``t0``: ``∂J/∂(q0, p0)`` of the consistent initial state.
+    stats : dict
+        ``checkpoints`` kept, ``segment`` (steps between them), ``backward_time`` (s).
+    """
+
+    result: Result
+    grad_q0: np.ndarray
+    grad_v0: np.ndarray
+    grad_params: np.ndarray
+    param_index: list
+    lam_q: np.ndarray
+    lam_p: np.ndarray
+    stats: dict
+
+
+def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
+            n_steps: int | None = None, t0: float = 0.0, t_span=None, method="P2L-Q3G",
+            param_index=None, initial_state=None, params=None, save_every: int = 1,
+            checkpoint_every: int | None = None, tol: float = valid.DEFAULT_TOL,
+            max_iter: int = valid.DEFAULT_MAX_ITER, newton: str = "auto", solver: str = "auto",
+            check: bool = True, monitor: bool = True) -> AdjointResult:
+    r"""The gradient of a cost ``J`` of the saved states by the discrete adjoint.
+
+    For ``J`` a function of the samples ``(q_i, v_i)`` of the run, ``cotangent(result)``
+    returns ``(∂J/∂q_i, ∂J/∂v_i)`` (two (K, n) arrays; the second may be None). The
+    backward sweep over the steps (``x = (q, p)``)
+
+    .. math::
+
+        \lambda_k = \Big(\frac{\partial x_{k+1}}{\partial x_k}\Big)^{\!T} \lambda_{k+1}
+                    + \frac{\partial J}{\partial x_k},\qquad
+        \nabla_\theta J \mathrel{+}= \Big(\frac{\partial x_{k+1}}{\partial \theta}\Big)^{\!T}
+                    \lambda_{k+1}
+
+    transposes exactly the linearised steps of :func:`fastvi.sensitivity`, so
+    ``⟨∇J, δ⟩`` equals the forward derivative of ``J`` along any direction ``δ`` to
+    round-off. Each step costs one linearisation and one transposed solve with its exact
+    Newton matrix (plus four residual evaluations a parameter, for the parameters'
+    differences). Memory stays ∝ √N: the forward run keeps its state every
+    ``checkpoint_every`` steps, and the sweep retakes each segment from its checkpoint.
+
+    Parameters
+    ----------
+    model, q0, v0, h, t_end, n_steps, t0, t_span, method, params, save_every, tol, max_iter, newton, solver, check, monitor :
+        As :func:`fastvi.sensitivity`.
+    cotangent : callable
+        ``cotangent(result) -> (dJ_dq, dJ_dv)``, (K, n) each at the samples of
+        ``result`` (a :class:`fastvi.Result`); ``dJ_dv`` may be None.
+    param_index : sequence of int, optional
+        The parameters to differentiate (default: all ``k``).
+    initial_state : callable, optional
+        ``initial_state(params) -> (q0, v0)``, as in :func:`fastvi.sensitivity`.
+    checkpoint_every : int, optional
+        Steps between checkpoints (default ``⌈√N⌉``).
+
+    Returns
+    -------
+    AdjointResult
+
+    Raises
+    ------
+    fastvi.IntegrationError
+        A step failed, or its Newton matrix is singular at the solution.
+
+    References
+    ----------
+    J. M. Sanz-Serna, Symplectic Runge–Kutta schemes for adjoint equations, automatic
+    differentiation, optimal control, and more, SIAM Review 58 (2016) 3–33.
+    """
+    run = disc.prepare(model, q0, v0, h=h, t_end=t_end, n_steps=n_steps, t0=t0, t_span=t_span,
+                       method=method, save_every=save_every, tol=tol, max_iter=max_iter,
+                       newton=newton, params=params, solver=solver, check=check,
+                       monitor=monitor, what="the adjoint")
+    n, m, k = model.n, model.m, run.prm.shape[0]
+    meth = run.meth
+    N = meth.s * n + meth.J * m
+    C = (math.ceil(math.sqrt(run.total)) if checkpoint_every is None
+         else valid.count(checkpoint_every, "checkpoint_every", 1))
+    C = min(C, run.total)
+    ck = make_checkpoints(-(-run.total // C), n, m, N)
+    t_loop = time.perf_counter()
+    with quiet():
+        status = _FORWARD(run.model_data, run.tabs, run.opts, run.h, run.state, run.ws,
+                          run.total, run.every, run.smp, run.info, run.sout, run.ev,
+                          run.stepk, run.stages, ck, C)
+    loop_time = time.perf_counter() - t_loop
+    result = disc.finish(run, int(status), loop_time, 0.0, "the adjoint")
+    pidx = list(range(k)) if param_index is None else disc.param_indices(param_index, k)
+    Lq, Lp, direct = _cotangents(run, result, cotangent, pidx)
+    tw = make_tangent_work(n, m, meth.s, meth.r, meth.J, 1, pidx)
+    disc.linear_part(run, tw)
+    rec = make_records(C, n, m, N)
+    lq, lp, lth = np.zeros(n), np.zeros(n), np.zeros(max(len(pidx), 1))
+    t_back = time.perf_counter()
+    info = run.info.copy()
+    with quiet():
+        status = _BACKWARD(run.model_data, run.tabs, run.tx, run.opts, run.h, run.state, run.ws,
+                           run.total, run.every, run.smp, info, run.sout, run.ev, run.stepk,
+                           run.stages, tw, ck, rec, Lq, Lp, lq, lp, lth)
+    back_time = time.perf_counter() - t_back
+    if status != 0:
+        run.info[:] = info
+        disc.finish(run, int(status), loop_time, 0.0, "the adjoint")
+    # through the consistent initial state: its derivative by each raw input
+    D = np.eye(2 * n + k)[list(range(2 * n)) + [2 * n + l for l in pidx]]
+    dq0, dp0, _, _ = disc.initial_tangent(run, D, initial_state)
+    grad = dq0 @ lq + dp0 @ lp
+    grad[2 * n:] += lth[:len(pidx)] + direct
+    return AdjointResult(result, grad[:n], grad[n:2 * n], grad[2 * n:], pidx, lq, lp,
+                         dict(checkpoints=ck.steps.shape[0], segment=C, backward_time=back_time))
+
+
+def _cotangents(run, result, cotangent, pidx):
+    r"""``(Lq, Lp, direct)``: the cotangents on ``(q_i, p_i)`` of ``cotangent(result)`` =
+    ``(∂J/∂q_i, ∂J/∂v_i)``, with ``v = M(q, θ)⁻¹ p``: ``Lp = M⁻¹ J_v``,
+    ``Lq = J_q − C_qᵀ M⁻¹ J_v``, and the direct part by the parameters
+    ``−Σ_i (M_θ v_i)ᵀ M⁻¹ J_v`` (for a configuration-dependent mass)."""
+    model = run.model
+    n, K = model.n, result.t.shape[0]
+    out = cotangent(result)
+    if not (isinstance(out, tuple) and len(out) == 2):
+        raise TypeError("`cotangent(result)` must return a pair (dJ_dq, dJ_dv) of (K, n) arrays "
+                        f"(dJ_dv may be None), got {type(out).__name__}")
+    Jq = _cotangent_array(out[0], "dJ_dq", K, n)
+    Jv = None if out[1] is None else _cotangent_array(out[1], "dJ_dv", K, n)
+    direct = np.zeros(len(pidx))
+    if Jv is None:
+        return Jq, np.zeros((K, n)), direct
+    if model.mass_matrix_constant is not None:
+        return Jq, np.linalg.solve(model.mass_matrix_constant, Jv.T).T.copy(), direct
+    Lq, Lp = Jq.copy(), np.zeros((K, n))
+    for i in range(K):
+        q, v = result.q[i], result.v[i]
+        M, _, _, _, Cq = point_terms(run.model_data, q, v, np.zeros(model.m))
+        Lp[i] = np.linalg.solve(M, Jv[i])
+        Lq[i] -= Cq.T @ Lp[i]
+        for j, l in enumerate(pidx):
+            direct[j] -= disc.theta_derivative(lambda th: model.mass_matrix(q, th) @ v,
+                                               run.prm, l) @ Lp[i]
+    return Lq, Lp, direct
+
+
+def _cotangent_array(x, name, K, n):
+    arr = np.asarray(x, dtype=float)
+    if arr.shape != (K, n) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"`cotangent(result)` must give `{name}` as finite ({K}, {n}) array (one "
+                         f"row per sample), got shape {arr.shape}")
+    return np.ascontiguousarray(arr)

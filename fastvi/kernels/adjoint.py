@@ -1,0 +1,182 @@
+r"""The discrete adjoint: the transposed linearised steps swept backwards, with checkpoints.
+
+For a cost ``J`` of the saved states, with ``Λ_i = (∂J/∂q_i, ∂J/∂p_i)`` at sample ``i``,
+the adjoint of step k (:func:`.tangent.pull`) maps ``λ_{k+1}`` to
+
+    λ_k = (∂x_{k+1}/∂x_k)ᵀ λ_{k+1} + Λ(k),      ∇_θ J += (∂x_{k+1}/∂θ)ᵀ λ_{k+1},
+
+``Λ(k)`` the cotangent of the sample at step k, if any: one transposed solve with the
+step's exact Newton matrix a step, whatever the number of parameters. The backward sweep
+needs each step's converged unknowns. Rather than keep them for the whole run (memory ∝ N),
+:func:`run_checkpointed` keeps the step's state and the predictor's history every ``C``
+steps, and :func:`run_adjoint` retakes each segment of ``C`` steps from its checkpoint —
+the same steps, bit for bit — into :class:`Records` before sweeping it backwards: memory ∝
+``N / C + C`` (``C ≈ √N``), one more trajectory's worth of steps in time.
+"""
+
+from collections import namedtuple
+
+import numpy as np
+
+from .._numba import byref, hot
+from .drive import run
+from .layout import H_SIZE, I_FAILED, I_FIRST, I_STEPS, OK, sizes
+from .tangent import linearise, pull
+
+__all__ = ["Checkpoints", "Records", "make_checkpoints", "make_records", "run_checkpointed",
+           "run_adjoint"]
+
+#: what a step needs of the past to be retaken bit for bit: the state (rows q, p, v), the
+#: predictor's unknowns of the last two steps, the workspace's flags and step lengths, and
+#: G(q_k) (the step reuses the last one's); per checkpoint, with the step it starts
+Checkpoints = namedtuple("Checkpoints", ["steps", "first", "state", "Xprev", "Xpp", "hold",
+                                         "hist", "G0"])
+#: the steps of one segment: start (q_k, p_k), converged unknowns, times, end (q, v), end
+#: impulse and momentum before the projection — what :func:`.tangent.linearise` reads
+Records = namedtuple("Records", ["qk", "pk", "X", "time", "q1", "v1", "eta", "P"])
+
+
+def make_checkpoints(count, n, m, N):
+    z = np.zeros
+    mm = max(m, 1)
+    return Checkpoints(z(count, dtype=np.int64), z(count), z((count, 3, n)), z((count, N)),
+                       z((count, N)), z((count, H_SIZE), dtype=np.int64), z((count, 2)),
+                       z((count, mm, n)))
+
+
+def make_records(C, n, m, N):
+    z = np.zeros
+    return Records(z((C, n)), z((C, n)), z((C, N)), z((C, 2)), z((C, n)), z((C, n)),
+                   z((C, max(m, 1))), z((C, n)))
+
+
+@hot
+def _keep(ck, i, state, ws, info):
+    ck.steps[i] = int(info[I_STEPS])
+    ck.first[i] = info[I_FIRST]
+    for r in range(3):
+        for a in range(state.shape[1]):
+            ck.state[i, r, a] = state[r, a]
+    for k in range(ws.Xprev.shape[0]):
+        ck.Xprev[i, k] = ws.Xprev[k]
+        ck.Xpp[i, k] = ws.Xpp[k]
+    for k in range(ws.hold.shape[0]):
+        ck.hold[i, k] = ws.hold[k]
+    ck.hist[i, 0] = ws.hist[0]
+    ck.hist[i, 1] = ws.hist[1]
+    for c in range(ws.G.shape[1]):
+        for a in range(ws.G.shape[2]):
+            ck.G0[i, c, a] = ws.G[0, c, a]
+
+
+@hot
+def _restore(ck, i, state, ws, info):
+    info[I_STEPS] = ck.steps[i]
+    info[I_FIRST] = ck.first[i]
+    for r in range(3):
+        for a in range(state.shape[1]):
+            state[r, a] = ck.state[i, r, a]
+    for k in range(ws.Xprev.shape[0]):
+        ws.Xprev[k] = ck.Xprev[i, k]
+        ws.Xpp[k] = ck.Xpp[i, k]
+    for k in range(ws.hold.shape[0]):
+        ws.hold[k] = ck.hold[i, k]
+    ws.hist[0] = ck.hist[i, 0]
+    ws.hist[1] = ck.hist[i, 1]
+    for c in range(ws.G.shape[1]):
+        for a in range(ws.G.shape[2]):
+            ws.G[0, c, a] = ck.G0[i, c, a]
+
+
+@hot
+def run_checkpointed(md, tabs, opts, h, state, ws, n_total, save_every, smp, info, sout, ev,
+                     stepk, stages, ck, C):
+    """:func:`.drive.run` in segments of ``C`` steps, keeping a checkpoint before each in
+    ``ck`` (``ceil(n_total / C)`` of them). Returns a status code."""
+    i = 0
+    while int(info[I_STEPS]) < n_total:
+        _keep(ck, i, state, ws, info)
+        i += 1
+        st = run(md, tabs, opts, h, state, ws, C, n_total, save_every, smp, info, sout, ev,
+                 stepk, stages, None)
+        if st != 0:
+            return st
+    return 0
+
+
+@hot
+def _sample_of(k, every, n_total, K):
+    """The sample that holds the state after ``k`` steps, or −1."""
+    if k % every == 0:
+        return k // every
+    if k == n_total:
+        return K - 1
+    return -1
+
+
+@hot
+def run_adjoint(md, tabs, tx, opts, h, state, ws, n_total, every, smp, info, sout, ev, stepk,
+                stages, tw, ck, rec, Lq, Lp, lq, lp, lth):
+    """The backward sweep: ``(lq, lp)`` becomes ``λ_0`` for the sample cotangents ``Lq``,
+    ``Lp`` (K, n), and ``lth`` (np,) the gradient by the parameters ``tw.pidx`` through the
+    steps. Each segment of ``ck`` (:func:`run_checkpointed`), last first, is retaken into
+    ``rec`` and swept backwards with :func:`.tangent.linearise` and :func:`.tangent.pull`.
+    Returns a status code; ``info[I_FAILED]`` is the failed step."""
+    mdp, txp, twp = byref(md), byref(tx), byref(tw)
+    n = state.shape[1]
+    m = sizes(tw.ws)[1]
+    C = rec.qk.shape[0]
+    K = Lq.shape[0]
+    for a in range(n):
+        lq[a] = 0.0
+        lp[a] = 0.0
+    for l in range(lth.shape[0]):
+        lth[l] = 0.0
+    nseg = (n_total + C - 1) // C
+    # one step a call of `run`, saving nothing, in int64s of run time: literals would have
+    # numba compile `run` once more, for the literals' types
+    one = nseg - nseg + 1
+    no_samples = one - 1
+    for seg in range(nseg - 1, -1, -1):
+        _restore(ck, seg, state, ws, info)
+        k0 = ck.steps[seg]
+        cnt = min(C, n_total - k0)
+        for j in range(cnt):
+            for a in range(n):
+                rec.qk[j, a] = state[0, a]
+                rec.pk[j, a] = state[1, a]
+            st = run(md, tabs, opts, h, state, ws, one, n_total, no_samples, smp, info, sout, ev,
+                     stepk, stages, None)
+            if st != 0:
+                return st
+            for k in range(ws.X.shape[0]):
+                rec.X[j, k] = ws.X[k]
+            rec.time[j, 0] = ws.time[0]
+            rec.time[j, 1] = ws.time[1]
+            for a in range(n):
+                rec.q1[j, a] = state[3, a]
+                rec.v1[j, a] = state[5, a]
+                rec.P[j, a] = ws.P[a]
+            for c in range(m):
+                rec.eta[j, c] = ws.etaJ[c]
+        for j in range(cnt - 1, -1, -1):
+            k = k0 + j
+            i = _sample_of(k + 1, every, n_total, K)
+            if i >= 0:
+                for a in range(n):
+                    lq[a] += Lq[i, a]
+                    lp[a] += Lp[i, a]
+            for a in range(n):
+                tw.qk[a] = rec.qk[j, a]
+                tw.pk[a] = rec.pk[j, a]
+            st = linearise(mdp, txp, h, rec.time[j], rec.X[j], rec.q1[j], rec.v1[j],
+                           rec.eta[j, :m], rec.P[j], twp)
+            if st == OK:
+                st = pull(twp, lq, lp, lth)
+            if st != OK:
+                info[I_FAILED] = k
+                return st
+    for a in range(n):
+        lq[a] += Lq[0, a]
+        lp[a] += Lp[0, a]
+    return 0

@@ -1,0 +1,568 @@
+r"""The linearised step: exact derivatives of the discrete flow (``docs/sensitivities.md``).
+
+A step solves ``R(X; q_k, p_k, θ) = 0`` for its unknowns ``X = (ΔQ^1 … ΔQ^s, η_0 … η_{J−1})``
+(:mod:`.step`), then reads off ``q_{k+1} = q_k + ΔQ^s`` and the momentum
+
+    P = ∂S_u/∂Q^s − Σ_{j<J} ℓ_s(d_j) G_jᵀ η_j,   p_{k+1} = P − G(q_{k+1})ᵀ η_J,
+    (G M⁻¹ Gᵀ) η_J = G M⁻¹ P   at q_{k+1}.
+
+At the converged ``X`` its derivative along a direction ``(δq_k, δp_k, δθ)`` is
+
+    K y = R_q δq_k + R_p δp_k + R_θ δθ,     K = ∂R/∂X (the exact Newton matrix), y = −δX
+    δq_{k+1} = δq_k − y_s,   δP = P_q δq_k + P_θ δθ − P_X y
+
+followed by the derivative of the projection (:func:`push`). ``R_q`` is the derivative at
+fixed increments: ``q_k`` moves every control point, so ``R_q = Σ_{μ=0}^{s} ∂R/∂Q^μ`` in
+absolute control points, of which the Newton matrix has the columns μ ≥ 1 only.
+
+All of these blocks come from one call of :func:`.step.assemble` on an *extended* step
+(:func:`extended_tables`): the step's own basis ``ℓ_0 … ℓ_s`` with one more function, the
+constant 1 (zero slope, one at every constraint point). Its unknowns are
+``(ΔQ^1 … ΔQ^s, T; η_0 … η_{J−1})`` with the translation ``T = 0``; as the basis functions
+of the rows run over ``ℓ_0 … ℓ_s`` its rows are ``E_0 … E_{s−1}``, then ``P``, then the
+constraint rows, and the column of ``T`` is ``R_q`` (moving ``q_k`` translates every
+quadrature and constraint point and leaves the velocities alone). The one term that
+``assemble`` has no reason to form, the constraint Hessian at ``q_k`` (the step's first
+constraint point is ``q_k`` itself, fixed within a step), is added to that column here.
+``K`` is gathered from the rest: the step's exact Newton matrix, assembled by the step's
+own code with its second derivatives (the callbacks, or the same finite differences as the
+full Newton). Derivatives by the parameters are five-point differences in ``θ`` (the
+kernels' rule for differences in time, ``layout.FD_T``) of the extended residual and of
+the projection.
+
+:func:`linearise` computes and factors these blocks once a step; :func:`push` applies the
+step's derivative to any number of directions (one solve each), :func:`pull` its transpose
+to a cotangent (one transposed solve: the discrete adjoint, :mod:`.adjoint`). Nothing here
+allocates in the time loop; statuses, not exceptions, report failures.
+"""
+
+from collections import namedtuple
+
+import numpy as np
+
+from .._numba import byref, hot, hot_inline, own, ptr
+from .drive import run
+from .layout import (CHESS, CJAC, F_EX_CHESS, F_EX_MJAC, F_MASSFN, FD_T, FD_T_POINTS, I_FAILED,
+                     I_SLOT, I_STEPS, MASS, MJAC, NONFINITE, OK, SINGULAR, SINGULAR_CONSTRAINTS,
+                     SINGULAR_MASS, STEP_OUT_SIZE, make_workspace, sizes)
+from .linalg import lu_factor, lu_solve
+from .step import (_fd_constraint_hessian, _fd_momentum_jacobian, assemble, end_momentum,
+                   linear_force)
+
+__all__ = ["PointWork", "TangentWork", "extended_tables", "make_point_work",
+           "make_tangent_work", "point", "point_terms", "linearise", "push", "pull",
+           "lu_solve_transposed", "run_tangent"]
+
+#: the second derivatives at a point of the constrained phase space, and their scratch
+PointWork = namedtuple("PointWork", [
+    "M",  # (n, n) M(q)
+    "G",  # (m, n) G(q)
+    "He",  # (n, n) Σ_c η_c ∇²g_c(q)
+    "Hv",  # (m, n) ∂(G v)/∂q
+    "Cq",  # (n, n) ∂(M v)/∂q (zero for a constant M)
+    "Hs",  # (n, n) scratch: one constraint's Hessian
+    "e",  # (m,) scratch: a unit impulse
+    "qa",  # (n,) scratch of the differences
+    "Ma",  # (n, n) scratch of the mass differences
+    "Gp", "Gm",  # (m, n) scratch of the Jacobian differences
+])
+
+#: the linearised step (:func:`linearise`) and the tangent state of the directions
+TangentWork = namedtuple("TangentWork", [
+    "ws",  # Workspace of the extended step (n, m, s + 1, r, J)
+    "pt",  # PointWork at q_{k+1}: M (factored), G, He, Hv, Cq
+    "rows",  # (N,) int64: the rows of the extended Newton matrix that are the step's equations
+    "cols",  # (N,) int64: its columns that are the step's unknowns
+    "K", "piv",  # (N, N) the step's exact Newton matrix, factored; its pivots
+    "Tq",  # (N + n, n) R_q, then P_q, at fixed increments
+    "PX",  # (n, N) P_X: ∂P/∂X
+    "pidx",  # (np,) int64: the parameters differentiated
+    "Rth",  # (N + n, np) R_θ, then P_θ
+    "Pth",  # (n, np) ∂p_{k+1}/∂θ of the projection at fixed q_{k+1} and P
+    "Yg",  # (m, n) G M⁻¹ at q_{k+1}
+    "S", "pivm",  # (m, m) G M⁻¹ Gᵀ, factored; (m,)
+    "pivn",  # (n,) pivots of M(q_{k+1})
+    "dq", "dp",  # (d, n) the tangent state, one direction a row
+    "th",  # (d, np) the parameter part of each direction (fixed over the run)
+    "B",  # (d, N) right-hand sides, then y = −δX
+    "dP", "dq1",  # (d, n) δP, δq_{k+1}
+    "Rd",  # (N',) the extended residual's difference in θ
+    "p1s", "v1s",  # (n,) the projection's outputs at a shifted θ
+    "G1s",  # (m, n) G(q_{k+1}) at a shifted θ
+    "w", "wb",  # (m,) scratch
+    "z", "zb", "u",  # (n,) scratch
+    "yb",  # (N,) scratch of the transposed solve
+    "qk", "pk",  # (n,) the step's start
+    "out",  # (STEP_OUT_SIZE,) scratch of the projection
+])
+
+
+# ----------------------------------------------------------------------------- set-up (Python)
+def extended_tables(tabs, s, J):
+    """The :class:`.layout.Tables` of the extended step: the basis ``ℓ_0 … ℓ_s`` and the
+    constant function at index s + 1 (value 1 at every quadrature and constraint point,
+    slope 0; see the module docstring)."""
+    one = np.ones((1, tabs.L.shape[1]))
+    return tabs._replace(L=np.vstack([tabs.L, one]),
+                         Ld=np.vstack([tabs.Ld, np.zeros_like(one)]),
+                         Lc=np.vstack([tabs.Lc, np.ones((1, tabs.Lc.shape[1]))]))
+
+
+def _index_maps(n, m, s, J):
+    """Rows and columns of the extended Newton matrix that are the step's own."""
+    sx = s + 1
+    rows = [nu * n + a for nu in range(s) for a in range(n)]
+    rows += [sx * n + (j - 1) * m + c for j in range(1, J + 1) for c in range(m)]
+    cols = [(mu - 1) * n + a for mu in range(1, s + 1) for a in range(n)]
+    cols += [sx * n + j * m + c for j in range(J) for c in range(m)]
+    return np.array(rows, dtype=np.int64), np.array(cols, dtype=np.int64)
+
+
+def make_point_work(n, m):
+    """A :class:`PointWork` for ``n`` coordinates and ``m`` constraints."""
+    mm = max(m, 1)
+    z = np.zeros
+    return PointWork(z((n, n)), z((mm, n)), z((n, n)), z((mm, n)), z((n, n)), z((n, n)), z(mm),
+                     z(n), z((n, n)), z((mm, n)), z((mm, n)))
+
+
+def make_tangent_work(n, m, s, r, J, d, pidx):
+    """A :class:`TangentWork` for ``d`` directions, differentiating by the parameters
+    ``pidx``."""
+    N = s * n + J * m
+    mm = max(m, 1)
+    npar = max(len(pidx), 1)
+    rows, cols = _index_maps(n, m, s, J)
+    z = np.zeros
+    return TangentWork(
+        make_workspace(n, m, s + 1, r, J), make_point_work(n, m), rows, cols, z((N, N)),
+        z(N, dtype=np.int64), z((N + n, n)), z((n, N)), np.asarray(pidx, dtype=np.int64),
+        z((N + n, npar)), z((n, npar)), z((mm, n)), z((mm, mm)), z(mm, dtype=np.int64),
+        z(n, dtype=np.int64), z((d, n)), z((d, n)), z((d, npar)), z((d, N)), z((d, n)),
+        z((d, n)), z((s + 1) * n + J * m), z(n), z(n), z((mm, n)), z(mm), z(mm), z(n),
+        z(n), z(n), z(N), z(n), z(n), z(STEP_OUT_SIZE))
+
+
+# ----------------------------------------------------------------------------- second derivatives
+@hot
+def _hessian(md, q, eta, out, pw, n, m):
+    """``out = Σ_c η_c ∇²g_c(q)``: the callback, or the full Newton's differences of G."""
+    if md.flags[F_EX_CHESS] != 0:
+        md.fns[CHESS](ptr(q), ptr(eta), ptr(md.prm), ptr(out))
+    else:
+        _fd_constraint_hessian(md.fns[CJAC], q, eta, md.prm, out, pw.qa, pw.Gp, pw.Gm, n, m)
+
+
+@hot
+def point(md_, q, v, eta, pw_):
+    """Fill the :class:`PointWork` at ``(q, v)`` with impulse ``eta`` (m,): ``M(q)``,
+    ``G(q)``, ``Σ η_c ∇²g_c``, ``∂(G v)/∂q`` (row c: ``(∇²g_c v)ᵀ``) and ``∂(M v)/∂q``."""
+    md, pw = own(md_), own(pw_)
+    fns, flags, prm = md.fns, md.flags, md.prm
+    n = q.shape[0]
+    m = eta.shape[0]
+    M, G, Hv, Cq, Hs, e = pw.M, pw.G, pw.Hv, pw.Cq, pw.Hs, pw.e
+    if flags[F_MASSFN] != 0:
+        fns[MASS](ptr(q), ptr(q), ptr(prm), ptr(M))
+        if flags[F_EX_MJAC] != 0:
+            fns[MJAC](ptr(q), ptr(v), ptr(prm), ptr(Cq))
+        else:
+            _fd_momentum_jacobian(fns[MASS], q, v, prm, Cq, pw.qa, pw.Ma, n)
+    else:
+        for a in range(n):
+            for b in range(n):
+                M[a, b] = md.Mc[a, b]
+                Cq[a, b] = 0.0
+    if m == 0:
+        return
+    for c in range(m):
+        for a in range(n):
+            G[c, a] = 0.0  # a callback with a declared pattern writes only its non-zeros
+    fns[CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
+    _hessian(md, q, eta, pw.He, pw, n, m)
+    for c in range(m):
+        for i in range(m):
+            e[i] = 0.0
+        e[c] = 1.0
+        _hessian(md, q, e, Hs, pw, n, m)
+        for b in range(n):
+            acc = 0.0
+            for a in range(n):
+                acc += Hs[b, a] * v[a]
+            Hv[c, b] = acc
+
+
+def point_terms(md, q, v, eta):
+    """``(M, G, He, Hv, Cq)`` at ``(q, v)`` with impulse ``eta`` (:func:`point`), as new
+    arrays: for the Python side (the initial tangent, the checks)."""
+    n, m = len(q), len(eta)
+    pw = make_point_work(n, m)
+    point(md, np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(v, dtype=float),
+          np.ascontiguousarray(eta, dtype=float), pw)
+    return pw.M.copy(), pw.G[:m].copy(), pw.He.copy(), pw.Hv[:m].copy(), pw.Cq.copy()
+
+
+@hot
+def lu_solve_transposed(A, piv, b, N):
+    """Solve ``Aᵀ x = b`` with the factors of :func:`.linalg.lu_factor` (``P A = L U``,
+    reciprocal pivots on the diagonal); ``b`` is overwritten."""
+    for i in range(N):  # Uᵀ
+        s = b[i]
+        for j in range(i):
+            s -= A[j, i] * b[j]
+        b[i] = s * A[i, i]
+    for i in range(N - 1, -1, -1):  # Lᵀ (unit diagonal)
+        s = b[i]
+        for j in range(i + 1, N):
+            s -= A[j, i] * b[j]
+        b[i] = s
+    for k in range(N - 1, -1, -1):  # Pᵀ
+        p = piv[k]
+        if p != k:
+            t = b[k]
+            b[k] = b[p]
+            b[p] = t
+
+
+# ----------------------------------------------------------------------------- linearisation
+@hot_inline
+def _step_sizes(wx):
+    """``(n, m, s, N)`` of the step whose extended workspace is ``wx``."""
+    n, m, sx, _, J = sizes(wx)
+    return n, m, sx - 1, (sx - 1) * n + J * m
+
+
+@hot_inline
+def _start_jacobian(md, qk, wx, n, m):
+    """``wx.G[0] = G(q_k)``: the extended step's first constraint point, as the step has it."""
+    G0 = wx.G[0]
+    for c in range(m):
+        for a in range(n):
+            G0[c, a] = 0.0  # a callback with a declared pattern writes only its non-zeros
+    md.fns[CJAC](ptr(qk), ptr(qk), ptr(md.prm), ptr(G0))
+
+
+@hot
+def _theta_differences(md_, tx_, h, q1, P, tw_):
+    """``tw.Rth`` (the rows of R and of P) and ``tw.Pth`` (the projection at fixed
+    ``q_{k+1}`` and ``P``): five-point differences in each parameter of ``tw.pidx``. Leaves
+    ``md.prm`` as it found it. Returns a status code."""
+    md, tw = own(md_), own(tw_)
+    wx = tw.ws
+    n, m, s, N = _step_sizes(wx)
+    prow = s * n
+    prm, Rd, rows, Rth, Pth, G1s = md.prm, tw.Rd, tw.rows, tw.Rth, tw.Pth, tw.G1s
+    wxp = byref(wx)
+    st = OK
+    for i in range(tw.pidx.shape[0]):
+        l = tw.pidx[i]
+        th0 = prm[l]
+        dt = FD_T * max(1.0, abs(th0))
+        for k in range(Rd.shape[0]):
+            Rd[k] = 0.0
+        for a in range(n):
+            Pth[a, i] = 0.0
+        for sgn, wgt in FD_T_POINTS:
+            prm[l] = th0 + sgn * dt
+            linear_force(md, wx, tw.qk)
+            if m > 0:
+                _start_jacobian(md, tw.qk, wx, n, m)
+            st = assemble(md_, tx_, h, tw.qk, tw.pk, wxp, False)
+            if st != OK:
+                break
+            for k in range(Rd.shape[0]):
+                Rd[k] += wgt * wx.R[k]
+            if m > 0:
+                for c in range(m):
+                    for a in range(n):
+                        G1s[c, a] = 0.0
+                md.fns[CJAC](ptr(q1), ptr(q1), ptr(prm), ptr(G1s))
+            st = end_momentum(md_, byref(q1), byref(P), byref(tw.p1s), byref(tw.v1s),
+                              byref(G1s), wxp, byref(tw.out))
+            if st != OK:
+                break
+            for a in range(n):
+                Pth[a, i] += wgt * tw.p1s[a]
+        prm[l] = th0
+        linear_force(md, wx, tw.qk)
+        if st != OK:
+            return st
+        inv = 1.0 / (12.0 * dt)
+        for k in range(N):
+            Rth[k, i] = Rd[rows[k]] * inv
+        for a in range(n):
+            Rth[N + a, i] = Rd[prow + a] * inv
+            Pth[a, i] *= inv
+    return OK
+
+
+@hot
+def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
+    """The blocks of the step's derivative (module docstring) at its converged unknowns
+    ``X``, from the start ``tw.qk``, ``tw.pk`` at ``time`` = (t_k, t_{k+1}), to the end
+    ``q1``, ``v1`` with the end impulse ``eta`` (m,) and ``P`` (the momentum before the
+    projection); ``tx`` the :func:`extended_tables`. Factors ``K``, ``M(q_{k+1})`` and
+    ``G M⁻¹ Gᵀ``. Returns a status code (``SINGULAR``: the Newton matrix at the solution is
+    singular, and the step has no derivative there)."""
+    md, tx, tw = own(md_), own(tx_), own(tw_)
+    wx, pw = tw.ws, tw.pt
+    n, m, s, N = _step_sizes(wx)
+    sn = s * n
+    tcol = sn  # the translation's column, and the first row of P
+    Xx, A = wx.X, wx.A
+    rows, cols, K, Tq, PX = tw.rows, tw.cols, tw.K, tw.Tq, tw.PX
+    for k in range(sn):
+        Xx[k] = X[k]
+    for a in range(n):
+        Xx[sn + a] = 0.0
+    for k in range(N - sn):
+        Xx[sn + n + k] = X[sn + k]
+    wx.time[0] = time[0]
+    wx.time[1] = time[1]
+    if m > 0:
+        _start_jacobian(md, tw.qk, wx, n, m)
+    st = assemble(md_, tx_, h, tw.qk, tw.pk, byref(wx), True)
+    if st != OK:
+        return st
+    if m > 0:
+        # ∂/∂q_k of −ℓ_ν(d_0) G(q_k)ᵀ η_0: the step holds G(q_k) fixed, its matrix has no
+        # such term
+        Hs = pw.Hs
+        _hessian(md, tw.qk, X[sn:sn + m], Hs, pw, n, m)
+        for nu in range(s + 1):
+            cl = tx.Lc[nu, 0]
+            if cl != 0.0:
+                for a in range(n):
+                    for b in range(n):
+                        A[nu * n + a, tcol + b] -= cl * Hs[a, b]
+    for i in range(N):
+        ri = rows[i]
+        for j in range(N):
+            K[i, j] = A[ri, cols[j]]
+        for b in range(n):
+            Tq[i, b] = A[ri, tcol + b]
+    for a in range(n):
+        for j in range(N):
+            PX[a, j] = A[sn + a, cols[j]]
+        for b in range(n):
+            Tq[N + a, b] = A[sn + a, tcol + b]
+    if lu_factor(K, tw.piv, N) != 0:
+        return SINGULAR
+    if tw.pidx.shape[0] > 0:
+        st = _theta_differences(md_, tx_, h, q1, P, tw_)
+        if st != OK:
+            return st
+    point(md_, q1, v1, eta, byref(pw))
+    if m > 0:
+        M, G, Yg, S = pw.M, pw.G, tw.Yg, tw.S
+        if lu_factor(M, tw.pivn, n) != 0:
+            return SINGULAR_MASS
+        for c in range(m):
+            for a in range(n):
+                Yg[c, a] = G[c, a]
+            lu_solve(M, tw.pivn, Yg[c], n)
+        for c in range(m):
+            for e in range(m):
+                acc = 0.0
+                for a in range(n):
+                    acc += Yg[c, a] * G[e, a]
+                S[c, e] = acc
+        if lu_factor(S, tw.pivm, m) != 0:
+            return SINGULAR_CONSTRAINTS
+    return OK
+
+
+@hot_inline
+def _minus_product(out, x, A, y, n):
+    """``out = x − A y`` (n,)."""
+    for a in range(n):
+        acc = x[a]
+        for b in range(n):
+            acc -= A[a, b] * y[b]
+        out[a] = acc
+
+
+@hot
+def push(tw_):
+    r"""Apply the linearised step to every direction: ``tw.dq``, ``tw.dp`` (with the
+    parameter parts ``tw.th``) become the directions at ``t_{k+1}``. The projection's part,
+    with ``Y = G M⁻¹``, ``S = Y Gᵀ`` at ``q_{k+1}``:
+
+        z = δP − H_η δq_{k+1},   S δη = Y (z − C_q δq_{k+1}) + H_v δq_{k+1},
+        δp_{k+1} = z − Gᵀ δη + (∂p_{k+1}/∂θ) δθ
+
+    (``H_η = Σ η_c ∇²g_c``, ``H_v = ∂(G v)/∂q``, ``C_q = ∂(M v)/∂q``): the derivative of
+    ``p = P − Gᵀη`` and of the hidden constraint ``G M⁻¹ p = 0``. Returns a status code."""
+    tw = own(tw_)
+    pw = tw.pt
+    n, m, s, N = _step_sizes(tw.ws)
+    sn = s * n
+    npar = tw.pidx.shape[0]
+    K, Tq, Rth, PX, B, dP = tw.K, tw.Tq, tw.Rth, tw.PX, tw.B, tw.dP
+    G, He, Hv, Cq, Yg = pw.G, pw.He, pw.Hv, pw.Cq, tw.Yg
+    z, u, w = tw.z, tw.u, tw.w
+    bad = False
+    for c in range(tw.dq.shape[0]):
+        dq, dp, th, y, dq1 = tw.dq[c], tw.dp[c], tw.th[c], B[c], tw.dq1[c]
+        for i in range(N):
+            acc = dp[i] if i < n else 0.0
+            for b in range(n):
+                acc += Tq[i, b] * dq[b]
+            for l in range(npar):
+                acc += Rth[i, l] * th[l]
+            y[i] = acc
+        lu_solve(K, tw.piv, y, N)
+        for a in range(n):
+            dq1[a] = dq[a] - y[sn - n + a]
+            acc = 0.0
+            for b in range(n):
+                acc += Tq[N + a, b] * dq[b]
+            for l in range(npar):
+                acc += Rth[N + a, l] * th[l]
+            for j in range(N):
+                acc -= PX[a, j] * y[j]
+            dP[c, a] = acc
+        _minus_product(z, tw.dP[c], He, dq1, n)
+        if m > 0:
+            _minus_product(u, z, Cq, dq1, n)
+            for e in range(m):
+                acc = 0.0
+                for a in range(n):
+                    acc += Yg[e, a] * u[a] + Hv[e, a] * dq1[a]
+                w[e] = acc
+            lu_solve(tw.S, tw.pivm, w, m)
+            for a in range(n):
+                acc = z[a]
+                for e in range(m):
+                    acc -= G[e, a] * w[e]
+                z[a] = acc
+        for a in range(n):
+            x = z[a]
+            for l in range(npar):
+                x += tw.Pth[a, l] * th[l]
+            dq[a] = dq1[a]
+            dp[a] = x
+            bad = bad or not (np.isfinite(x) and np.isfinite(dq1[a]))
+    return NONFINITE if bad else OK
+
+
+@hot
+def pull(tw_, lq, lp, lth):
+    """The transpose of :func:`push`: the cotangent ``(lq, lp)`` at ``t_{k+1}`` becomes the
+    one at ``t_k`` (in place), and ``lth`` (np,) gains the parameters' part
+    (``lth += (∂x_{k+1}/∂θ)ᵀ λ_{k+1}``). One transposed solve with ``K``. Returns a status
+    code."""
+    tw = own(tw_)
+    pw = tw.pt
+    n, m, s, N = _step_sizes(tw.ws)
+    sn = s * n
+    npar = tw.pidx.shape[0]
+    Tq, Rth, PX = tw.Tq, tw.Rth, tw.PX
+    G, He, Hv, Cq, Yg = pw.G, pw.He, pw.Hv, pw.Cq, tw.Yg
+    zb, u, wb, yb, dq1b = tw.zb, tw.u, tw.wb, tw.yb, tw.z
+    # dp1 = z − Gᵀ w + P_θ θ
+    for l in range(npar):
+        acc = 0.0
+        for a in range(n):
+            acc += tw.Pth[a, l] * lp[a]
+        lth[l] += acc
+    for a in range(n):
+        zb[a] = lp[a]
+        dq1b[a] = lq[a]
+    if m > 0:
+        for e in range(m):  # w̄ = −G λp, then S⁻ᵀ w̄
+            acc = 0.0
+            for a in range(n):
+                acc -= G[e, a] * lp[a]
+            wb[e] = acc
+        lu_solve_transposed(tw.S, tw.pivm, wb, m)
+        for a in range(n):  # ū = Yᵀ w̄ ; δq1 gains H_vᵀ w̄
+            acc = 0.0
+            acc2 = 0.0
+            for e in range(m):
+                acc += Yg[e, a] * wb[e]
+                acc2 += Hv[e, a] * wb[e]
+            u[a] = acc
+            dq1b[a] += acc2
+        for a in range(n):  # u = z − C_q δq1
+            acc = 0.0
+            for b in range(n):
+                acc += Cq[b, a] * u[b]
+            zb[a] += u[a]
+            dq1b[a] -= acc
+    for a in range(n):  # z = δP − H_η δq1
+        acc = 0.0
+        for b in range(n):
+            acc += He[b, a] * zb[b]
+        dq1b[a] -= acc
+    # δP = P_q δq + P_θ θ − P_X y ;  δq1 = δq − y_s
+    for l in range(npar):
+        acc = 0.0
+        for a in range(n):
+            acc += Rth[N + a, l] * zb[a]
+        lth[l] += acc
+    for j in range(N):
+        acc = 0.0
+        for a in range(n):
+            acc -= PX[a, j] * zb[a]
+        yb[j] = acc
+    for a in range(n):
+        yb[sn - n + a] -= dq1b[a]
+    lu_solve_transposed(tw.K, tw.piv, yb, N)  # B̄ = K⁻ᵀ ȳ
+    for b in range(n):
+        acc = dq1b[b]
+        for a in range(n):
+            acc += Tq[N + a, b] * zb[a]
+        for i in range(N):
+            acc += Tq[i, b] * yb[i]
+        lq[b] = acc
+    for a in range(n):
+        lp[a] = yb[a]
+    for l in range(npar):
+        acc = 0.0
+        for i in range(N):
+            acc += Rth[i, l] * yb[i]
+        lth[l] += acc
+    bad = False
+    for a in range(n):
+        bad = bad or not (np.isfinite(lq[a]) and np.isfinite(lp[a]))
+    return NONFINITE if bad else OK
+
+
+# ----------------------------------------------------------------------------- time loop
+@hot
+def run_tangent(md, tabs, tx, opts, h, state, ws, n_total, save_every, smp, info, sout, ev,
+                stepk, stages, tw, dQ, dPs):
+    """:func:`.drive.run` one step at a time, each followed by :func:`linearise` and
+    :func:`push`: the samples of the trajectory into ``smp`` as ``run`` saves them (the
+    same steps, bit for bit), and the directions at each sample into ``dQ``, ``dPs``
+    (K, d, n). Returns a status code; ``info[I_FAILED]`` is the failed step."""
+    mdp, txp, twp = byref(md), byref(tx), byref(tw)
+    n = state.shape[1]
+    m = sizes(tw.ws)[1]
+    d = tw.dq.shape[0]
+    # one step a call of `run`, in an int64 of run time: a literal 1 would have numba compile
+    # `run` once more, for the literal's type
+    one = n_total - n_total + 1
+    while int(info[I_STEPS]) < n_total:
+        k = int(info[I_STEPS])
+        for a in range(n):
+            tw.qk[a] = state[0, a]
+            tw.pk[a] = state[1, a]
+        slot = int(info[I_SLOT])
+        st = run(md, tabs, opts, h, state, ws, one, n_total, save_every, smp, info, sout, ev,
+                 stepk, stages, None)
+        if st != 0:
+            return st
+        st = linearise(mdp, txp, h, ws.time, ws.X, state[3], state[5], ws.etaJ[:m], ws.P, twp)
+        if st == OK:
+            st = push(twp)
+        if st != OK:
+            info[I_FAILED] = k
+            return st
+        if int(info[I_SLOT]) > slot:
+            for c in range(d):
+                for a in range(n):
+                    dQ[slot, c, a] = tw.dq[c, a]
+                    dPs[slot, c, a] = tw.dp[c, a]
+    return 0

@@ -1,0 +1,275 @@
+r"""Forward sensitivities of the discrete flow: :func:`sensitivity`, :func:`tangent_space`.
+
+The derivatives are those of the map the integrator computes — the composition of its
+steps, each differentiated at its converged Newton solution — not of the differential
+equations: exact up to round-off for the trajectory :func:`fastvi.integrate` returns
+(``docs/sensitivities.md``).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _discrete as disc
+from . import _validate as valid
+from .kernels.tangent import make_tangent_work, point_terms, run_tangent
+from ._launch import Launcher
+from ._numba import quiet
+from .results import Result
+
+__all__ = ["sensitivity", "SensitivityResult", "tangent_space"]
+
+#: the time loop, called through its compiled entry points (no per-call typing: _launch.py)
+_RUN_TANGENT = Launcher(run_tangent)
+
+
+@dataclass
+class SensitivityResult:
+    """The trajectory of :func:`sensitivity` and its derivatives at the saved steps.
+
+    Attributes
+    ----------
+    result : Result
+        The trajectory, equal bit for bit to :func:`fastvi.integrate`'s with the same
+        arguments.
+    t : ndarray (K,)
+        The times of the samples (``result.t``).
+    dq, dv, dp : ndarray (K, n, d)
+        ``dq[i, :, j]``: the derivative of ``q(t_i)`` along direction ``j`` (``labels[j]``),
+        and likewise of ``v(t_i)`` and ``p(t_i)``. For ``wrt=("q0", "v0", "params")`` the
+        directions are the unit vectors of the raw inputs, so ``dq[i]`` is the Jacobian
+        ``∂q(t_i)/∂(q0, v0, θ)`` (n, 2n + len(param_index)).
+    labels : list of str
+        What each direction perturbs: ``"q0[a]"``, ``"v0[a]"``, ``"params[l]"`` or
+        ``"direction[j]"``.
+    params : ndarray (k,)
+        The parameters of the run.
+    """
+
+    result: Result
+    t: np.ndarray
+    dq: np.ndarray
+    dv: np.ndarray
+    dp: np.ndarray
+    labels: list
+    params: np.ndarray
+    _dth: np.ndarray = field(repr=False, default=None)
+    _pidx: list = field(repr=False, default_factory=list)
+    _model: object = field(repr=False, default=None)
+
+    def tangent_residual(self):
+        r"""How far each sample's derivatives are from the tangent space of the constraints:
+        ``(g, gv)`` (K,), the max-norms over the directions of the linearised constraint
+        ``G δq + g_θ δθ`` and of the linearised hidden constraint
+        ``H_v δq + G M⁻¹ (δp − C_q δq) + (∂(G M⁻¹ p)/∂θ) δθ``. At round-off for a
+        consistent start: the linearised step maps tangent vectors to tangent vectors."""
+        model, prm = self._model, self.params
+        K = self.t.shape[0]
+        g, gv = np.zeros(K), np.zeros(K)
+        if model.m == 0:
+            return g, gv
+        md = model.kernel_data(prm)
+        res = self.result
+        for i in range(K):
+            q, v, p = res.q[i], res.v[i], res.p[i]
+            M, G, _, Hv, Cq = point_terms(md, q, v, np.zeros(model.m))
+            dq, dp = self.dq[i], self.dp[i]
+            lin_g = G @ dq
+            lin_h = Hv @ dq + G @ np.linalg.solve(M, dp - Cq @ dq)
+            for j, l in enumerate(self._pidx):
+                lin_g += np.outer(disc.theta_derivative(lambda th: model.constraint_value(q, th), prm, l),
+                                  self._dth[:, j])
+                hid = disc.theta_derivative(
+                    lambda th: model.constraint_jacobian_value(q, th)
+                    @ np.linalg.solve(model.mass_matrix(q, th), p), prm, l)
+                lin_h += np.outer(hid, self._dth[:, j])
+            g[i] = np.abs(lin_g).max()
+            gv[i] = np.abs(lin_h).max()
+        return g, gv
+
+
+def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
+                n_steps: int | None = None, t0: float = 0.0, t_span=None,
+                method="P2L-Q3G", wrt=("q0", "v0"), param_index=None, initial_state=None,
+                params=None, save_every: int = 1, tol: float = valid.DEFAULT_TOL,
+                max_iter: int = valid.DEFAULT_MAX_ITER, newton: str = "auto",
+                solver: str = "auto", check: bool = True, monitor: bool = True
+                ) -> SensitivityResult:
+    r"""Integrate like :func:`fastvi.integrate` and propagate derivatives along the run.
+
+    Each step solves ``R(X; q_k, p_k, θ) = 0`` for its unknowns ``X`` and reads off
+    ``(q_{k+1}, p_{k+1})``; at the converged ``X`` its derivative along
+    ``(δq_k, δp_k, δθ)`` solves
+
+    .. math::
+
+        K\,\delta X = -\left(R_q\,\delta q_k + R_p\,\delta p_k + R_\theta\,\delta\theta\right),
+        \qquad K = \partial R/\partial X,
+
+    with one LU factorisation of the exact Newton matrix ``K`` per step and one solve per
+    direction, followed by the derivative of ``q_{k+1} = q_k + ΔQ^s`` and of the end
+    projection of the momentum (``docs/sensitivities.md``). These are the exact derivatives
+    of the discrete map — of the numbers this function returns — not of the differential
+    equations: they differ from the latter by the method's error, ``O(h^{2s})``.
+
+    What a perturbation of the initial state means: the run starts from the consistent
+    state that :func:`fastvi.integrate` makes of ``(q0, v0)`` — their projection onto
+    ``g(q) = 0``, ``G(q) v = 0`` in the metric of ``M`` — so a raw perturbation
+    ``(δq0, δv0, δθ)`` acts through the derivative of that projection:
+
+    .. math::
+
+        \delta q^* = \delta q - W S^{-1}(G\,\delta q + g_\theta\,\delta\theta),\qquad
+        \delta v^* = \delta v - W S^{-1}(G\,\delta v + H_v\,\delta q^* + (G_\theta v)\,\delta\theta),
+
+    ``W = M⁻¹Gᵀ``, ``S = G W``, ``H_v = ∂(G v)/∂q``: a tangent vector of the constrained
+    phase space (the parameters may move the constraints: a rod length). The columns for
+    ``q0`` and ``v0`` therefore have rank ``n − m`` each.
+
+    Parameters
+    ----------
+    model, q0, v0, h, t_end, n_steps, t0, t_span, method, params, save_every, tol, max_iter, newton, solver, check, monitor :
+        As :func:`fastvi.integrate`. The run must be a whole number of steps of ``h``;
+        adaptive steps, events, dense output, ``recover`` and ``specialize`` are not
+        available here.
+    wrt : sequence of {"q0", "v0", "params"}, or array (2n + k, d), default ("q0", "v0")
+        The directions: the unit vectors of ``q0`` (n), ``v0`` (n) and the parameters of
+        ``param_index``, in the order named; or the columns of an array of raw directions
+        ``(δq0, δv0, δθ)`` (all ``k`` parameters).
+    param_index : sequence of int, optional
+        The parameters of ``"params"`` (default: all ``k``). Parameters are the entries of
+        the parameter vector the model's callbacks read; a constant mass matrix is not one.
+    initial_state : callable, optional
+        ``initial_state(params) -> (q0, v0)``: where the initial state itself depends on the
+        parameters (initial angles of rods whose lengths are fitted). Its derivative, by
+        five-point differences, joins the parameters' directions. ``q0, v0`` should be its
+        value at ``params``.
+
+    Returns
+    -------
+    SensitivityResult
+        ``result`` (the :class:`fastvi.Result`), and ``dq``, ``dv``, ``dp`` (K, n, d) at
+        the saved steps.
+
+    Raises
+    ------
+    fastvi.IntegrationError
+        A step failed, or its Newton matrix is singular at the solution (the discrete flow
+        has no derivative there): the partial result is attached; no NaN is returned.
+    NotImplementedError
+        A model with time-dependent potential or constraints.
+
+    Notes
+    -----
+    Cost: one linearisation a step (an assembly of the exact Newton matrix, about twice the
+    size of the step's, an LU factorisation, the second derivatives of the projection) and
+    one solve per direction; each parameter moved adds four residual evaluations a step
+    (its five-point difference). See ``docs/sensitivities.md`` for measured costs.
+
+    References
+    ----------
+    J. M. Sanz-Serna, Symplectic Runge–Kutta schemes for adjoint equations, automatic
+    differentiation, optimal control, and more, SIAM Review 58 (2016) 3–33.
+
+    Examples
+    --------
+    >>> import numpy as np, fastvi
+    >>> dp = fastvi.scenes.double_pendulum()
+    >>> q0, v0 = dp.initial_state(0.5, 0.3)
+    >>> sens = fastvi.sensitivity(dp, q0, v0, h=0.01, n_steps=100, wrt=("q0", "v0"))
+    >>> sens.dq.shape                     # 101 samples, n = 4, 2n = 8 directions
+    (101, 4, 8)
+    """
+    run = disc.prepare(model, q0, v0, h=h, t_end=t_end, n_steps=n_steps, t0=t0, t_span=t_span,
+                       method=method, save_every=save_every, tol=tol, max_iter=max_iter,
+                       newton=newton, params=params, solver=solver, check=check,
+                       monitor=monitor, what="the sensitivity")
+    n, k = model.n, run.prm.shape[0]
+    D, labels = disc.directions(wrt, n, k, param_index)
+    dq0, dp0, pidx, dth = disc.initial_tangent(run, D, initial_state)
+    meth = run.meth
+    d = D.shape[0]
+    tw = make_tangent_work(n, model.m, meth.s, meth.r, meth.J, d, pidx)
+    tw.dq[:], tw.dp[:] = dq0, dp0
+    tw.th[:, :len(pidx)] = dth
+    disc.linear_part(run, tw)
+    dQ = np.zeros((run.K, d, n))
+    dP = np.zeros((run.K, d, n))
+    dQ[0], dP[0] = dq0, dp0
+    t_loop = time.perf_counter()
+    with quiet():
+        status = _RUN_TANGENT(run.model_data, run.tabs, run.tx, run.opts, run.h, run.state, run.ws,
+                              run.total, run.every, run.smp, run.info, run.sout, run.ev,
+                              run.stepk, run.stages, tw, dQ, dP)
+    loop_time = time.perf_counter() - t_loop
+    result = disc.finish(run, int(status), loop_time, 0.0, "the sensitivity")
+    K = result.t.shape[0]
+    dq = np.ascontiguousarray(dQ[:K].transpose(0, 2, 1))
+    dp = np.ascontiguousarray(dP[:K].transpose(0, 2, 1))
+    dv = _velocity_derivatives(run, result, dq, dp, pidx, dth)
+    return SensitivityResult(result, result.t, dq, dv, dp, labels, run.prm, dth, pidx, model)
+
+
+def _velocity_derivatives(run, result, dq, dp, pidx, dth):
+    """``δv = M⁻¹ (δp − C_q δq − (M_θ v) δθ)`` at every sample."""
+    model = run.model
+    if model.mass_matrix_constant is not None:
+        return np.linalg.solve(model.mass_matrix_constant, dp)
+    dv = np.empty_like(dp)
+    zero = np.zeros(model.m)
+    for i in range(dq.shape[0]):
+        q, v = result.q[i], result.v[i]
+        M, _, _, _, Cq = point_terms(run.model_data, q, v, zero)
+        rhs = dp[i] - Cq @ dq[i]
+        for j, l in enumerate(pidx):
+            rhs -= np.outer(disc.theta_derivative(lambda th: model.mass_matrix(q, th) @ v,
+                                                  run.prm, l), dth[:, j])
+        dv[i] = np.linalg.solve(M, rhs)
+    return dv
+
+
+def tangent_space(model, q, v, *, params=None) -> np.ndarray:
+    r"""An orthonormal basis of the tangent space of the constrained phase space.
+
+    At ``(q, p = M(q) v)``, in ``(δq, δp)``: the null space of
+
+    .. math::
+
+        \begin{pmatrix} G & 0 \\ H_v - G M^{-1} C_q & G M^{-1} \end{pmatrix},
+
+    the linearised constraint ``G δq = 0`` and hidden constraint ``δ(G M⁻¹ p) = 0``
+    (``H_v = ∂(G v)/∂q``, ``C_q = ∂(M v)/∂q``). Directions in this space are the meaningful
+    perturbations of a state; :func:`sensitivity` maps them to tangent vectors at every
+    later step.
+
+    Parameters
+    ----------
+    model : Model
+        Without time-dependent constraints.
+    q, v : array_like (n,)
+        A consistent state.
+    params : array_like (k,), optional
+        Parameters (default: the model's).
+
+    Returns
+    -------
+    ndarray (2n, 2(n − m))
+        Orthonormal columns ``(δq, δp)``.
+    """
+    n, m = model.n, model.m
+    q = valid.vector(q, "q", n)
+    v = valid.vector(v, "v", n)
+    prm = valid.params(params, model)
+    if model.time_dependent:
+        raise NotImplementedError("tangent_space does not support time-dependent constraints yet")
+    model._compile()
+    if m == 0:
+        return np.eye(2 * n)
+    M, G, _, Hv, Cq = point_terms(model.kernel_data(prm), q, v, np.zeros(m))
+    Y = np.linalg.solve(M, G.T).T
+    C = np.block([[G, np.zeros((m, n))], [Hv - Y @ Cq, Y]])
+    _, sv, Vt = np.linalg.svd(C)
+    return np.ascontiguousarray(Vt[2 * m:].T)

@@ -32,7 +32,7 @@ Once per model, method and parameter vector, in NumPy:
    Powell–Reid column groups of ``Σ η_i ∇²g_i`` (pattern ``Gᵀ G``): the full Newton
    matrix differences the Jacobian callback twice per group, not per coordinate (6 groups
    for a chain of any length), with the column-by-column result bit for bit
-   (:func:`fastvi.kernels.step._fd_constraint_hessian_grouped`).
+   (:func:`fastvi.kernels.step.fd_constraint_hessian_grouped`).
 
 Why safe: the full Newton and the mechanics iteration only *solve for an increment* — a
 non-zero outside the detected band would slow their convergence, never change the

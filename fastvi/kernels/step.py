@@ -112,7 +112,7 @@ def _fd_vec_jacobian(fn, kind, q, v, prm, out, xa, fa, fb, n):
 
 
 @hot
-def _fd_momentum_jacobian(fmass, q, v, prm, out, qa, Ma, n):
+def fd_momentum_jacobian(fmass, q, v, prm, out, qa, Ma, n):
     """out[a, b] = ∂(M(q) v)_a / ∂q_b by central differences of the mass callback."""
     for b in range(n):
         for a in range(n):
@@ -136,7 +136,7 @@ def _fd_momentum_jacobian(fmass, q, v, prm, out, qa, Ma, n):
 
 
 @hot
-def _fd_constraint_hessian(fjac, q, eta, prm, out, qa, Gp, Gm, n, m):
+def fd_constraint_hessian(fjac, q, eta, prm, out, qa, Gp, Gm, n, m):
     """out = Σ_a η_a ∇²g_a = ∂(Gᵀη)/∂q by central differences of the Jacobian callback.
 
     ``Gp``/``Gm`` are zeroed first: they double as scratch elsewhere, and a callback with a
@@ -167,8 +167,8 @@ def _fd_constraint_hessian(fjac, q, eta, prm, out, qa, Gp, Gm, n, m):
 
 
 @hot
-def _fd_constraint_hessian_grouped(fjac, q, eta, prm, out, qa, d, Gp, Gm, si, n, m):
-    """:func:`_fd_constraint_hessian` with the columns perturbed in groups (Curtis–Powell–
+def fd_constraint_hessian_grouped(fjac, q, eta, prm, out, qa, d, Gp, Gm, si, n, m):
+    """:func:`fd_constraint_hessian` with the columns perturbed in groups (Curtis–Powell–
     Reid, planned by :func:`fastvi.structure.plan` on the pattern of ``Gᵀ G``): two
     Jacobian calls per group instead of per coordinate, products over the pattern of G.
 
@@ -391,7 +391,7 @@ def assemble(md_, tabs_, h, qk, pk, ws_, jac):
             if flags[F_EX_MJAC] != 0:
                 fns[MJAC](ptr(qi), ptr(vi), ptr(prm), ptr(Cq))
             else:
-                _fd_momentum_jacobian(fns[MASS], qi, vi, prm, Cq, fa, Ma, n)
+                fd_momentum_jacobian(fns[MASS], qi, vi, prm, Cq, fa, Ma, n)
         if has_force:
             # ∂F_nc/∂q joins the force block, ∂F_nc/∂v the mixed block (docs/method.md §11)
             if flags[F_EX_FJQ] != 0:
@@ -461,10 +461,10 @@ def assemble(md_, tabs_, h, qk, pk, ws_, jac):
                     if flags[F_EX_CHESS] != 0:
                         fns[CHESS](ptr(qd), ptr(eta), ptr(prm), ptr(Hc))
                     elif ws.si[SI_HC_NG] != 0:  # large models: columns in groups
-                        _fd_constraint_hessian_grouped(fns[CJAC], qd, eta, prm, Hc, fa, Pm, ws.Gp,
+                        fd_constraint_hessian_grouped(fns[CJAC], qd, eta, prm, Hc, fa, Pm, ws.Gp,
                                                        ws.Gm, ws.si, n, m)  # Pm: spent scratch
                     else:
-                        _fd_constraint_hessian(fns[CJAC], qd, eta, prm, Hc, fa, ws.Gp, ws.Gm, n, m)
+                        fd_constraint_hessian(fns[CJAC], qd, eta, prm, Hc, fa, ws.Gp, ws.Gm, n, m)
                     for nu in range(s):
                         for mu in range(1, s + 1):
                             cc = Lc[nu, j] * Lc[mu, j]

@@ -46,7 +46,7 @@ from .layout import (CHESS, CJAC, F_EX_CHESS, F_EX_MJAC, F_MASSFN, FD_T, FD_T_PO
                      I_SLOT, I_STEPS, MASS, MJAC, NONFINITE, OK, SINGULAR, SINGULAR_CONSTRAINTS,
                      SINGULAR_MASS, STEP_OUT_SIZE, make_workspace, sizes)
 from .linalg import lu_factor, lu_solve
-from .step import (_fd_constraint_hessian, _fd_momentum_jacobian, assemble, end_momentum,
+from .step import (fd_constraint_hessian, fd_momentum_jacobian, assemble, end_momentum,
                    linear_force)
 
 __all__ = ["PointWork", "TangentWork", "extended_tables", "make_point_work",
@@ -150,7 +150,7 @@ def _hessian(md, q, eta, out, pw, n, m):
     if md.flags[F_EX_CHESS] != 0:
         md.fns[CHESS](ptr(q), ptr(eta), ptr(md.prm), ptr(out))
     else:
-        _fd_constraint_hessian(md.fns[CJAC], q, eta, md.prm, out, pw.qa, pw.Gp, pw.Gm, n, m)
+        fd_constraint_hessian(md.fns[CJAC], q, eta, md.prm, out, pw.qa, pw.Gp, pw.Gm, n, m)
 
 
 @hot
@@ -167,7 +167,7 @@ def point(md_, q, v, eta, pw_):
         if flags[F_EX_MJAC] != 0:
             fns[MJAC](ptr(q), ptr(v), ptr(prm), ptr(Cq))
         else:
-            _fd_momentum_jacobian(fns[MASS], q, v, prm, Cq, pw.qa, pw.Ma, n)
+            fd_momentum_jacobian(fns[MASS], q, v, prm, Cq, pw.qa, pw.Ma, n)
     else:
         for a in range(n):
             for b in range(n):

@@ -28,9 +28,12 @@ fixed, distance      none                          as at the reference configura
 ===================  ============================  ==========================================
 
 Bodies not connected to the ground keep their reference pose and velocity and carry their
-subtree. Joints that close a loop take no coordinates; the state is made consistent with
-them afterwards by :func:`fastvi.consistent_state` (the nearest consistent state in the
-metric of the mass matrix), with a warning when that moves the configuration.
+subtree. Joints that close a loop take no coordinates. The state is then made consistent —
+the nearest one in the metric of the mass matrix that satisfies every constraint and keeps
+the given coordinates and rates of revolute, prismatic and cylindrical joints exactly
+(Gauss–Newton on positions, a linear solve for velocities) — so that the given joints of a
+loop (a crank's angle and speed) determine the rest. For a tree this changes nothing; a
+move of the configuration is warned about.
 """
 
 from __future__ import annotations
@@ -39,13 +42,14 @@ import warnings
 
 import numpy as np
 
-from ..consistent import consistent_state
+from .coordinates import HAS_COORDINATES, joint_coordinates
 from .rigid import Body, Ground, PointMass, expm_so3
 
 __all__ = ["initial_state"]
 
 #: a residual below this (relative to the configuration's scale) needs no projection
-_CONSISTENT = 1e-12
+_CONSISTENT = 1e-13
+_MAX_ITER = 50
 
 
 def _rot(axis: int, angle: float) -> np.ndarray:
@@ -197,7 +201,7 @@ def initial_state(model, values=None, rates=None, *, t: float = 0.0):
             v[s] = np.concatenate([vphi, Dd[0], Dd[1], Dd[2]])
         else:
             q[s], v[s] = phi, vphi
-    return _made_consistent(model, q, v, t, [j.name for j in pending])
+    return _made_consistent(model, q, v, t, [j.name for j in pending], vals, rts)
 
 
 def _placed(body, D, xj, vj, w, X):
@@ -208,27 +212,79 @@ def _placed(body, D, xj, vj, w, X):
     return D, xj - arm, w, vj - np.cross(w, arm)
 
 
-def _made_consistent(model, q, v, t, loops):
+def _selected(asm, given, what):
+    """``[(joint, k, target)]``: the given coordinates the projection holds (the joints with
+    coordinate functions, :mod:`fastvi.bodies.coordinates`)."""
+    out = []
+    for j, val in given.items():
+        if j.kind in HAS_COORDINATES and j.drive is None:
+            arr = np.atleast_1d(np.asarray(val, dtype=float))
+            out.extend((j, k, float(arr[k])) for k in range(arr.size))
+    return out
+
+
+def _rows(asm, q, sel):
+    """Values and gradients of the selected joint coordinates at ``q``."""
+    if not sel:
+        return np.zeros(0), np.zeros((0, q.shape[0]))
+    vals, grads = [], []
+    for j, k, _ in sel:
+        v, g = joint_coordinates(asm, j, q)
+        vals.append(v[k])
+        grads.append(g[k])
+    return np.array(vals), np.array(grads)
+
+
+def _step(C, w, F, what):
+    """The smallest step in the metric ``diag(1/w)`` with ``C Δ = −F``."""
+    S = (C * w) @ C.T
+    try:
+        return -(w * (C.T @ np.linalg.solve(S, F)))
+    except np.linalg.LinAlgError:
+        raise ValueError(f"the {what} given do not determine a state: the constraints and the given "
+                         "joint coordinates are dependent (give coordinates of independent joints, at "
+                         "most as many as the mechanism's degrees of freedom)") from None
+
+
+def _made_consistent(model, q, v, t, loops, vals=None, rts=None):
+    """The nearest state (metric of the mass matrix) with ``g = 0``, ``G v + g_t = 0`` and the
+    given joint coordinates and rates held."""
     if model.m == 0:
         return q, v
+    asm = model.assembly
+    mdiag = np.diag(model.mass_matrix_constant)
+    w = 1.0 / np.maximum(mdiag, 1e-12 * mdiag.max())  # a lamina's E = 0 still gets a metric
+    sel_q, sel_v = _selected(asm, vals or {}, "values"), _selected(asm, rts or {}, "rates")
     scale = max(1.0, float(np.abs(q).max()))
-    g = model.constraint_value(q, t=t)
+    q0, v0 = q.copy(), v.copy()
+    for _ in range(_MAX_ITER):
+        c, C = _rows(asm, q, sel_q)
+        F = np.concatenate([model.constraint_value(q, t=t),
+                            np.angle(np.exp(1j * (c - [x for _, _, x in sel_q])))])
+        if np.abs(F).max() <= _CONSISTENT * scale:
+            break
+        dq = _step(np.vstack([model.constraint_jacobian_value(q, t=t), C]), w, F, "values")
+        q = q + dq
+    else:
+        raise ValueError(f"model {model.name!r}: no consistent configuration found near the given "
+                         f"joint coordinates (max residual {np.abs(F).max():.2e}); give values closer "
+                         "to an assembly of the mechanism")
     G = model.constraint_jacobian_value(q, t=t)
-    gv = G @ v + model.constraint_time_derivative_value(q, t=t)
-    vscale = max(1.0, float(np.abs(v).max()))
-    if np.abs(g).max() <= _CONSISTENT * scale and np.abs(gv).max() <= _CONSISTENT * vscale * scale:
-        return q, v
-    q1, v1 = consistent_state(model, q, v, t=t)
-    moved = float(np.abs(q1 - q).max())
-    changed = float(np.abs(v1 - v).max())
+    _, Cv = _rows(asm, q, sel_v)
+    A = np.vstack([G, Cv])
+    rhs = np.concatenate([-model.constraint_time_derivative_value(q, t=t), [x for _, _, x in sel_v]])
+    for _ in range(2):  # the second pass removes the round-off of the first
+        v = v + _step(A, w, A @ v - rhs, "rates")
+    moved, changed = float(np.abs(q - q0).max()), float(np.abs(v - v0).max())
+    vscale = max(1.0, float(np.abs(v0).max()))
     where = f" (the loop joint(s) {', '.join(map(repr, loops))})" if loops else ""
     if moved > 1e-8 * scale:
         warnings.warn(f"model {model.name!r}: the initial configuration does not satisfy every "
-                      f"constraint{where}; consistent_state moved it by up to {moved:.2e}",
+                      f"constraint{where}; it was moved by up to {moved:.2e} onto them",
                       RuntimeWarning, stacklevel=3)
-    if changed > 1e-8 * vscale:
-        warnings.warn(f"model {model.name!r}: the initial velocities do not satisfy every constraint"
-                      f"{where}; consistent_state changed them by up to {changed:.2e} (give each body "
-                      "the velocity its joints allow, e.g. φ̇ = ω × (φ − fixed point))",
+    if changed > 1e-8 * vscale and not loops:
+        warnings.warn(f"model {model.name!r}: the initial velocities do not satisfy every constraint; "
+                      f"they were changed by up to {changed:.2e} (give each body the velocity its "
+                      "joints allow, e.g. φ̇ = ω × (φ − fixed point), or use joint rates)",
                       RuntimeWarning, stacklevel=3)
-    return q1, v1
+    return q, v

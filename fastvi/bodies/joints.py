@@ -68,6 +68,9 @@ class Joint:
         ``θ(t)`` or ``s(t)`` of a driven joint.
     length : float
         Of a distance joint.
+    offset : ndarray (3,)
+        A distance joint's ``x_B − x_A`` at the reference configuration, in the frame ``F^A``
+        (what the kinematics keeps).
     index : int
         Its place in the mechanism.
     """
@@ -82,6 +85,7 @@ class Joint:
     frame_b: np.ndarray
     drive: Profile | None = None
     length: float = 0.0
+    offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
     index: int = -1
     rows: list = field(default_factory=list)
 
@@ -159,8 +163,12 @@ def make_joint(kind: str, name: str, a, b, *, point=None, point_a=None, point_b=
     else:
         Xa = _user_to_principal(a, _vec(point_a, "point_a", owner) if point_a is not None else np.zeros(3))
         world = reference_point(a, Xa)
-        Xb = (_user_to_principal(b, _vec(point_b, "point_b", owner)) if point_b is not None
-              else Db.T @ (world - reference_point(b, np.zeros(3))))
+        if point_b is not None:
+            Xb = _user_to_principal(b, _vec(point_b, "point_b", owner))
+        elif kind == "distance":  # a rod between two points: b's defaults to its origin
+            Xb = np.zeros(3)
+        else:
+            Xb = Db.T @ (world - reference_point(b, np.zeros(3)))
     for side, body, X in (("a", a, Xa), ("b", b, Xb)):
         if isinstance(body, PointMass) and np.abs(X).max() > 1e-12 * max(1.0, np.abs(body.position).max()):
             raise ValueError(f"{owner}: the joint point is not at point mass {body.name!r} (offset {X}); a "
@@ -205,7 +213,8 @@ def make_joint(kind: str, name: str, a, b, *, point=None, point_a=None, point_b=
                 else float(length))
         if not np.isfinite(dist) or dist <= 0.0:
             raise ValueError(f"{owner}: `length` must be positive, got {length!r}")
-    return Joint(kind, name, a, b, Xa, Xb, Fa, Fb, drive, dist)
+    offset = Fa.T @ Da.T @ (reference_point(b, Xb) - reference_point(a, Xa))
+    return Joint(kind, name, a, b, Xa, Xb, Fa, Fb, drive, dist, offset if kind == "distance" else np.zeros(3))
 
 
 def _vec(x, name, owner) -> np.ndarray:

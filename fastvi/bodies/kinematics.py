@@ -25,6 +25,7 @@ spherical            rotation vector ρ (A's        ``exp(ρ̂)``, 0, the given 
 driven               ``θ(t)``, ``θ'(t)`` of its    as revolute / prismatic
                      profile
 fixed, distance      none                          as at the reference configuration
+                                                   (relative to A)
 ===================  ============================  ==========================================
 
 Bodies not connected to the ground keep their reference pose and velocity and carry their
@@ -75,7 +76,9 @@ def _motion(joint, value, rate, t):
         return R1 @ _rot(1, value[1]), zero, rate[0] * e1 + rate[1] * (R1 @ np.eye(3)[1]), zero
     if kind == "spherical":
         return expm_so3(value), zero, np.asarray(rate, dtype=float), zero
-    return np.eye(3), zero, zero, zero  # fixed, distance
+    if kind == "distance":  # the rod keeps its reference direction in A
+        return np.eye(3), joint.offset, zero, zero
+    return np.eye(3), zero, zero, zero  # fixed
 
 
 def _coordinates_of(joint, given, what):
@@ -112,10 +115,11 @@ def initial_state(model, values=None, rates=None, *, t: float = 0.0):
         Built by :meth:`fastvi.bodies.Mechanism.build`.
     values, rates : mapping, optional
         Joint (name, index or object) → its coordinates and their rates (see the module
-        docstring; a number for a one-coordinate joint). Neither given: the bodies' own
-        reference poses and velocities, made consistent. Otherwise joints not given stay at
-        0 (the reference configuration) at rest relative to their parent; a body not
-        connected to the ground keeps its reference pose and velocity.
+        docstring; a number for a one-coordinate joint). Neither given, and no drives: the
+        bodies' own reference poses and velocities, made consistent. Otherwise joints not
+        given stay at 0 (the reference configuration) at rest relative to their parent, and
+        driven joints at ``θ(t)`` moving at ``θ'(t)``; a body not connected to the ground
+        keeps its reference pose and velocity.
     t : float, default 0
         The time of the state (the drives' ``θ(t)``, ``θ'(t)``).
 
@@ -131,7 +135,7 @@ def initial_state(model, values=None, rates=None, *, t: float = 0.0):
         a joint that closes a loop.
     """
     asm = model.assembly
-    if not values and not rates:
+    if not values and not rates and not any(j.drive is not None for j in asm.joints):
         return _made_consistent(model, asm.q_ref.copy(), asm.v_ref.copy(), t, [])
     vals, rts = _keyed(asm, values, "values"), _keyed(asm, rates, "rates")
     pose = {}  # body -> (D, φ, ω, φ̇)
@@ -278,7 +282,7 @@ def _made_consistent(model, q, v, t, loops, vals=None, rts=None):
     moved, changed = float(np.abs(q - q0).max()), float(np.abs(v - v0).max())
     vscale = max(1.0, float(np.abs(v0).max()))
     where = f" (the loop joint(s) {', '.join(map(repr, loops))})" if loops else ""
-    if moved > 1e-8 * scale:
+    if moved > 1e-8 * scale and not (vals and loops):  # given coordinates move a loop's others
         warnings.warn(f"model {model.name!r}: the initial configuration does not satisfy every "
                       f"constraint{where}; it was moved by up to {moved:.2e} onto them",
                       RuntimeWarning, stacklevel=3)

@@ -259,7 +259,8 @@ class Mechanism:
         return self._joint("fixed", a, b, name, point=point, point_a=point_a, point_b=point_b)
 
     def distance(self, a, b, *, point_a=None, point_b=None, length=None, name=None) -> Joint:
-        """A massless rod: ``|x_A − x_B| = length`` (1 row; default: the reference distance)."""
+        """A massless rod between ``point_a`` and ``point_b`` (body frames, default the centres of
+        mass): ``|x_A − x_B| = length`` (1 row; default: the reference distance)."""
         return self._joint("distance", a, b, name, point_a=point_a, point_b=point_b, length=length)
 
     def driven_revolute(self, a, b, angle, *, point=None, point_a=None, point_b=None, axis=None,
@@ -400,38 +401,26 @@ class Mechanism:
             linear[offsets[b]: offsets[b] + 3] = -b.mass * self.gravity
         loads = np.array([load_record(ld, offsets) for ld in self.loads]).reshape(-1, pk.LOAD_W)
         timed = any(j.drive is not None for j in self.joints)
-        dof = self._analyse(n, linear, records, loads, labels, owner, offsets, q_ref, t0, rank_rtol)
-        if dof.redundant and redundant == "raise":
-            raise ValueError(f"mechanism {self.name!r}: {dof}")
-        keep = np.array(dof.kept_rows if redundant == "drop" else range(len(labels)), dtype=int)
-        records, owner = records[keep], owner[keep]
-        labels = tuple(labels[i] for i in keep)
-        m = records.shape[0]
-        params = pk.pack(n, linear, records, loads)
         springs = any(ld.stiffness > 0 for ld in self.loads)
         forced = any(ld.kind in ("force", "torque") or ld.damping > 0 for ld in self.loads)
-        rows = [a for a in range(m) for _ in pk.row_columns(records[a])]
-        cols = [c for a in range(m) for c in pk.row_columns(records[a])]
-        model_name = name or self.name
-        try:
-            model = Model(n, m, params=params, mass=mdiag, name=model_name,
-                          time_dependent=timed,
-                          constraint_jacobian_pattern=(np.array(rows, dtype=np.int64),
-                                                       np.array(cols, dtype=np.int64)) if m else None,
-                          **cb.model_callbacks(timed, springs, forced))
-        except ValueError as exc:
-            if "positive definite" not in str(exc):
-                raise
-            flat = [f"{b.name!r} (E = {b.second_moments.tolist()})" for b in self.bodies
-                    if isinstance(b, Body) and np.any(b.second_moments <= 0)]
-            raise ValueError(
-                f"mechanism {self.name!r}: the mass matrix diag(m, E₁, E₂, E₃) is singular for "
-                f"{', '.join(flat)}: a lamina or a slender rod (a principal moment equal to the sum "
-                "of the other two) has a director inertia E_I = ½ tr J − J_I = 0, and this fastvi "
-                "needs a positive definite mass matrix; give the body a small thickness") from None
+        make = dict(n=n, linear=linear, loads=loads, mdiag=mdiag, timed=timed, springs=springs,
+                    forced=forced, name=name or self.name)
+        model = self._model(records, **make)
+        # the rank at the reference configuration, from the compiled Jacobian of every row
+        G = model.constraint_jacobian_value(q_ref, t=float(t0)) if records.shape[0] else np.zeros((0, n))
+        dof = analyse(G, twist_basis(self.bodies, offsets, q_ref), np.flatnonzero(owner >= 0), labels,
+                      rank_rtol)
+        if dof.redundant and redundant == "raise":
+            raise ValueError(f"mechanism {self.name!r}: {dof}")
+        if dof.redundant and redundant == "drop":
+            keep = np.array(dof.kept_rows, dtype=int)
+            records, owner = records[keep], owner[keep]
+            labels = [labels[i] for i in keep]
+            model = self._model(records, **make)
+        model_name = make["name"]
         model.assembly = Assembly(
             name=model_name, bodies=tuple(self.bodies), offsets=dict(offsets), joints=tuple(self.joints),
-            loads=tuple(self.loads), gravity=self.gravity.copy(), row_labels=labels, row_joint=owner,
+            loads=tuple(self.loads), gravity=self.gravity.copy(), row_labels=tuple(labels), row_joint=owner,
             joint_row_indices=np.flatnonzero(owner >= 0), dof=dof, q_ref=q_ref, v_ref=v_ref)
         model.dof = dof
         from .kinematics import initial_state
@@ -443,14 +432,26 @@ class Mechanism:
         model.initial_state = _initial_state
         return model
 
-    def _analyse(self, n, linear, records, loads, labels, owner, offsets, q_ref, t0, rtol):
-        """:func:`analyse` on the full set of rows at the reference configuration; the
-        Jacobian is the callbacks' own (their helpers run as plain Python here)."""
-        params = pk.pack(n, linear, records, loads)
-        G = np.zeros((records.shape[0], n))
-        cb._jacobian(float(t0), q_ref, params, G)
-        T = twist_basis(self.bodies, offsets, q_ref)
-        return analyse(G, T, np.flatnonzero(owner >= 0), labels, rtol)
+    def _model(self, records, *, n, linear, loads, mdiag, timed, springs, forced, name) -> Model:
+        """The ``fastvi.Model`` of the given rows; a clear error for a singular mass matrix."""
+        m = records.shape[0]
+        cols = [pk.row_columns(records[a]) for a in range(m)]
+        rows = np.array([a for a in range(m) for _ in cols[a]], dtype=np.int64)
+        pattern = (rows, np.array([c for cs in cols for c in cs], dtype=np.int64)) if m else None
+        try:
+            return Model(n, m, params=pk.pack(n, linear, records, loads), mass=mdiag, name=name,
+                         time_dependent=timed, constraint_jacobian_pattern=pattern,
+                         **cb.model_callbacks(timed, springs, forced))
+        except ValueError as exc:
+            if "positive definite" not in str(exc):
+                raise
+            flat = [f"{b.name!r} (E = {b.second_moments.tolist()})" for b in self.bodies
+                    if isinstance(b, Body) and np.any(b.second_moments <= 0)]
+            raise ValueError(
+                f"mechanism {self.name!r}: the mass matrix diag(m, E₁, E₂, E₃) is singular for "
+                f"{', '.join(flat)}: a lamina or a slender rod (a principal moment equal to the sum "
+                "of the other two) has a director inertia E_I = ½ tr J − J_I = 0, and this fastvi "
+                "needs a positive definite mass matrix; give the body a small thickness") from None
 
     def __repr__(self) -> str:
         return (f"Mechanism({self.name!r}: {len(self.bodies)} bodies, {len(self.joints)} joints, "

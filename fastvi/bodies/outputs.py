@@ -55,8 +55,9 @@ def _assembly(model):
     return asm
 
 
-def _states(model, data, v=None, need_v=False):
-    """``(q, v, t, single)``: the samples of a Result, or the given arrays as (K, n)."""
+def _states(model, data, v=None, need_v=False, t=None):
+    """``(q, v, t, single)``: the samples of a Result, or the given arrays as (K, n) (at the
+    times ``t``, default 0)."""
     if hasattr(data, "q") and hasattr(data, "t"):
         q, v, t = data.q, data.v, data.t
         single = False
@@ -65,7 +66,7 @@ def _states(model, data, v=None, need_v=False):
         single = q.ndim == 1
         q = np.atleast_2d(q)
         v = None if v is None else np.atleast_2d(np.asarray(v, dtype=float))
-        t = np.zeros(q.shape[0])
+        t = np.broadcast_to(np.asarray(0.0 if t is None else t, dtype=float), (q.shape[0],))
     if q.shape[-1] != model.n:
         raise ValueError(f"`q` must have n = {model.n} columns, got shape {q.shape}")
     if need_v:
@@ -142,8 +143,7 @@ def kinetic_energy(model, data, v=None):
 
 def potential_energy(model, data, t=None):
     """``V(t, q)``: gravity and springs."""
-    q, _, ts, single = _states(model, data)
-    ts = ts if t is None else np.broadcast_to(np.asarray(t, dtype=float), (q.shape[0],))
+    q, _, ts, single = _states(model, data, t=t)
     return _out(np.array([model.potential_energy(qk, t=float(tk)) for qk, tk in zip(q, ts)]), single)
 
 
@@ -254,14 +254,14 @@ def _gamma(asm, records, q, v, t):
     return gam
 
 
-def reactions(model, data, joint, v=None):
+def reactions(model, data, joint, v=None, t=None):
     r"""Force and torque the joint exerts on its body ``b`` (by body ``a``), at the joint point.
 
     Parameters
     ----------
     model : fastvi.Model
     data : fastvi.Result or ndarray (K, n) / (n,)
-        The states; with arrays, ``v`` too (at ``t = 0``).
+        The states; with arrays, ``v`` too, and ``t`` (default 0) for a driven mechanism.
     joint : str, int or Joint
 
     Returns
@@ -277,7 +277,7 @@ def reactions(model, data, joint, v=None):
     post-processing tool for mechanisms of moderate size.
     """
     asm = _assembly(model)
-    q, v, t, single = _states(model, data, v, need_v=True)
+    q, v, t, single = _states(model, data, v, need_v=True, t=t)
     j = asm.joint(joint)
     rows = asm.rows_of(j)
     records = pk.rows_of(model.params).copy()

@@ -17,6 +17,7 @@ from .slider_crank import slider_crank
 from .spherical_pendulum import spherical_pendulum
 from .tree import tree
 from .triple_pendulum import triple_pendulum
+from ..bodies import scenes as _bodies
 
 #: Scene constructors by name (used by the CLI, the docs and pickling of scene models).
 SCENES = {
@@ -32,6 +33,14 @@ SCENES = {
     "tree": tree,
     "kapitza_pendulum": kapitza_pendulum,
     "slider_crank": slider_crank,
+    # rigid bodies in director coordinates (fastvi.bodies.scenes)
+    "heavy_top": _bodies.heavy_top,
+    "lagrange_top": _bodies.lagrange_top,
+    "fast_top": _bodies.fast_top,
+    "spatial_slider_crank": _bodies.spatial_slider_crank,
+    "bricard": _bodies.bricard,
+    "flyball_governor": _bodies.flyball_governor,
+    "body_chain": _bodies.body_chain,
 }
 
 __all__ = ["SCENES", "pendulum", "double_pendulum", "rotary_rod_slider", "triple_pendulum",

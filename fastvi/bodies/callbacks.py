@@ -20,9 +20,9 @@ import math
 from numba.extending import register_jitable
 
 from .packing import (DRIVE_ANGLE, FORCE, H_LOADS, H_NLOADS, H_ROWS, HEADER, L_C, L_K, L_LAW,
-                      L_NA, L_NB, L_OFFA, L_OFFB, L_REST, L_V1, L_V2, L_V3, LOAD_W, R_C0, R_KIND,
-                      R_LAW, R_NA, R_NB, R_OFFA, R_OFFB, R_U1, R_U2, R_W1, R_W2, ROTARY_SPRING,
-                      ROW_W, SLOTS, SPRING, STATIC, TORQUE, VECTOR_SPRING)
+                      L_OFFA, L_REST, L_V1, L_V2, L_V3, LOAD_W, R_C0, R_KIND, R_LAW, R_OFFA, R_U1,
+                      R_U2, R_W1, R_W2, ROTARY_SPRING, ROW_W, SLOTS, SPRING, STATIC, TORQUE,
+                      VECTOR_SPRING)
 
 
 # ============================================================================ small pieces
@@ -107,42 +107,39 @@ def _terms(q, p, r, kind, oa, na, ob, nb):
 
 
 @register_jitable
+def _row(p, a, t):
+    """``(r, kind, oa, na, ob, nb, factors)`` of row ``a`` at time ``t``."""
+    r = int(p[H_ROWS]) + a * ROW_W
+    kind = int(p[r + R_KIND])
+    oa, na, ob, nb = _head(p, r, R_OFFA)
+    return r, kind, oa, na, ob, nb, _factors(p, r, kind, t)
+
+
+@register_jitable
 def _constraint(t, q, p, out):
-    base = int(p[H_ROWS])
     for a in range(out.shape[0]):
-        r = base + a * ROW_W
-        kind = int(p[r + R_KIND])
-        oa, na, ob, nb = _head(p, r, R_OFFA)
-        f1, f2, s, _, _, _ = _factors(p, r, kind, t)
+        r, kind, oa, na, ob, nb, f = _row(p, a, t)
         U1, W1, U2, W2 = _terms(q, p, r, kind, oa, na, ob, nb)
-        out[a] = f1 * _dot(U1, W1) + f2 * _dot(U2, W2) + p[r + R_C0] - s
+        out[a] = f[0] * _dot(U1, W1) + f[1] * _dot(U2, W2) + p[r + R_C0] - f[2]
 
 
 @register_jitable
 def _constraint_rate(t, q, p, out):
     """``∂g/∂t``: zero but for the driven rows."""
-    base = int(p[H_ROWS])
     for a in range(out.shape[0]):
-        r = base + a * ROW_W
-        kind = int(p[r + R_KIND])
+        r, kind, oa, na, ob, nb, f = _row(p, a, t)
         if kind == STATIC:
             out[a] = 0.0
             continue
-        oa, na, ob, nb = _head(p, r, R_OFFA)
-        _, _, _, df1, df2, ds = _factors(p, r, kind, t)
         U1, W1, U2, W2 = _terms(q, p, r, kind, oa, na, ob, nb)
-        out[a] = df1 * _dot(U1, W1) + df2 * _dot(U2, W2) - ds
+        out[a] = f[3] * _dot(U1, W1) + f[4] * _dot(U2, W2) - f[5]
 
 
 @register_jitable
 def _jacobian(t, q, p, out):
     # writes only the slots with a non-zero weight: the declared pattern (packing.row_columns)
-    base = int(p[H_ROWS])
     for a in range(out.shape[0]):
-        r = base + a * ROW_W
-        kind = int(p[r + R_KIND])
-        oa, na, ob, nb = _head(p, r, R_OFFA)
-        f1, f2, _, _, _, _ = _factors(p, r, kind, t)
+        r, kind, oa, na, ob, nb, f = _row(p, a, t)
         U1, W1, U2, W2 = _terms(q, p, r, kind, oa, na, ob, nb)
         for j in range(SLOTS):
             col = _slot_col(j, oa, na, ob, nb)
@@ -152,7 +149,7 @@ def _jacobian(t, q, p, out):
             g1 = _dot_grad(p, r + R_U1, r + R_W1, j, U1, W1)
             g2 = _dot_grad(p, r + R_U2, r + R_W2, j, U2, W2)
             for c in range(3):
-                out[a, col + c] = f1 * g1[c] + f2 * g2[c]
+                out[a, col + c] = f[0] * g1[c] + f[1] * g2[c]
 
 
 @register_jitable
@@ -177,17 +174,13 @@ def _add_bilinear(p, bu, bw, s, oa, na, ob, nb, out):
 @register_jitable
 def _constraint_hessian(t, q, eta, p, out):
     out[:, :] = 0.0
-    base = int(p[H_ROWS])
     for a in range(eta.shape[0]):
         if eta[a] == 0.0:
             continue
-        r = base + a * ROW_W
-        kind = int(p[r + R_KIND])
-        oa, na, ob, nb = _head(p, r, R_OFFA)
-        f1, f2, _, _, _, _ = _factors(p, r, kind, t)
-        _add_bilinear(p, r + R_U1, r + R_W1, eta[a] * f1, oa, na, ob, nb, out)
+        r, kind, oa, na, ob, nb, f = _row(p, a, t)
+        _add_bilinear(p, r + R_U1, r + R_W1, eta[a] * f[0], oa, na, ob, nb, out)
         if kind == DRIVE_ANGLE:
-            _add_bilinear(p, r + R_U2, r + R_W2, eta[a] * f2, oa, na, ob, nb, out)
+            _add_bilinear(p, r + R_U2, r + R_W2, eta[a] * f[1], oa, na, ob, nb, out)
 
 
 # ============================================================================ loads
@@ -253,25 +246,101 @@ def _spring_state(q, p, l, oa, na, ob, nb):
 
 
 @register_jitable
+def _load(p, k):
+    """``(l, kind, oa, na, ob, nb)`` of load ``k``."""
+    l = int(p[H_LOADS]) + k * LOAD_W
+    oa, na, ob, nb = _head(p, l, L_OFFA)
+    return l, int(p[l]), oa, na, ob, nb
+
+
+@register_jitable
+def _elastic(p, l, kind):
+    """A spring with a stiffness (it enters the potential)."""
+    return p[l + L_K] != 0.0 and kind != TORQUE and kind != FORCE
+
+
+@register_jitable
+def _add_weighted(p, l, oa, na, ob, nb, K, out):
+    """``out += w_i w_j K`` on every slot block (i, j) of the spring's ``r``, ``K`` a 3×3
+    matrix as a 9-tuple (row major)."""
+    for i in range(SLOTS):
+        wi = p[l + L_V1 + i]
+        ci = _slot_col(i, oa, na, ob, nb)
+        if wi == 0.0 or ci < 0:
+            continue
+        for j in range(SLOTS):
+            wj = p[l + L_V1 + j]
+            cj = _slot_col(j, oa, na, ob, nb)
+            if wj == 0.0 or cj < 0:
+                continue
+            for a in range(3):
+                for b in range(3):
+                    out[ci + a, cj + b] += wi * wj * K[3 * a + b]
+
+
+@register_jitable
+def _add_angle_blocks(p, l, oa, na, ob, nb, st, v, alpha, beta, gamma, out):
+    """``out += α ∇θ ∇θᵀ + β ∇²θ + γ ∇θ (∇²θ v)ᵀ`` for a rotary spring's angle."""
+    for i in range(SLOTS):
+        ci = _slot_col(i, oa, na, ob, nb)
+        if ci < 0:
+            continue
+        gi = _angle_grad(p, l, i, st)
+        for j in range(SLOTS):
+            cj = _slot_col(j, oa, na, ob, nb)
+            if cj < 0:
+                continue
+            gj = _angle_grad(p, l, j, st)
+            for b in range(3):
+                hv = 0.0  # (∇²θ v)_(j, b)
+                if gamma != 0.0:
+                    for kk in range(SLOTS):
+                        ck = _slot_col(kk, oa, na, ob, nb)
+                        if ck >= 0:
+                            for c in range(3):
+                                hv += _angle_hess(p, l, j, kk, b, c, st) * v[ck + c]
+                for a in range(3):
+                    h = _angle_hess(p, l, i, j, a, b, st) if beta != 0.0 else 0.0
+                    out[ci + a, cj + b] += alpha * gi[a] * gj[b] + beta * h + gamma * gi[a] * hv
+
+
+@register_jitable
+def _add_slots(p, base, oa, na, ob, nb, f, s, out):
+    """``out[slot j] += s w_j f`` for the weights ``w`` at ``p[base:]``."""
+    for j in range(SLOTS):
+        w = p[base + j]
+        o = _slot_col(j, oa, na, ob, nb)
+        if w != 0.0 and o >= 0:
+            for c in range(3):
+                out[o + c] += s * w * f[c]
+
+
+@register_jitable
+def _add_angle_grad(p, l, oa, na, ob, nb, st, s, out):
+    """``out += s ∇θ``."""
+    for j in range(SLOTS):
+        o = _slot_col(j, oa, na, ob, nb)
+        if o >= 0:
+            g = _angle_grad(p, l, j, st)
+            for c in range(3):
+                out[o + c] += s * g[c]
+
+
+@register_jitable
 def _potential(q, p):
     acc = 0.0
     for i in range(q.shape[0]):
         acc += p[HEADER + i] * q[i]
-    base = int(p[H_LOADS])
     for k in range(int(p[H_NLOADS])):
-        l = base + k * LOAD_W
-        kind = int(p[l])
-        stiff = p[l + L_K]
-        if stiff == 0.0 or kind == TORQUE or kind == FORCE:
+        l, kind, oa, na, ob, nb = _load(p, k)
+        if not _elastic(p, l, kind):
             continue
-        oa, na, ob, nb = _head(p, l, L_OFFA)
         if kind == ROTARY_SPRING:
-            d = _angle(q, p, l, oa, na, ob, nb)[5]
-            acc += 0.5 * stiff * d * d
+            ext = _angle(q, p, l, oa, na, ob, nb)[5]
         else:
-            r, length = _spring_state(q, p, l, oa, na, ob, nb)
+            length = _spring_state(q, p, l, oa, na, ob, nb)[1]
             ext = length - p[l + L_REST] if kind == SPRING else length
-            acc += 0.5 * stiff * ext * ext
+        acc += 0.5 * p[l + L_K] * ext * ext
     return acc
 
 
@@ -279,220 +348,133 @@ def _potential(q, p):
 def _potential_grad(q, p, out):
     for i in range(q.shape[0]):
         out[i] = p[HEADER + i]
-    base = int(p[H_LOADS])
     for k in range(int(p[H_NLOADS])):
-        l = base + k * LOAD_W
-        kind = int(p[l])
-        stiff = p[l + L_K]
-        if stiff == 0.0 or kind == TORQUE or kind == FORCE:
+        l, kind, oa, na, ob, nb = _load(p, k)
+        if not _elastic(p, l, kind):
             continue
-        oa, na, ob, nb = _head(p, l, L_OFFA)
+        stiff = p[l + L_K]
         if kind == ROTARY_SPRING:
             st = _angle(q, p, l, oa, na, ob, nb)
-            for j in range(SLOTS):
-                o = _slot_col(j, oa, na, ob, nb)
-                if o >= 0:
-                    g = _angle_grad(p, l, j, st)
-                    for c in range(3):
-                        out[o + c] += stiff * st[5] * g[c]
+            _add_angle_grad(p, l, oa, na, ob, nb, st, stiff * st[5], out)
             continue
         r, length = _spring_state(q, p, l, oa, na, ob, nb)
         coef = stiff * (1.0 - p[l + L_REST] / length) if kind == SPRING else stiff
-        for j in range(SLOTS):
-            w = p[l + L_V1 + j]
-            o = _slot_col(j, oa, na, ob, nb)
-            if w != 0.0 and o >= 0:
-                for c in range(3):
-                    out[o + c] += w * coef * r[c]
+        _add_slots(p, l + L_V1, oa, na, ob, nb, r, coef, out)
 
 
 @register_jitable
 def _potential_hessian(q, p, out):
     out[:, :] = 0.0
-    base = int(p[H_LOADS])
     for k in range(int(p[H_NLOADS])):
-        l = base + k * LOAD_W
-        kind = int(p[l])
-        stiff = p[l + L_K]
-        if stiff == 0.0 or kind == TORQUE or kind == FORCE:
+        l, kind, oa, na, ob, nb = _load(p, k)
+        if not _elastic(p, l, kind):
             continue
-        oa, na, ob, nb = _head(p, l, L_OFFA)
+        stiff = p[l + L_K]
         if kind == ROTARY_SPRING:
             st = _angle(q, p, l, oa, na, ob, nb)
-            for i in range(SLOTS):
-                ci = _slot_col(i, oa, na, ob, nb)
-                if ci < 0:
-                    continue
-                gi = _angle_grad(p, l, i, st)
-                for j in range(SLOTS):
-                    cj = _slot_col(j, oa, na, ob, nb)
-                    if cj < 0:
-                        continue
-                    gj = _angle_grad(p, l, j, st)
-                    for a in range(3):
-                        for b in range(3):
-                            out[ci + a, cj + b] += stiff * (gi[a] * gj[b]
-                                                            + st[5] * _angle_hess(p, l, i, j, a, b, st))
+            _add_angle_blocks(p, l, oa, na, ob, nb, st, q, stiff, stiff * st[5], 0.0, out)
             continue
         r, length = _spring_state(q, p, l, oa, na, ob, nb)
+        # k [(1 − L/|r|) 1 + (L/|r|³) r rᵀ]; k 1 for a zero-length spring
         rest = p[l + L_REST] if kind == SPRING else 0.0
         iso = stiff * (1.0 - rest / length) if kind == SPRING else stiff
         rad = stiff * rest / (length * length * length) if kind == SPRING else 0.0
-        for i in range(SLOTS):
-            wi = p[l + L_V1 + i]
-            ci = _slot_col(i, oa, na, ob, nb)
-            if wi == 0.0 or ci < 0:
-                continue
-            for j in range(SLOTS):
-                wj = p[l + L_V1 + j]
-                cj = _slot_col(j, oa, na, ob, nb)
-                if wj == 0.0 or cj < 0:
-                    continue
-                for a in range(3):
-                    out[ci + a, cj + a] += wi * wj * iso
-                    for b in range(3):
-                        out[ci + a, cj + b] += wi * wj * rad * r[a] * r[b]
+        K = (iso + rad * r[0] * r[0], rad * r[0] * r[1], rad * r[0] * r[2],
+             rad * r[1] * r[0], iso + rad * r[1] * r[1], rad * r[1] * r[2],
+             rad * r[2] * r[0], rad * r[2] * r[1], iso + rad * r[2] * r[2])
+        _add_weighted(p, l, oa, na, ob, nb, K, out)
+
+
+@register_jitable
+def _applied(p, l, t):
+    """``s(t) f`` of a force or torque."""
+    s = _law(p, l + L_LAW, t)[0]
+    b = l + L_V1 + SLOTS
+    return s * p[b], s * p[b + 1], s * p[b + 2]
 
 
 @register_jitable
 def _force(t, q, v, p, out):
     for i in range(q.shape[0]):
         out[i] = 0.0
-    base = int(p[H_LOADS])
     for k in range(int(p[H_NLOADS])):
-        l = base + k * LOAD_W
-        kind = int(p[l])
-        oa, na, ob, nb = _head(p, l, L_OFFA)
-        if kind == TORQUE or kind == FORCE:
-            s = _law(p, l + L_LAW, t)[0]
-            fx, fy, fz = s * p[l + L_V1 + SLOTS], s * p[l + L_V1 + SLOTS + 1], s * p[l + L_V1 + SLOTS + 2]
-            if kind == TORQUE:  # ½ τ × d_I on each director
-                for d in range(1, 4):
-                    o = oa + 3 * d
-                    out[o] += 0.5 * (fy * q[o + 2] - fz * q[o + 1])
-                    out[o + 1] += 0.5 * (fz * q[o] - fx * q[o + 2])
-                    out[o + 2] += 0.5 * (fx * q[o + 1] - fy * q[o])
-            else:  # (f, X₁ f, X₂ f, X₃ f) on body A
-                for j in range(4):
-                    w = p[l + L_V1 + j]
-                    o = _slot_col(j, oa, na, ob, nb)
-                    if w != 0.0 and o >= 0:
-                        out[o] += w * fx
-                        out[o + 1] += w * fy
-                        out[o + 2] += w * fz
+        l, kind, oa, na, ob, nb = _load(p, k)
+        if kind == TORQUE:  # ½ τ × d_I on each director
+            fx, fy, fz = _applied(p, l, t)
+            for d in range(1, 4):
+                o = oa + 3 * d
+                out[o] += 0.5 * (fy * q[o + 2] - fz * q[o + 1])
+                out[o + 1] += 0.5 * (fz * q[o] - fx * q[o + 2])
+                out[o + 2] += 0.5 * (fx * q[o + 1] - fy * q[o])
+            continue
+        if kind == FORCE:  # (f, X₁ f, X₂ f, X₃ f) on body A
+            _add_slots(p, l + L_V1, oa, na, ob, nb, _applied(p, l, t), 1.0, out)
             continue
         damp = p[l + L_C]
         if damp == 0.0:
             continue
         if kind == ROTARY_SPRING:
             st = _angle(q, p, l, oa, na, ob, nb)
-            rate = _angle_rate(p, l, v, oa, na, ob, nb, st)
-            for j in range(SLOTS):
-                o = _slot_col(j, oa, na, ob, nb)
-                if o >= 0:
-                    g = _angle_grad(p, l, j, st)
-                    for c in range(3):
-                        out[o + c] -= damp * rate * g[c]
+            _add_angle_grad(p, l, oa, na, ob, nb, st, -damp * _angle_rate(p, l, v, oa, na, ob, nb, st), out)
             continue
         r, length = _spring_state(q, p, l, oa, na, ob, nb)
         rd = _expr(v, p, l + L_V1, oa, na, ob, nb, False)
         if kind == SPRING:  # along the line: −c (r·ṙ/|r|²) r
-            coef = _dot(r, rd) / (length * length)
-            fx, fy, fz = coef * r[0], coef * r[1], coef * r[2]
+            _add_slots(p, l + L_V1, oa, na, ob, nb, r, -damp * _dot(r, rd) / (length * length), out)
         else:
-            fx, fy, fz = rd
-        for j in range(SLOTS):
-            w = p[l + L_V1 + j]
-            o = _slot_col(j, oa, na, ob, nb)
-            if w != 0.0 and o >= 0:
-                out[o] -= damp * w * fx
-                out[o + 1] -= damp * w * fy
-                out[o + 2] -= damp * w * fz
+            _add_slots(p, l + L_V1, oa, na, ob, nb, rd, -damp, out)
 
 
 @register_jitable
 def _force_jacobian(t, q, v, p, out, wrt_v):
     """``∂F/∂q`` (``wrt_v`` false) or ``∂F/∂v``."""
     out[:, :] = 0.0
-    base = int(p[H_LOADS])
     for k in range(int(p[H_NLOADS])):
-        l = base + k * LOAD_W
-        kind = int(p[l])
-        oa, na, ob, nb = _head(p, l, L_OFFA)
+        l, kind, oa, na, ob, nb = _load(p, k)
         if kind == TORQUE:
             if wrt_v:
                 continue
-            s = 0.5 * _law(p, l + L_LAW, t)[0]
-            fx, fy, fz = s * p[l + L_V1 + SLOTS], s * p[l + L_V1 + SLOTS + 1], s * p[l + L_V1 + SLOTS + 2]
+            fx, fy, fz = _applied(p, l, t)
             for d in range(1, 4):  # ∂(½ τ × d)/∂d = ½ τ̂
                 o = oa + 3 * d
-                out[o, o + 1] += -fz
-                out[o, o + 2] += fy
-                out[o + 1, o] += fz
-                out[o + 1, o + 2] += -fx
-                out[o + 2, o] += -fy
-                out[o + 2, o + 1] += fx
+                out[o, o + 1] += -0.5 * fz
+                out[o, o + 2] += 0.5 * fy
+                out[o + 1, o] += 0.5 * fz
+                out[o + 1, o + 2] += -0.5 * fx
+                out[o + 2, o] += -0.5 * fy
+                out[o + 2, o + 1] += 0.5 * fx
             continue
         damp = p[l + L_C]
         if kind == FORCE or damp == 0.0:
             continue
         if kind == ROTARY_SPRING:
             st = _angle(q, p, l, oa, na, ob, nb)
-            rate = _angle_rate(p, l, v, oa, na, ob, nb, st)
-            for i in range(SLOTS):
-                ci = _slot_col(i, oa, na, ob, nb)
-                if ci < 0:
-                    continue
-                gi = _angle_grad(p, l, i, st)
-                for j in range(SLOTS):
-                    cj = _slot_col(j, oa, na, ob, nb)
-                    if cj < 0:
-                        continue
-                    if wrt_v:
-                        gj = _angle_grad(p, l, j, st)
-                        for a in range(3):
-                            for b in range(3):
-                                out[ci + a, cj + b] -= damp * gi[a] * gj[b]
-                        continue
-                    for b in range(3):  # (∇²θ v)_j,b
-                        hv = 0.0
-                        for kk in range(SLOTS):
-                            ck = _slot_col(kk, oa, na, ob, nb)
-                            if ck >= 0:
-                                for c in range(3):
-                                    hv += _angle_hess(p, l, j, kk, b, c, st) * v[ck + c]
-                        for a in range(3):
-                            out[ci + a, cj + b] -= damp * (gi[a] * hv
-                                                           + rate * _angle_hess(p, l, i, j, a, b, st))
+            if wrt_v:  # −c ∇θ ∇θᵀ
+                _add_angle_blocks(p, l, oa, na, ob, nb, st, v, -damp, 0.0, 0.0, out)
+            else:  # −c [θ̇ ∇²θ + ∇θ (∇²θ v)ᵀ]
+                rate = _angle_rate(p, l, v, oa, na, ob, nb, st)
+                _add_angle_blocks(p, l, oa, na, ob, nb, st, v, 0.0, -damp * rate, -damp, out)
+            continue
+        if kind == VECTOR_SPRING:  # −c ṙ
+            if wrt_v:
+                _add_weighted(p, l, oa, na, ob, nb, (-damp, 0.0, 0.0, 0.0, -damp, 0.0, 0.0, 0.0, -damp), out)
             continue
         r, length = _spring_state(q, p, l, oa, na, ob, nb)
         rd = _expr(v, p, l + L_V1, oa, na, ob, nb, False)
         l2 = length * length
-        rr = _dot(r, rd)
-        for i in range(SLOTS):
-            wi = p[l + L_V1 + i]
-            ci = _slot_col(i, oa, na, ob, nb)
-            if wi == 0.0 or ci < 0:
-                continue
-            for j in range(SLOTS):
-                wj = p[l + L_V1 + j]
-                cj = _slot_col(j, oa, na, ob, nb)
-                if wj == 0.0 or cj < 0:
-                    continue
-                s = -damp * wi * wj
-                for a in range(3):
-                    if kind == VECTOR_SPRING:
-                        if wrt_v:
-                            out[ci + a, cj + a] += s
-                        continue
-                    for b in range(3):
-                        if wrt_v:  # ∂φ/∂ṙ = r rᵀ/|r|²
-                            out[ci + a, cj + b] += s * r[a] * r[b] / l2
-                        else:  # ∂φ/∂r = (r ṙᵀ + (r·ṙ) 1)/|r|² − 2 (r·ṙ) r rᵀ/|r|⁴
-                            val = r[a] * rd[b] / l2 - 2.0 * rr * r[a] * r[b] / (l2 * l2)
-                            if a == b:
-                                val += rr / l2
-                            out[ci + a, cj + b] += s * val
+        if wrt_v:  # −c r rᵀ/|r|²
+            c = -damp / l2
+            K = (c * r[0] * r[0], c * r[0] * r[1], c * r[0] * r[2], c * r[1] * r[0], c * r[1] * r[1],
+                 c * r[1] * r[2], c * r[2] * r[0], c * r[2] * r[1], c * r[2] * r[2])
+        else:  # −c [(r ṙᵀ + (r·ṙ) 1)/|r|² − 2 (r·ṙ) r rᵀ/|r|⁴]
+            c, rr = -damp / l2, _dot(r, rd)
+            e = -2.0 * rr / l2
+            K = (c * (r[0] * rd[0] + rr + e * r[0] * r[0]), c * (r[0] * rd[1] + e * r[0] * r[1]),
+                 c * (r[0] * rd[2] + e * r[0] * r[2]), c * (r[1] * rd[0] + e * r[1] * r[0]),
+                 c * (r[1] * rd[1] + rr + e * r[1] * r[1]), c * (r[1] * rd[2] + e * r[1] * r[2]),
+                 c * (r[2] * rd[0] + e * r[2] * r[0]), c * (r[2] * rd[1] + e * r[2] * r[1]),
+                 c * (r[2] * rd[2] + rr + e * r[2] * r[2]))
+        _add_weighted(p, l, oa, na, ob, nb, K, out)
 
 
 # ============================================================================ the callbacks

@@ -63,6 +63,13 @@ def rotation_matrix(R, name: str) -> np.ndarray:
     return U @ Vt
 
 
+def _mass(value, owner: str) -> float:
+    if not (isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+            and math.isfinite(value) and value > 0):
+        raise ValueError(f"{owner}: `mass` must be positive and finite, got {value!r}")
+    return float(value)
+
+
 def _vector(x, name: str, owner: str) -> np.ndarray:
     x = np.array(x, dtype=float).reshape(-1) if x is not None else np.zeros(3)
     if x.shape != (3,) or not np.all(np.isfinite(x)):
@@ -159,10 +166,7 @@ class PointMass:
 
     def __post_init__(self):
         owner = f"point mass {self.name!r}"
-        if not (isinstance(self.mass, (int, float, np.integer, np.floating)) and math.isfinite(self.mass)
-                and self.mass > 0):
-            raise ValueError(f"{owner}: `mass` must be positive and finite, got {self.mass!r}")
-        self.mass = float(self.mass)
+        self.mass = _mass(self.mass, owner)
         self.position = _vector(self.position, "position", owner)
         self.velocity = _vector(self.velocity, "velocity", owner)
 
@@ -233,10 +237,7 @@ class Body:
 
     def __post_init__(self):
         owner = f"body {self.name!r}"
-        if not (isinstance(self.mass, (int, float, np.integer, np.floating)) and math.isfinite(self.mass)
-                and self.mass > 0):
-            raise ValueError(f"{owner}: `mass` must be positive and finite, got {self.mass!r}")
-        self.mass = float(self.mass)
+        self.mass = _mass(self.mass, owner)
         self.moments, self.axes = principal(self.inertia, owner)
         self.inertia = self.axes @ np.diag(self.moments) @ self.axes.T
         self.second_moments = 0.5 * self.moments.sum() - self.moments

@@ -261,7 +261,7 @@ def flyball_governor(stiffness: float = 8e5, damping: float = 4e4, omega: float 
     return attach(model, "flyball_governor", kw, initial_state=initial_state)
 
 
-def body_chain(N: int, mass: float = 1.0, length: float = 1.0, side: float = 0.05, g: float = 9.81):
+def body_chain(N: int = 8, mass: float = 1.0, length: float = 1.0, side: float = 0.05, g: float = 9.81):
     r"""``N`` rigid rods (``length``, square section ``side``) hanging from the origin on
     spherical joints, released at rest from a smooth arc in the x–z plane: ``n = 12 N``
     coordinates and ``m = 9 N`` rows, the cost-scaling mechanism of the rigid-body benchmarks

@@ -62,16 +62,14 @@ def test_body_chain_cost_per_step(benchmark, N):
     model = scenes.body_chain(N)
     q0, v0 = model.initial_state()
     steps = max(10, STEP_BUDGET // N)
-    # compile, plan; check=False: the derivative check differences a 12N × 12N Hessian per row
-    first = fastvi.integrate(model, q0, v0, h=H, n_steps=2, method=METHOD, check=False)
+    first = fastvi.integrate(model, q0, v0, h=H, n_steps=2, method=METHOD)  # compile, plan
     benchmark.group = f"body_chain(N), {METHOD}, cost per step"
     benchmark.pedantic(lambda: fastvi.integrate(model, q0, v0, h=H, n_steps=steps, method=METHOD,
-                                                save_every=steps, check=False),
+                                                save_every=steps),
                        rounds=1, iterations=1, warmup_rounds=0)
     times, res = [], None
     for _ in range(3):
-        res = fastvi.integrate(model, q0, v0, h=H, n_steps=steps, method=METHOD, save_every=steps,
-                               check=False)
+        res = fastvi.integrate(model, q0, v0, h=H, n_steps=steps, method=METHOD, save_every=steps)
         times.append(res.stats["integration_time"] / steps)
     meth = fastvi.method(METHOD)
     plan = structure.plan(model, meth)

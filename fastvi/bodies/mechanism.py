@@ -386,7 +386,10 @@ class Mechanism:
         fastvi.Model
             With ``model.assembly`` (:class:`Assembly`), ``model.dof`` (the
             :class:`~fastvi.bodies.redundancy.DegreesOfFreedom` found) and
-            ``model.initial_state(values=None, rates=None, t=t0)``.
+            ``model.initial_state(values=None, rates=None, t=t0)``. It counts as checked:
+            ``fastvi.integrate`` does not compare its derivatives with finite differences
+            (the library's callbacks are tested on every joint and load kind, and the
+            comparison costs ``O(m n²)``); ``model.check(q, v)`` runs it on demand.
         """
         if redundant not in ("drop", "keep", "raise"):
             raise ValueError(f"`redundant` must be 'drop', 'keep' or 'raise', got {redundant!r}")
@@ -423,6 +426,11 @@ class Mechanism:
             loads=tuple(self.loads), gravity=self.gravity.copy(), row_labels=tuple(labels), row_joint=owner,
             joint_row_indices=np.flatnonzero(owner >= 0), dof=dof, q_ref=q_ref, v_ref=v_ref)
         model.dof = dof
+        # The callbacks are the library's, checked against finite differences on every row and
+        # load kind (tests/test_bodies.py); the automatic check of the first integration costs
+        # O(m n²) (116 s for 64 bodies), so a built model counts as checked. Model.check(q, v)
+        # still runs it on demand.
+        model._checked = True
         from .kinematics import initial_state
 
         def _initial_state(values=None, rates=None, t=t0):

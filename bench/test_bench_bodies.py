@@ -12,7 +12,7 @@ that of a run of K steps, over K (best of three; on a loaded machine the wall ti
 the cost). The report prints the rows, the plan, iterations per step, both times and the
 least-squares exponents of the CPU cost against N, per step and per Newton iteration. ``FASTVI_BODY_SIZES``
 (comma-separated) overrides the sizes: the kernels' workspace holds the dense Newton matrix
-(``(s n + J m)²`` floats, 1.4 GB at N = 256), so the largest size needs about 3 GB.
+(``(s n + J m)²`` floats, 0.9 GB at N = 256), so the largest size needs about 2 GB.
 
 Run with ``.venv/bin/python -m pytest bench/test_bench_bodies.py --benchmark-only``.
 """

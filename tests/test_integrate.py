@@ -108,7 +108,8 @@ def test_kernels_compile_once_for_every_model(double_pendulum, dp_start):
 
 
 def test_every_scene_callback_has_the_one_signature():
-    required = {"chain": dict(N=3)}  # scenes whose size has no default
+    # scenes whose size has no default; Brüls' heavy top is a lamina (singular M) by default
+    required = {"chain": dict(N=3), "heavy_top": dict(inertia=(0.234375, 0.4, 0.234375))}
     for name, make in fastvi.scenes.SCENES.items():
         cfs, flags, _ = make(**required.get(name, {})).kernel_arguments()
         for cf in cfs:

@@ -18,6 +18,20 @@ from .spherical_pendulum import spherical_pendulum
 from .tree import tree
 from .triple_pendulum import triple_pendulum
 
+
+def _rigid(name: str):
+    """The rigid-body scene ``fastvi.bodies.scenes.<name>``, imported on first use (the rigid
+    bodies' modules stay out of ``import fastvi``)."""
+    def make(*args, **kwargs):
+        from ..bodies import scenes
+
+        return getattr(scenes, name)(*args, **kwargs)
+
+    make.__name__ = make.__qualname__ = name
+    make.__doc__ = f"See :func:`fastvi.bodies.scenes.{name}`."
+    return make
+
+
 #: Scene constructors by name (used by the CLI, the docs and pickling of scene models).
 SCENES = {
     "pendulum": pendulum,
@@ -32,6 +46,14 @@ SCENES = {
     "tree": tree,
     "kapitza_pendulum": kapitza_pendulum,
     "slider_crank": slider_crank,
+    # rigid bodies in director coordinates (fastvi.bodies.scenes)
+    "heavy_top": _rigid("heavy_top"),
+    "lagrange_top": _rigid("lagrange_top"),
+    "fast_top": _rigid("fast_top"),
+    "spatial_slider_crank": _rigid("spatial_slider_crank"),
+    "bricard": _rigid("bricard"),
+    "flyball_governor": _rigid("flyball_governor"),
+    "body_chain": _rigid("body_chain"),
 }
 
 __all__ = ["SCENES", "pendulum", "double_pendulum", "rotary_rod_slider", "triple_pendulum",

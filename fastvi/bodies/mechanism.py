@@ -426,6 +426,9 @@ class Mechanism:
             loads=tuple(self.loads), gravity=self.gravity.copy(), row_labels=tuple(labels), row_joint=owner,
             joint_row_indices=np.flatnonzero(owner >= 0), dof=dof, q_ref=q_ref, v_ref=v_ref)
         model.dof = dof
+        from .drawing import mechanism_drawing
+
+        model.drawing = mechanism_drawing(model.assembly)
         # The callbacks are the library's, checked against finite differences on every row and
         # load kind (tests/test_bodies.py); the automatic check of the first integration costs
         # O(m n²) (116 s for 64 bodies), so a built model counts as checked. Model.check(q, v)
@@ -441,25 +444,16 @@ class Mechanism:
         return model
 
     def _model(self, records, *, n, linear, loads, mdiag, timed, springs, forced, name) -> Model:
-        """The ``fastvi.Model`` of the given rows; a clear error for a singular mass matrix."""
+        """The ``fastvi.Model`` of the given rows. A lamina's or a rod's zero director inertia
+        makes the mass matrix singular, which the Model accepts where it is definite on the
+        tangent space of the constraints (checked by the first integration)."""
         m = records.shape[0]
         cols = [pk.row_columns(records[a]) for a in range(m)]
         rows = np.array([a for a in range(m) for _ in cols[a]], dtype=np.int64)
         pattern = (rows, np.array([c for cs in cols for c in cs], dtype=np.int64)) if m else None
-        try:
-            return Model(n, m, params=pk.pack(n, linear, records, loads), mass=mdiag, name=name,
-                         time_dependent=timed, constraint_jacobian_pattern=pattern,
-                         **cb.model_callbacks(timed, springs, forced))
-        except ValueError as exc:
-            if "positive definite" not in str(exc):
-                raise
-            flat = [f"{b.name!r} (E = {b.second_moments.tolist()})" for b in self.bodies
-                    if isinstance(b, Body) and np.any(b.second_moments <= 0)]
-            raise ValueError(
-                f"mechanism {self.name!r}: the mass matrix diag(m, E₁, E₂, E₃) is singular for "
-                f"{', '.join(flat)}: a lamina or a slender rod (a principal moment equal to the sum "
-                "of the other two) has a director inertia E_I = ½ tr J − J_I = 0, and this fastvi "
-                "needs a positive definite mass matrix; give the body a small thickness") from None
+        return Model(n, m, params=pk.pack(n, linear, records, loads), mass=mdiag, name=name,
+                     time_dependent=timed, constraint_jacobian_pattern=pattern,
+                     **cb.model_callbacks(timed, springs, forced))
 
     def __repr__(self) -> str:
         return (f"Mechanism({self.name!r}: {len(self.bodies)} bodies, {len(self.joints)} joints, "

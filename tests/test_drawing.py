@@ -82,7 +82,14 @@ def test_rotary_rod_slider_draws_the_rod_and_the_slider():
     np.testing.assert_allclose(slider, r * np.array([np.cos(theta), np.sin(theta)]), atol=1e-15)
 
 
+#: the rigid-body scenes (fastvi.bodies): in space, drawn from their mechanism
+RIGID = ("heavy_top", "lagrange_top", "fast_top", "spatial_slider_crank", "bricard",
+         "flyball_governor", "body_chain")
+
+
 def _start(name, model):
+    if name in RIGID:
+        return model.initial_state()[0]
     if name in ("chain", "tree", "ladder"):
         N = {"chain": 5, "tree": 10, "ladder": 8}[name]
         return model.initial_state(np.linspace(0.2, 0.9, N))[0]
@@ -100,14 +107,14 @@ def test_every_scene_has_a_drawing_whose_bars_are_its_links(name):
     model = SCENES[name](N=5) if name == "chain" else SCENES[name]()
     drawing = model.drawing
     assert isinstance(drawing, Drawing)
-    assert drawing.dim == (3 if name == "spherical_pendulum" else 2)
+    assert drawing.dim == (3 if name == "spherical_pendulum" or name in RIGID else 2)
     q = _start(name, model)
     P = drawing.check(q, 0.0)
     assert P >= 2 and drawing.links.size and drawing.pivots
     pts = drawing.positions(q)
     # a Cartesian scene's constraints are its bars' lengths: at a consistent state every bar
     # between two points is as long as the constraint says, so no bar joins the wrong points
-    if model.m and name not in ("rotary_rod_slider", "slider_crank", "kapitza_pendulum"):
+    if model.m and name not in ("rotary_rod_slider", "slider_crank", "kapitza_pendulum") + RIGID:
         lengths = np.linalg.norm(pts[drawing.links[:, 1]] - pts[drawing.links[:, 0]], axis=1)
         assert np.all(lengths > 0.1) and np.all(lengths < 3.0), lengths
         assert np.max(np.abs(model.constraint_value(q))) < 1e-12

@@ -181,8 +181,9 @@ def test_size_mistakes_raise_a_clear_error_in_a_fresh_process():
 def test_size_mistakes_raise_with_check_false_too():
     """``check=False`` skips the derivative comparison only: before the size guard ran always,
     these ended in a segfault at exit (m too small), a raise then a segfault (transposed
-    Jacobian), or a silent success (gradient past n). Three fresh processes each."""
-    jobs = [(case, "nocheck") for _ in range(3) for case in CASES]
+    Jacobian), or a silent success (gradient past n). One fresh process each (three each:
+    ``test_size_mistakes_raise_every_time``, ``make test-slow``)."""
+    jobs = [(case, "nocheck") for case in CASES]
     jobs.append(("correct", "nocheck"))
     results = _run_all(jobs)
     control = results.pop()
@@ -193,11 +194,11 @@ def test_size_mistakes_raise_with_check_false_too():
 def test_event_mistakes_raise_a_clear_error_in_a_fresh_process():
     """Before the event guard an event reading v[n] returned invented crossings (exit 0), one
     writing into v corrupted the recorded velocities silently, and SciPy's ev(t, y) got
-    numba's generic typing advice. Three fresh processes each, with and without the model
+    numba's generic typing advice. One fresh process each, with and without the model
     check; the correct event is the control."""
     import re
 
-    jobs = [(case, route) for _ in range(3) for case in EVENT_CASES for route in ("check", "nocheck")]
+    jobs = [(case, route) for case in EVENT_CASES for route in ("check", "nocheck")]
     results = _run_all(jobs + [("correct", "check")], script=EVENT_SCRIPT)
     control = results.pop()
     assert control[1] == 0 and "integrated True" in control[2], control

@@ -300,6 +300,7 @@ def test_peer_split_into_steps_and_cost_per_step_on_synthetic_curves():
     assert np.isnan(far[0][2]) and np.isnan(far[0][3])
 
 
+@pytest.mark.slow  # runs chain(N) for the growth table: 11 s
 def test_growth_section_is_spliced_into_an_existing_page(tmp_path):
     rows = {N: chain_cost(N) for N in (2, 4)}
     for N, r in rows.items():
@@ -401,6 +402,7 @@ def test_a_level_looser_than_a_front_takes_the_cheaper_tighter_run_as_its_bound(
     assert 0.0270 < best3 < 0.031
 
 
+@pytest.mark.slow  # compiles the adaptive step's kernels for the study: 11 s
 def test_the_adaptive_pilot_runs_once_per_model_and_setting(monkeypatch):
     """The study times a setting several times; its (deterministic) pilot runs once."""
     model = fastvi.scenes.pendulum()

@@ -28,7 +28,7 @@ import pytest
 import fastvi
 from fastvi import structure
 from fastvi.bodies import scenes
-from fastvi.studies.wpd import fit_exponent
+from studies.wpd.growth import fit_exponent
 
 SIZES = tuple(int(x) for x in os.environ.get("FASTVI_BODY_SIZES", "16,32,64,128,256").split(","))
 METHOD = "P2L-Q3G"

@@ -5,7 +5,7 @@ r"""Build a multibody mechanism and turn it into a ``fastvi.Model``: :class:`Mec
     from fastvi import bodies
 
     mech = bodies.Mechanism(gravity=(0, 0, -9.81))
-    top = mech.body("top", mass=15.0, inertia=(0.234375, 0.4, 0.234375),
+    top = mech.body("top", mass=15.0, inertia=(0.234375, 0.46875, 0.234375),
                     omega_body=(0, 150, -4.61538))
     mech.spherical(bodies.GROUND, top, point_b=(0, -1, 0))   # the fixed point, in the body frame
     model = mech.build()

@@ -9,7 +9,7 @@ time-reversible step-size rule with the density ρ(q) = sqrt(1 + KE(q)/K_r), KE 
 the energy shell) against the fixed step, on the chaotic double pendulum from π/2, π/2 at
 rest. The first form sweeps h (fixed) and ε (adaptive, ``h=ε``) and prints, per method, the
 steps to t = T at the study's energy levels (log–log along each front, max|ΔH| over every
-step, median over ``--starts`` starts 1e-12 rad apart, `fastvi.studies.wpd.peer_starts`)
+step, median over ``--starts`` starts 1e-12 rad apart, `studies.wpd.peer_runs.peer_starts`)
 and their ratio. ``cost`` times a step of each (``specialize=True``, process CPU, nothing
 saved but the ends, the two interleaved in one process, best of ``--rounds``) at settings
 of about equal energy error, with the Newton iterations a step. ``drift`` prints the
@@ -23,7 +23,7 @@ import time
 import numpy as np
 
 import fastvi
-from fastvi.studies.wpd import peer_starts
+from studies.wpd.peer_runs import peer_starts
 from time_transform_steps import steps_at  # the script's own folder
 
 LEVELS = (1e-2, 3e-3, 1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6)

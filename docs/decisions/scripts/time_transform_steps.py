@@ -24,7 +24,7 @@ kinetic energy is KE(q) = E0 − V(q), so the step can follow the speed through 
 Physical time is t(τ) = ∫ σ(q(τ)) dτ (trapezoid over the steps, enough to count steps up to
 T). For each method the script sweeps h (fixed step) and (K_r, Δτ) (transformed), counts
 the steps to reach t = T, reads max|ΔH| over every step (the median over ``--starts``
-starts 1e-12 rad apart, `fastvi.studies.wpd.peer_starts`: the motion is chaotic), and
+starts 1e-12 rad apart, `studies.wpd.peer_runs.peer_starts`: the motion is chaotic), and
 prints the steps each needs at the study's levels (log–log along each front) and their
 ratio. Then the cost a step of each (generic kernels, no saving): the model-level
 transform runs through the general mass path, so the ratio says how cheap a dedicated
@@ -52,7 +52,7 @@ import numba
 import numpy as np
 
 import fastvi
-from fastvi.studies.wpd import peer_starts
+from studies.wpd.peer_runs import peer_starts
 
 #: the scene's module (its name is shadowed by the function in fastvi.scenes): its callbacks
 _dp = importlib.import_module("fastvi.scenes.double_pendulum")

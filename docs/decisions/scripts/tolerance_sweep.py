@@ -30,7 +30,8 @@ ACCURACY = (("P2L-Q3G", 0.025), ("P3L-Q4G", 0.025), ("P4L-Q4G", 0.0125))
 
 
 def accuracy():
-    from fastvi.studies.wpd import peer_starts, reference_q
+    from studies.wpd.peer_runs import peer_starts
+    from studies.wpd.runs import reference_q
 
     dp = fastvi.scenes.double_pendulum()
     q_ref = reference_q(10.0)

@@ -636,8 +636,7 @@ class Model:
             M = self.mass_matrix_constant
             Mc = np.ascontiguousarray(M if M is not None else np.zeros((self.n, self.n)))
             # a diagonal constant M lets the kernels use M v and M⁻¹ elementwise
-            flags[lay.F_DIAG] = int(M is not None and not self.mass_singular
-                                    and np.count_nonzero(M - np.diag(np.diag(M))) == 0)
+            flags[lay.F_DIAG] = int(M is not None and np.count_nonzero(M - np.diag(np.diag(M))) == 0)
             flags[lay.F_AUGMENT] = int(self.mass_singular)
             flags[lay.F_FORCE] = int(self.has_force)
             flags[lay.F_EX_FJQ] = int("force_jacobian_q" in self._functions)

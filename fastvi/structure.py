@@ -282,7 +282,7 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
             si[lay.SI_GPTR] = put(np.concatenate(([0], np.cumsum(PG.sum(axis=1)))))
             si[lay.SI_GCOL] = put(np.nonzero(PG)[1])
 
-    if m and flags[lay.F_DIAG]:
+    if m and flags[lay.F_DIAG] and not flags[lay.F_AUGMENT]:  # M⁻¹ elementwise
         PG = pats["G"]
         Gi = PG.astype(np.int64)
         PS = (Gi @ Gi.T) > 0

@@ -730,14 +730,14 @@ def _mass_bar(md, qk, ws, n):
     constant ``M`` once per trajectory; of ``M + Gᵀ W G`` at ``q_k`` for a singular constant
     ``M``, :func:`.linalg.augmented_mass`). Returns a status code."""
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
-    if flags[F_DIAG] != 0:
+    Mb = ws.Mb
+    if flags[F_AUGMENT] != 0:
+        augmented_mass(Mc, ws.G[0], Mb, n, flags[F_M])
+    elif flags[F_DIAG] != 0:
         _inverse_diagonal(md, ws, n)
         return OK
-    Mb = ws.Mb
-    if flags[F_MASSFN] != 0:
+    elif flags[F_MASSFN] != 0:
         fns[MASS](ptr(qk), ptr(qk), ptr(prm), ptr(Mb))
-    elif flags[F_AUGMENT] != 0:
-        augmented_mass(Mc, ws.G[0], Mb, n, flags[F_M])
     elif ws.hold[H_MBAR] != 0:
         return OK
     else:
@@ -763,7 +763,7 @@ def _inverse_diagonal(md, ws, n):
 @hot_inline
 def _minv(md, ws, x, n):
     """x ← M̄⁻¹ x."""
-    if md.flags[F_DIAG] != 0:
+    if md.flags[F_DIAG] != 0 and md.flags[F_AUGMENT] == 0:
         for a in range(n):
             x[a] *= ws.minv[a]
     else:
@@ -1440,7 +1440,7 @@ def end_momentum(md_, q1_, P_, p1_, v1_, G1_, ws_, out_):
     Y = ws.Gp
     S = ws.S
     pivm = ws.pivm
-    diag = flags[F_DIAG] != 0
+    diag = flags[F_DIAG] != 0 and flags[F_AUGMENT] == 0  # M⁻¹ elementwise
     minv = ws.minv
     if diag:
         _inverse_diagonal(md, ws, n)

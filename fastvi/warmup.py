@@ -13,8 +13,9 @@ The four first calls are the four kinds of kernel a session uses:
 3. ``integrate`` with terminal events and dense output;
 4. ``integrate_ensemble`` of 8 members (the parallel driver).
 
-``--only specialize`` times a fifth, opt-in kind: ``integrate(..., specialize=True)`` of the
-double pendulum, the kernels compiled for its sizes.
+``--only specialize`` times a fifth kind: ``integrate(..., specialize=True)`` of the
+double pendulum, the step's stages compiled for its sizes (which the default,
+``specialize=None``, then uses for every run of a model of those sizes).
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ from .integrate import IntegrationError, Result, integrate
 from .ensemble import EnsembleResult, integrate_ensemble
 from .adjoint import AdjointResult, adjoint
 from .fit import TrajectoryFit
-from .sensitivity import SensitivityResult, sensitivity, tangent_space
+from .sensitivity import SensitivityResult, largest_lyapunov, sensitivity, tangent_space
 from .model import CALLBACK_SIGNATURE, Model
 from .status import Status
 from .tables import Method, method
@@ -37,6 +37,7 @@ __all__ = [
     "sensitivity",
     "SensitivityResult",
     "tangent_space",
+    "largest_lyapunov",
     "adjoint",
     "AdjointResult",
     "TrajectoryFit",

@@ -1,5 +1,5 @@
 """The largest Lyapunov exponent of the double pendulum from the tangent flow
-=========================================================================
+==========================================================================
 
 The largest Lyapunov exponent measures how fast two nearby motions separate:
 ``|δx(t)| ~ e^{λ t} |δx(0)|``. It is computed here by Benettin's method on the *exact

@@ -1524,6 +1524,8 @@ def end_momentum(md_, q1_, P_, p1_, v1_, G1_, ws_, out_):
 _STEPS: dict = {}
 #: the optional stages compiled so far: (kernel type, stage name) -> C function
 _OPTIONAL: dict = {}
+#: the sized stages looked up in numba's disk cache and not found there, in this process
+_NOT_CACHED: set = set()
 
 
 #: the step's three large stages, compiled as C functions and called by address from the
@@ -1616,6 +1618,8 @@ def _sized(key, md, tabs, opts, ws, stages, compile):
     disk cache; else None."""
     names = SIZED_STAGES_FULL if opts.mode == NEWTON_FULL or not tabs.mech else SIZED_STAGES
     skey = (key, "sized", _key(layout_specialize(ws).dims), names)
+    if not compile and skey in _NOT_CACHED:
+        return None  # looked up once in this process: a lookup costs a few ms a call
     if skey not in _OPTIONAL:
         generic = _stage_signatures(md, tabs, opts, ws)
         sized = _stage_signatures(md, tabs, opts, layout_specialize(ws))
@@ -1624,6 +1628,7 @@ def _sized(key, md, tabs, opts, ws, stages, compile):
         for name in names:
             cf = _cfunc(fns[name].py_func, sized[name], compile)
             if cf is None:
+                _NOT_CACHED.add(skey)
                 return None
             entries[name] = _SizedStage(cf, generic[name])
         _OPTIONAL[skey] = entries

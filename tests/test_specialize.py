@@ -84,3 +84,24 @@ def test_specialized_stiff_fallback_is_the_generic_trajectory_bit_for_bit():
     for key in ("newton_iterations", "full_newton_steps"):
         assert sized.stats[key] == gen.stats[key], key
     _same(gen, sized)
+
+
+def test_none_takes_the_sized_stages_once_they_are_compiled_after_a_miss(monkeypatch):
+    """A disk-cache miss is remembered for the process (a lookup costs milliseconds), but
+    stages compiled since then in this process are taken."""
+    from fastvi import structure
+    from fastvi.kernels import step as step_mod
+
+    class EveryKeyMissed(set):
+        def __contains__(self, key):
+            return True
+
+    dp = fastvi.scenes.double_pendulum()
+    q0, v0 = dp.initial_state(0.3, 0.2)
+    fastvi.integrate(dp, q0, v0, h=0.01, n_steps=5, specialize=True)  # compiled (or loaded)
+    monkeypatch.setattr(step_mod, "_NOT_CACHED", EveryKeyMissed())
+    meth = fastvi.method("P2L-Q3G")
+    opts = lay.NewtonOptions(1e-14, 30, lay.NEWTON_MODES["auto"])
+    _, stages = step_mod.step_kernel(dp.kernel_data(), meth.kernel_tables, opts,
+                                     structure.workspace(dp, meth), sized="cached")
+    assert isinstance(stages.newton_mech, step_mod._SizedStage)

@@ -1618,7 +1618,7 @@ def _sized(key, md, tabs, opts, ws, stages, compile):
     disk cache; else None."""
     names = SIZED_STAGES_FULL if opts.mode == NEWTON_FULL or not tabs.mech else SIZED_STAGES
     skey = (key, "sized", _key(layout_specialize(ws).dims), names)
-    if not compile and skey in _NOT_CACHED:
+    if skey not in _OPTIONAL and not compile and skey in _NOT_CACHED:
         return None  # looked up once in this process: a lookup costs a few ms a call
     if skey not in _OPTIONAL:
         generic = _stage_signatures(md, tabs, opts, ws)

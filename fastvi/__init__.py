@@ -18,6 +18,7 @@ from .ensemble import EnsembleResult, integrate_ensemble
 from .adjoint import AdjointResult, adjoint
 from .fit import TrajectoryFit
 from .sensitivity import SensitivityResult, largest_lyapunov, sensitivity, tangent_space
+from .sensitivity_ensemble import EnsembleSensitivityResult, sensitivity_ensemble
 from .model import CALLBACK_SIGNATURE, Model
 from .status import Status
 from .tables import Method, method
@@ -36,6 +37,8 @@ __all__ = [
     "Drawing",
     "sensitivity",
     "SensitivityResult",
+    "sensitivity_ensemble",
+    "EnsembleSensitivityResult",
     "tangent_space",
     "largest_lyapunov",
     "adjoint",

@@ -28,7 +28,8 @@ from .results import Result
 from .status import Status
 from .tables import Method
 
-__all__ = ["Run", "prepare", "directions", "param_indices", "linear_part", "initial_tangent", "theta_derivative", "finish"]
+__all__ = ["Run", "prepare", "directions", "param_indices", "linear_part", "initial_tangent", "theta_derivative",
+           "velocity_derivatives", "finish"]
 
 
 @dataclass
@@ -238,6 +239,24 @@ def initial_tangent(run: Run, D: np.ndarray, initial_state=None):
 def _state_of(initial_state, p, n):
     q, v = initial_state(p)
     return valid.vector(q, "initial_state(params)[0]", n), valid.vector(v, "initial_state(params)[1]", n)
+
+
+def velocity_derivatives(run, result, dq, dp, pidx, dth):
+    """``δv = M⁻¹ (δp − C_q δq − (M_θ v) δθ)`` at every sample."""
+    model = run.model
+    if model.mass_matrix_constant is not None:
+        return np.linalg.solve(model.mass_matrix_constant, dp)
+    dv = np.empty_like(dp)
+    zero = np.zeros(model.m)
+    for i in range(dq.shape[0]):
+        q, v = result.q[i], result.v[i]
+        M, _, _, _, Cq = point_terms(run.model_data, q, v, zero)
+        rhs = dp[i] - Cq @ dq[i]
+        for j, l in enumerate(pidx):
+            rhs -= np.outer(theta_derivative(lambda th: model.mass_matrix(q, th) @ v,
+                                                  run.prm, l), dth[:, j])
+        dv[i] = np.linalg.solve(M, rhs)
+    return dv
 
 
 # ----------------------------------------------------------------------------- the result

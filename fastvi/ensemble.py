@@ -10,6 +10,7 @@ iteration fails stops alone; its status, failed step and last good state are rec
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 import warnings
@@ -546,6 +547,26 @@ def _ensemble_with_progress(model, Q0, V0, params, opts, threads, run_check, eve
 
 
 # ------------------------------------------------------------------ pieces shared with distributed
+@contextlib.contextmanager
+def parallel_section(threads, N: int):
+    """Run a compiled ``prange`` loop over ``N`` members with ``threads`` threads (None:
+    numba's setting), dynamically scheduled in chunks of ``N / (CHUNKS_PER_THREAD ·
+    threads)``; one such loop at a time per process. Yields the thread count used and
+    restores numba's settings after."""
+    with _PARALLEL_LOCK:
+        prev_threads = numba.get_num_threads()
+        prev_chunk = numba.get_parallel_chunksize()
+        try:
+            if threads is not None:
+                numba.set_num_threads(threads)
+            used = numba.get_num_threads()
+            numba.set_parallel_chunksize(max(1, N // (CHUNKS_PER_THREAD * used)))
+            yield used
+        finally:
+            numba.set_parallel_chunksize(prev_chunk)
+            numba.set_num_threads(prev_threads)
+
+
 def _validate_threads(threads):
     return check.threads(threads)
 
@@ -618,34 +639,24 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
 
     fns, flags, Mc = model.kernel_arguments()
     plan = structure.plan(model, meth, None, opts.get("solver", "auto"))
-    with _PARALLEL_LOCK:
-        prev_threads = numba.get_num_threads()
-        prev_chunk = numba.get_parallel_chunksize()
-        try:
-            if threads is not None:
-                numba.set_num_threads(threads)
-            used = numba.get_num_threads()
-            numba.set_parallel_chunksize(max(1, N // (CHUNKS_PER_THREAD * used)))
-            dims = (model.n, model.m, meth.s, meth.r, meth.J)
-            # the members' step: the one integrate compiles for a workspace of this type
-            t_step = time.perf_counter()
-            ws = structure.workspace(model, meth, None, opts.get("solver", "auto"))
-            sized = structure.sizing(opts.get("specialize"), model.n, N * total)
-            stepk, stages = step_kernel(model.kernel_data(), meth.kernel_tables,
-                                        opts["newton"], ws, full=True, sized=sized)
-            compile_time += time.perf_counter() - t_step
-            args = (fns, flags, Mc, KP, meth.kernel_tables,
-                    opts["newton"], h, t0, dims, plan.si, plan.sb, ws.structured, X0, total, mode, every, H0,
-                    Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, ev.fns, ev.count, ev.direction,
-                    ev.terminal, Te, Qe, Ve, Ne, stepk, stages)
-            run, seconds = _RUN_ENSEMBLE.bind(*args)
-            compile_time += seconds
-            t_loop = time.perf_counter()
-            run(*args)
-            t1 = time.perf_counter()
-        finally:
-            numba.set_parallel_chunksize(prev_chunk)
-            numba.set_num_threads(prev_threads)
+    with parallel_section(threads, N) as used:
+        dims = (model.n, model.m, meth.s, meth.r, meth.J)
+        # the members' step: the one integrate compiles for a workspace of this type
+        t_step = time.perf_counter()
+        ws = structure.workspace(model, meth, None, opts.get("solver", "auto"))
+        sized = structure.sizing(opts.get("specialize"), model.n, N * total)
+        stepk, stages = step_kernel(model.kernel_data(), meth.kernel_tables,
+                                    opts["newton"], ws, full=True, sized=sized)
+        compile_time += time.perf_counter() - t_step
+        args = (fns, flags, Mc, KP, meth.kernel_tables,
+                opts["newton"], h, t0, dims, plan.si, plan.sb, ws.structured, X0, total, mode, every, H0,
+                Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, ev.fns, ev.count, ev.direction,
+                ev.terminal, Te, Qe, Ve, Ne, stepk, stages)
+        run, seconds = _RUN_ENSEMBLE.bind(*args)
+        compile_time += seconds
+        t_loop = time.perf_counter()
+        run(*args)
+        t1 = time.perf_counter()
 
     steps = ist[:, lay.E_STEPS].copy()
     iterations = fst[:, lay.F_ITERS].astype(np.int64)

@@ -209,26 +209,8 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     K = result.t.shape[0]
     dq = np.ascontiguousarray(dQ[:K].transpose(0, 2, 1))
     dp = np.ascontiguousarray(dP[:K].transpose(0, 2, 1))
-    dv = _velocity_derivatives(run, result, dq, dp, pidx, dth)
+    dv = disc.velocity_derivatives(run, result, dq, dp, pidx, dth)
     return SensitivityResult(result, result.t, dq, dv, dp, labels, run.prm, dth, pidx, model)
-
-
-def _velocity_derivatives(run, result, dq, dp, pidx, dth):
-    """``δv = M⁻¹ (δp − C_q δq − (M_θ v) δθ)`` at every sample."""
-    model = run.model
-    if model.mass_matrix_constant is not None:
-        return np.linalg.solve(model.mass_matrix_constant, dp)
-    dv = np.empty_like(dp)
-    zero = np.zeros(model.m)
-    for i in range(dq.shape[0]):
-        q, v = result.q[i], result.v[i]
-        M, _, _, _, Cq = point_terms(run.model_data, q, v, zero)
-        rhs = dp[i] - Cq @ dq[i]
-        for j, l in enumerate(pidx):
-            rhs -= np.outer(disc.theta_derivative(lambda th: model.mass_matrix(q, th) @ v,
-                                                  run.prm, l), dth[:, j])
-        dv[i] = np.linalg.solve(M, rhs)
-    return dv
 
 
 def largest_lyapunov(model, q0, v0, *, h: float, t_end: float, segment: float = 1.0,

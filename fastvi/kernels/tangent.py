@@ -40,18 +40,22 @@ from collections import namedtuple
 
 import numpy as np
 
-from .._numba import byref, hot, hot_inline, own, ptr
+from numba import prange
+
+from .._numba import byref, hot, hot_inline, njit, own, ptr
 from .drive import run
 from .layout import (CHESS, CJAC, F_EX_CHESS, F_EX_MJAC, F_MASSFN, FD_T, FD_T_POINTS, I_FAILED,
                      I_SLOT, I_STEPS, MASS, MJAC, NONFINITE, OK, SINGULAR, SINGULAR_CONSTRAINTS,
-                     SINGULAR_MASS, STEP_OUT_SIZE, make_workspace, sizes)
+                     SINGULAR_MASS, STEP_OUT_SIZE, EVENT_SLOTS, Events, ModelData, Samples, make_workspace, sizes,
+                     with_plan, workspace_for)
 from .linalg import lu_factor, lu_solve
 from .step import (fd_constraint_hessian, fd_momentum_jacobian, assemble, end_momentum,
                    linear_force)
 
 __all__ = ["PointWork", "TangentWork", "extended_tables", "make_point_work",
            "make_tangent_work", "point", "point_terms", "linearise", "push", "pull",
-           "lu_solve_transposed", "run_tangent"]
+           "lu_solve_transposed", "run_tangent", "run_tangent_ensemble", "point_work",
+           "tangent_work", "index_maps"]
 
 #: the second derivatives at a point of the constrained phase space, and their scratch
 PointWork = namedtuple("PointWork", [
@@ -108,7 +112,7 @@ def extended_tables(tabs, s, J):
                          Lc=np.vstack([tabs.Lc, np.ones((1, tabs.Lc.shape[1]))]))
 
 
-def _index_maps(n, m, s, J):
+def index_maps(n, m, s, J):
     """Rows and columns of the extended Newton matrix that are the step's own."""
     sx = s + 1
     rows = [nu * n + a for nu in range(s) for a in range(n)]
@@ -118,29 +122,47 @@ def _index_maps(n, m, s, J):
     return np.array(rows, dtype=np.int64), np.array(cols, dtype=np.int64)
 
 
+@njit
+def point_work(n, m):
+    """A :class:`PointWork` for ``n`` coordinates and ``m`` constraints (compiled: the
+    ensemble's members build their own inside the parallel loop)."""
+    mm = max(m, 1)
+    return PointWork(np.zeros((n, n)), np.zeros((mm, n)), np.zeros((n, n)), np.zeros((mm, n)),
+                     np.zeros((n, n)), np.zeros((n, n)), np.zeros(mm), np.zeros(n),
+                     np.zeros((n, n)), np.zeros((mm, n)), np.zeros((mm, n)))
+
+
+@njit
+def tangent_work(xws, rows, cols, pidx, d):
+    """A :class:`TangentWork` for ``d`` directions around the extended step's workspace
+    ``xws`` (sizes ``n, m, s + 1, r, J``), differentiating by the parameters ``pidx``
+    (int64); ``rows``, ``cols`` from :func:`index_maps`."""
+    n, m, sx, J = xws.dims[0], xws.dims[1], xws.dims[2], xws.dims[4]
+    s = sx - 1
+    N = s * n + J * m
+    mm = max(m, 1)
+    npar = max(pidx.shape[0], 1)
+    return TangentWork(
+        xws, point_work(n, m), rows, cols, np.zeros((N, N)), np.zeros(N, dtype=np.int64),
+        np.zeros((N + n, n)), np.zeros((n, N)), pidx, np.zeros((N + n, npar)),
+        np.zeros((n, npar)), np.zeros((mm, n)), np.zeros((mm, mm)), np.zeros(mm, dtype=np.int64),
+        np.zeros(n, dtype=np.int64), np.zeros((d, n)), np.zeros((d, n)), np.zeros((d, npar)),
+        np.zeros((d, N)), np.zeros((d, n)), np.zeros((d, n)), np.zeros(sx * n + J * m),
+        np.zeros(n), np.zeros(n), np.zeros((mm, n)), np.zeros(mm), np.zeros(mm), np.zeros(n),
+        np.zeros(n), np.zeros(n), np.zeros(N), np.zeros(n), np.zeros(n), np.zeros(STEP_OUT_SIZE))
+
+
 def make_point_work(n, m):
     """A :class:`PointWork` for ``n`` coordinates and ``m`` constraints."""
-    mm = max(m, 1)
-    z = np.zeros
-    return PointWork(z((n, n)), z((mm, n)), z((n, n)), z((mm, n)), z((n, n)), z((n, n)), z(mm),
-                     z(n), z((n, n)), z((mm, n)), z((mm, n)))
+    return point_work(int(n), int(m))
 
 
 def make_tangent_work(n, m, s, r, J, d, pidx):
     """A :class:`TangentWork` for ``d`` directions, differentiating by the parameters
     ``pidx``."""
-    N = s * n + J * m
-    mm = max(m, 1)
-    npar = max(len(pidx), 1)
-    rows, cols = _index_maps(n, m, s, J)
-    z = np.zeros
-    return TangentWork(
-        make_workspace(n, m, s + 1, r, J), make_point_work(n, m), rows, cols, z((N, N)),
-        z(N, dtype=np.int64), z((N + n, n)), z((n, N)), np.asarray(pidx, dtype=np.int64),
-        z((N + n, npar)), z((n, npar)), z((mm, n)), z((mm, mm)), z(mm, dtype=np.int64),
-        z(n, dtype=np.int64), z((d, n)), z((d, n)), z((d, npar)), z((d, N)), z((d, n)),
-        z((d, n)), z((s + 1) * n + J * m), z(n), z(n), z((mm, n)), z(mm), z(mm), z(n),
-        z(n), z(n), z(N), z(n), z(n), z(STEP_OUT_SIZE))
+    rows, cols = index_maps(n, m, s, J)
+    return tangent_work(make_workspace(n, m, s + 1, r, J), rows, cols,
+                        np.asarray(pidx, dtype=np.int64), int(d))
 
 
 # ----------------------------------------------------------------------------- second derivatives
@@ -566,3 +588,55 @@ def run_tangent(md, tabs, tx, opts, h, state, ws, n_total, save_every, smp, info
                     dQ[slot, c, a] = tw.dq[c, a]
                     dPs[slot, c, a] = tw.dp[c, a]
     return 0
+
+
+@njit
+def _started(tw, dq, dp, th):
+    """``tw`` holding the initial tangent state ``dq``, ``dp`` and parameter parts ``th``.
+    A call, not statements of the parallel loop's body: written there, numba's parallel
+    lowering lost these writes (the members' directions came out zero)."""
+    tw.dq[:, :] = dq
+    tw.dp[:, :] = dp
+    tw.th[:, :] = th
+    return tw
+
+
+@njit(parallel=True)
+def run_tangent_ensemble(fns, flags, Mc, P, tabs, tx, opts, h, dims, si, sb, structured, X0,
+                         n_total, save_every, T, Qs, Vs, Ps, En, Gr, GVr, It, Wk, WF, infos,
+                         efns, ecount, edir, eterm, et, eq, ev_, en, stepk, stages, rows, cols, pidx, DQ,
+                         DP, TH, dQ, dPs, status):
+    """:func:`run_tangent` for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in
+    parallel: the members' trajectories equal :func:`fastvi.integrate`'s, and their
+    directions :func:`run_tangent`'s, bit for bit.
+
+    Member ``i`` has its own parameters ``P[i]`` (the kernels' row), samples ``T[i]``,
+    ``Qs[i]`` … ``WF[i]`` (slot 0 filled by the caller), counters ``infos[i]``, initial
+    tangent state ``DQ[i]``, ``DP[i]`` (d, n) and parameter parts ``TH[i]`` (d, np), and
+    writes its directions into ``dQ[i]``, ``dPs[i]`` (K, d, n) and its status into
+    ``status[i]``. ``dims`` = (n, m, s, r, J), ``si``, ``sb``, ``structured`` as in
+    :func:`.drive.run_ensemble`; ``efns`` … ``en``: the fields of a
+    :class:`.layout.Events` with no events (numba cannot hand the named tuple of callbacks
+    to the parallel loop's body; nothing writes these without events); ``rows``, ``cols``
+    from :func:`index_maps`. Each member allocates its workspaces inside the loop body, so
+    threads share nothing written."""
+    n, m, s, r, J = dims[0], dims[1], dims[2], dims[3], dims[4]
+    d = DQ.shape[1]
+    for i in prange(X0.shape[0]):
+        ws = with_plan(workspace_for(dims), si, sb.copy(), structured)
+        tw = _started(tangent_work(workspace_for((n, m, s + 1, r, J)), rows, cols, pidx, d),
+                      DQ[i], DP[i], TH[i])
+        state = np.zeros((6, n))
+        for a in range(n):
+            state[0, a] = X0[i, 0, a]
+            state[1, a] = X0[i, 1, a]
+            state[2, a] = X0[i, 2, a]
+        md = ModelData(fns, flags, Mc, P[i])
+        linear_force(md, tw.ws, X0[i, 0])
+        smp = Samples(T[i], Qs[i], Vs[i], Ps[i], En[i], Gr[i], GVr[i], It[i], Wk[i], WF[i])
+        ev = Events(efns, ecount, edir, eterm, np.zeros(EVENT_SLOTS), et, eq, ev_, en,
+                    np.zeros((0, s + 1, n)), np.zeros((s + 1, n)), np.zeros(n), np.zeros(n),
+                    np.zeros(n), np.zeros(s + 1), np.zeros(s + 1), np.zeros(1))
+        status[i] = run_tangent(md, tabs, tx, opts, h, state, ws, n_total, save_every, smp,
+                                infos[i], np.zeros(STEP_OUT_SIZE), ev, stepk, stages, tw,
+                                dQ[i], dPs[i])

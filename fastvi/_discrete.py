@@ -28,7 +28,7 @@ from .results import Result
 from .status import Status
 from .tables import Method
 
-__all__ = ["Run", "prepare", "directions", "param_indices", "linear_part", "initial_tangent", "theta_derivative",
+__all__ = ["Run", "refuse", "prepare", "directions", "param_indices", "linear_part", "initial_tangent", "theta_derivative",
            "velocity_derivatives", "finish"]
 
 
@@ -62,6 +62,34 @@ class Run:
     compile_time: float
     check_time: float
     monitor: bool
+
+
+#: options of :func:`fastvi.integrate` that the derivatives of the discrete flow do not take,
+#: and why
+_NOT_DIFFERENTIATED = {
+    "events": "an event crossing makes the flow non-smooth there (a terminal event's time "
+              "depends on the state); split the run at the event and chain the derivatives "
+              "of the pieces",
+    "adaptive": "the step-size controller is not differentiated; pass a fixed step `h`",
+    "recover": "a recovered step would change the map being differentiated; a failed step "
+               "raises `fastvi.IntegrationError` with the partial result instead",
+    "on_failure": "a failed step always raises: the derivative is not defined from it on",
+    "dense_output": "derivatives are given at the saved steps; save more often with "
+                    "`save_every`",
+    "t_eval": "derivatives are given at the saved steps; choose them with `save_every`",
+    "specialize": "the derivatives run with the generic compiled stages",
+    "progress": "no progress display yet; split a long run and chain the derivatives",
+}
+
+
+def refuse(options: dict, what: str) -> None:
+    """Raise ``TypeError`` for keyword arguments of :func:`fastvi.integrate` that ``what``
+    does not take, saying why, and for unknown ones as Python would."""
+    for name in options:
+        why = _NOT_DIFFERENTIATED.get(name)
+        if why is None:
+            raise TypeError(f"{what} got an unexpected keyword argument {name!r}")
+        raise TypeError(f"{what} does not take `{name}`: {why}")
 
 
 def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every, tol, max_iter,

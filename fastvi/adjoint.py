@@ -64,7 +64,7 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
             param_index=None, initial_state=None, params=None, save_every: int = 1,
             checkpoint_every: int | None = None, tol: float = valid.DEFAULT_TOL,
             max_iter: int = valid.DEFAULT_MAX_ITER, newton: str = "auto", solver: str = "auto",
-            check: bool = True, monitor: bool = True) -> AdjointResult:
+            check: bool = True, monitor: bool = True, **unsupported) -> AdjointResult:
     r"""The gradient of a cost ``J`` of the saved states by the discrete adjoint.
 
     For ``J`` a function of the samples ``(q_i, v_i)`` of the run, ``cotangent(result)``
@@ -113,6 +113,7 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     J. M. Sanz-Serna, Symplectic Runge–Kutta schemes for adjoint equations, automatic
     differentiation, optimal control, and more, SIAM Review 58 (2016) 3–33.
     """
+    disc.refuse(unsupported, "fastvi.adjoint")
     run = disc.prepare(model, q0, v0, h=h, t_end=t_end, n_steps=n_steps, t0=t0, t_span=t_span,
                        method=method, save_every=save_every, tol=tol, max_iter=max_iter,
                        newton=newton, params=params, solver=solver, check=check,

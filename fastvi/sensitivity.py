@@ -96,8 +96,8 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
                 method="P2L-Q3G", wrt=("q0", "v0"), param_index=None, initial_state=None,
                 params=None, save_every: int = 1, tol: float = valid.DEFAULT_TOL,
                 max_iter: int = valid.DEFAULT_MAX_ITER, newton: str = "auto",
-                solver: str = "auto", check: bool = True, monitor: bool = True
-                ) -> SensitivityResult:
+                solver: str = "auto", check: bool = True, monitor: bool = True,
+                **unsupported) -> SensitivityResult:
     r"""Integrate like :func:`fastvi.integrate` and propagate derivatives along the run.
 
     Each step solves ``R(X; q_k, p_k, θ) = 0`` for its unknowns ``X`` and reads off
@@ -132,9 +132,12 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     Parameters
     ----------
     model, q0, v0, h, t_end, n_steps, t0, t_span, method, params, save_every, tol, max_iter, newton, solver, check, monitor :
-        As :func:`fastvi.integrate`. The run must be a whole number of steps of ``h``;
-        adaptive steps, events, dense output, ``recover`` and ``specialize`` are not
-        available here.
+        As :func:`fastvi.integrate`. The run must be a whole number of steps of ``h``.
+    **unsupported :
+        ``events``, ``adaptive``, ``recover``, ``on_failure``, ``dense_output``,
+        ``t_eval``, ``specialize`` and ``progress`` of :func:`fastvi.integrate` raise
+        ``TypeError`` saying why (an event makes the flow non-smooth; a recovered step
+        changes the map; the step-size controller is not differentiated).
     wrt : sequence of {"q0", "v0", "params"}, or array (2n + k, d), default ("q0", "v0")
         The directions: the unit vectors of ``q0`` (n), ``v0`` (n) and the parameters of
         ``param_index``, in the order named; or the columns of an array of raw directions
@@ -183,6 +186,7 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     >>> sens.dq.shape                     # 101 samples, n = 4, 2n = 8 directions
     (101, 4, 8)
     """
+    disc.refuse(unsupported, "fastvi.sensitivity")
     run = disc.prepare(model, q0, v0, h=h, t_end=t_end, n_steps=n_steps, t0=t0, t_span=t_span,
                        method=method, save_every=save_every, tol=tol, max_iter=max_iter,
                        newton=newton, params=params, solver=solver, check=check,

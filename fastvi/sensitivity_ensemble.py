@@ -83,7 +83,7 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
                          save_every: int = 1, tol: float = valid.DEFAULT_TOL,
                          max_iter: int = valid.DEFAULT_MAX_ITER, newton: str = "auto",
                          solver: str = "auto", check: bool = True, monitor: bool = True,
-                         threads: int | None = None) -> EnsembleSensitivityResult:
+                         threads: int | None = None, **unsupported) -> EnsembleSensitivityResult:
     r"""Forward sensitivities of ``N`` members in one parallel loop.
 
     Member ``i`` starts from ``(Q0[i], V0[i])`` with parameters ``params[i]`` and carries
@@ -141,6 +141,7 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
     (3, 2, 4, 8)
     """
     started = time.perf_counter()
+    disc.refuse(unsupported, "fastvi.sensitivity_ensemble")
     if not isinstance(model, Model):
         raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
     Q0 = valid.member_vectors(Q0, "Q0", model.n)

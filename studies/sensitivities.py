@@ -48,10 +48,11 @@ def cost_table(steps: int, repeat: int, h: float = 0.01, method: str = "P2L-Q3G"
     n, k = dp.n, dp.params.size
     run = dict(h=h, n_steps=steps, method=method, save_every=steps)
 
-    def plain(prm=None, q=q0, v=v0):
+    def plain(specialize=None):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return fastvi.integrate(dp, q, v, params=prm, **run).stats["integration_time"]
+            return fastvi.integrate(dp, q0, v0, specialize=specialize,
+                                    **run).stats["integration_time"]
 
     def sens(wrt):
         return lambda: fastvi.sensitivity(dp, q0, v0, wrt=wrt, **run).result.stats[
@@ -67,7 +68,9 @@ def cost_table(steps: int, repeat: int, h: float = 0.01, method: str = "P2L-Q3G"
     one = np.zeros((2 * n + k, 1))
     one[0, 0] = 1.0
     t_plain = _best(plain, repeat)
-    rows = [("integrate (no derivatives)", t_plain, 1)]
+    rows = [("integrate (no derivatives)", t_plain, 1),
+            ("integrate, generic stages (`specialize=False`)",
+             _best(lambda: plain(False), repeat), 1)]
     rows.append(("sensitivity, 1 direction (q0[0])", _best(sens(one), repeat), 1))
     rows.append((f"sensitivity, 2n = {2 * n} directions (q0, v0)", _best(sens(("q0", "v0")), repeat),
                  2 * n))
@@ -213,6 +216,65 @@ def fit_table() -> str:
     return "\n".join(out)
 
 
+def memory_table(sizes=(1_000, 10_000, 100_000), h: float = 0.01,
+                 method: str = "P2L-Q3G") -> str:
+    """Peak memory of :func:`fastvi.adjoint` (``tracemalloc``: the NumPy arrays, checkpoints
+    and per-segment records included) with the default ``⌈√N⌉`` checkpoints and with every
+    step kept (``checkpoint_every = N``), one sample saved at each end."""
+    import tracemalloc
+
+    import fastvi
+
+    dp = fastvi.scenes.double_pendulum(damping=0.3)
+    q0, v0 = dp.initial_state(1.0, 0.5)
+
+    def peak(N, every):
+        tracemalloc.start()
+        A = fastvi.adjoint(dp, q0, v0, lambda r: (np.ones((len(r.t), dp.n)), None), h=h,
+                           n_steps=N, save_every=N, method=method, checkpoint_every=every)
+        size = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        return size, A.stats["checkpoints"], A.stats["segment"]
+
+    out = [f"Damped double pendulum, `{method}`, h = {h}: peak memory of one adjoint gradient "
+           "(`tracemalloc`).", "",
+           "| steps N | checkpoints × segment | peak (KiB) | every step kept (KiB) |",
+           "|---|---|---|---|"]
+    for N in sizes:
+        size, ck, seg = peak(N, None)
+        full, _, _ = peak(N, N)
+        out.append(f"| {N} | {ck} × {seg} | {size / 1024:.0f} | {full / 1024:.0f} |")
+    return "\n".join(out)
+
+
+def ensemble_table(members: int = 16, steps: int = 2_000, h: float = 0.01,
+                   method: str = "P2L-Q3G") -> str:
+    """:func:`fastvi.sensitivity_ensemble` against one :func:`fastvi.sensitivity` per member,
+    2n directions each: wall time, and whether the members agree bit for bit."""
+    import fastvi
+
+    dp = fastvi.scenes.double_pendulum(damping=0.3)
+    starts = [dp.initial_state(a, 0.5) for a in np.linspace(0.2, 2.0, members)]
+    Q0 = np.array([q for q, _ in starts])
+    V0 = np.array([v for _, v in starts])
+    run = dict(h=h, n_steps=steps, method=method, save_every=steps)
+    fastvi.sensitivity_ensemble(dp, Q0[:2], V0[:2], **{**run, "n_steps": 2})  # compiled first
+    ens = min((fastvi.sensitivity_ensemble(dp, Q0, V0, **run) for _ in range(3)),
+              key=lambda e: e.stats["integration_time"])
+    serial = min(sum(fastvi.sensitivity(dp, Q0[i], V0[i], **run).result.stats["integration_time"]
+                     for i in range(members)) for _ in range(3))
+    one = [fastvi.sensitivity(dp, Q0[i], V0[i], **run) for i in range(members)]
+    same = all(np.array_equal(o.dq, ens.dq[i]) for i, o in enumerate(one))
+    t_ens = ens.stats["integration_time"]
+    return (f"{members} members of the damped double pendulum, `{method}`, h = {h}, {steps} "
+            f"steps, 2n = {2 * dp.n} directions each, {ens.stats['threads']} threads; the "
+            "compiled loops' time, best of 3:\n\n"
+            "| computation | time (s) |\n|---|---|\n"
+            f"| `sensitivity_ensemble` (one parallel loop) | {t_ens:.3f} |\n"
+            f"| `sensitivity`, member by member | {serial:.3f} |\n\n"
+            f"Speed-up {serial / t_ens:.2f}; members equal bit for bit: {same}.")
+
+
 def main(argv=None) -> int:
     parser = study_parser("python -m fastvi sensitivities", __doc__)
     parser.add_argument("--steps", type=int, default=10_000, help="steps of the cost and symplecticity runs")
@@ -223,10 +285,12 @@ def main(argv=None) -> int:
     import fastvi
 
     dp = fastvi.scenes.double_pendulum(damping=0.3)  # compile everything first: not timed
+    fastvi.integrate(dp, *dp.initial_state(1.0, 0.5), h=0.01, n_steps=2, specialize=True)
     fastvi.sensitivity(dp, *dp.initial_state(1.0, 0.5), h=0.01, n_steps=2, wrt=("params",))
     fastvi.adjoint(dp, *dp.initial_state(1.0, 0.5), lambda r: (np.ones((len(r.t), 4)), None),
                    h=0.01, n_steps=2)
-    parts = [("Cost", cost_table(args.steps, args.repeat)), ("Order", order_table()),
+    parts = [("Cost", cost_table(args.steps, args.repeat)), ("Adjoint memory", memory_table()),
+             ("Ensembles", ensemble_table()), ("Order", order_table()),
              ("Symplecticity", symplectic_table(args.steps)), ("Fit", fit_table())]
     text = "\n\n".join(f"## {title}\n\n{body}" for title, body in parts) + "\n"
     out = Path(args.out)

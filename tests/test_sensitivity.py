@@ -234,6 +234,13 @@ def test_errors_name_what_is_not_defined(double_pendulum, dp_start):
     with pytest.raises(fastvi.IntegrationError, match="sensitivity is not defined") as info:
         fastvi.sensitivity(double_pendulum, q0, v0, h=0.01, n_steps=5, max_iter=1)
     assert info.value.result.status < 0
+    with pytest.raises(TypeError, match="does not take `events`: an event crossing makes the flow non-smooth"):
+        fastvi.sensitivity(double_pendulum, q0, v0, h=0.01, n_steps=2, events=[lambda t, q, v, p: q[0]])
+    with pytest.raises(TypeError, match="does not take `recover`"):
+        fastvi.adjoint(double_pendulum, q0, v0, lambda r: (np.ones((2, 4)), None), h=0.01,
+                       n_steps=2, recover=3)
+    with pytest.raises(TypeError, match="unexpected keyword argument 'hh'"):
+        fastvi.sensitivity_ensemble(double_pendulum, q0[None], v0[None], h=0.01, n_steps=2, hh=1)
     with pytest.raises(ValueError, match="dJ_dq"):
         fastvi.adjoint(double_pendulum, q0, v0, lambda r: (np.ones((2, 4)), None), h=0.01,
                        n_steps=5)

@@ -14,6 +14,8 @@ call. A key it has not seen (a new model kind, sizes, layout) goes through the d
 own typing and compilation once.
 """
 
+import functools
+import inspect
 import time
 import weakref
 
@@ -63,19 +65,27 @@ def _key(value):
         raise _NoKey from None
 
 
+def _with_tail(entry, tail, *args):
+    return entry(*args, *tail)
+
+
 class Launcher:
     """A kernel called through its compiled entry points, one per argument-type key.
 
     Parameters
     ----------
     kernel : numba dispatcher (or a plain function under ``NUMBA_DISABLE_JIT``)
-        Called with every argument positional, none left to its default.
+        Called with its arguments positional; trailing ones left out take their defaults.
     """
 
     def __init__(self, kernel):
         self.kernel = kernel
         self._entry = {}
         self._jit = hasattr(kernel, "compile") and _fingerprint is not None
+        fn = getattr(kernel, "py_func", kernel)
+        params = list(inspect.signature(fn).parameters.values())
+        self._arity = len(params)
+        self._defaults = tuple(p.default for p in params if p.default is not p.empty)
 
     def bind(self, *args):
         """The callable for arguments typed like ``args`` and the seconds it took to make it
@@ -94,8 +104,13 @@ class Launcher:
         if entry is not None:
             return entry, 0.0
         t = time.perf_counter()
+        # numba compiles for every parameter: the defaults left out are typed and passed too
+        tail = self._defaults[len(self._defaults) - (self._arity - len(args)):] \
+            if len(args) < self._arity else ()
         with quiet():
-            entry = self.kernel.compile(tuple(self.kernel.typeof_pyval(a) for a in args))
+            entry = self.kernel.compile(tuple(self.kernel.typeof_pyval(a) for a in args + tail))
+        if tail:
+            entry = functools.partial(_with_tail, entry, tail)
         if key is not None:
             self._entry[key] = entry
         return entry, time.perf_counter() - t

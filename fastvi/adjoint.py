@@ -18,7 +18,8 @@ from . import _discrete as disc
 from . import _validate as valid
 from ._launch import Launcher
 from ._numba import quiet
-from .kernels.adjoint import make_checkpoints, make_records, run_adjoint, run_checkpointed
+from .kernels.adjoint import (make_checkpoints, make_records, recorder, run_adjoint,
+                              run_checkpointed)
 from .kernels.tangent import make_tangent_work, point_terms
 from .results import Result
 
@@ -143,7 +144,8 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     with quiet():
         status = _BACKWARD(run.model_data, run.tabs, run.tx, run.opts, run.h, run.state, run.ws,
                            run.total, run.every, run.smp, info, run.sout, run.ev, run.stepk,
-                           run.stages, tw, ck, rec, Lq, Lp, lq, lp, lth)
+                           run.stages, tw, ck, rec, Lq, Lp, lq, lp, lth,
+                           recorder(run.model_data, run.state, run.ws, info, rec))
     back_time = time.perf_counter() - t_back
     if status != 0:
         run.info[:] = info

@@ -15,7 +15,7 @@ import numpy as np
 
 from . import _discrete as disc
 from . import _validate as valid
-from .kernels.tangent import make_tangent_work, point_terms, run_tangent
+from .kernels.tangent import differentiator, make_tangent_work, point_terms, run_tangent
 from ._launch import Launcher
 from ._numba import quiet
 from .results import Result
@@ -207,7 +207,9 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     with quiet():
         status = _RUN_TANGENT(run.model_data, run.tabs, run.tx, run.opts, run.h, run.state, run.ws,
                               run.total, run.every, run.smp, run.info, run.sout, run.ev,
-                              run.stepk, run.stages, tw, dQ, dP)
+                              run.stepk, run.stages, tw, dQ, dP,
+                              differentiator(run.model_data, run.state, run.ws, run.info,
+                                             run.tx, tw, dQ))
     loop_time = time.perf_counter() - t_loop
     result = disc.finish(run, int(status), loop_time, 0.0, "the sensitivity")
     K = result.t.shape[0]

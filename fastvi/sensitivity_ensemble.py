@@ -22,7 +22,7 @@ from ._numba import quiet
 from .ensemble import parallel_section
 from .integrate import IntegrationError
 from .kernels.layout import Samples
-from .kernels.tangent import index_maps, run_tangent_ensemble
+from .kernels.tangent import differentiator, index_maps, make_tangent_work, run_tangent_ensemble
 from .model import Model
 from .sensitivity import SensitivityResult
 
@@ -178,10 +178,13 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
     status = np.zeros(N, dtype=np.int64)
     md, ws, ev = first.model_data, first.ws, first.ev
     rows, cols = index_maps(n, m, meth.s, meth.J)
+    # the hook for a member's argument types, which are those of a single run's
+    each = differentiator(md, first.state, ws, first.info, first.tx,
+                          make_tangent_work(n, m, meth.s, meth.r, meth.J, d, pidx), dQ[0])
     args = (md.fns, md.flags, md.Mc, KP, first.tabs, first.tx, first.opts, first.h, ws.dims,
             ws.si, ws.sb, ws.structured, X0, first.total, first.every, *smp, infos, ev.fns,
             ev.count, ev.direction, ev.terminal, ev.t, ev.q, ev.v, ev.n, first.stepk, first.stages, rows, cols, np.asarray(pidx, dtype=np.int64), DQ, DP, TH,
-            dQ, dP, status)
+            dQ, dP, status, each)
     with parallel_section(threads, N) as used:
         with quiet():
             run, compile_time = _RUN.bind(*args)

@@ -18,13 +18,16 @@ from collections import namedtuple
 
 import numpy as np
 
-from .._numba import byref, hot
-from .drive import run
+import numba
+from numba.core import types
+
+from .._numba import byref, hot, own
+from .drive import run, step_hook
 from .layout import H_SIZE, I_FAILED, I_FIRST, I_STEPS, OK, sizes
 from .tangent import linearise, pull
 
 __all__ = ["Checkpoints", "Records", "make_checkpoints", "make_records", "run_checkpointed",
-           "run_adjoint"]
+           "run_adjoint", "recorder"]
 
 #: what a step needs of the past to be retaken bit for bit: the state (rows q, p, v), the
 #: predictor's unknowns of the last two steps, the workspace's flags and step lengths, and
@@ -34,6 +37,8 @@ Checkpoints = namedtuple("Checkpoints", ["steps", "first", "state", "Xprev", "Xp
 #: the steps of one segment: start (q_k, p_k), converged unknowns, times, end (q, v), end
 #: impulse and momentum before the projection — what :func:`.tangent.linearise` reads
 Records = namedtuple("Records", ["qk", "pk", "X", "time", "q1", "v1", "eta", "P"])
+#: the records of the segment that starts at step ``k0``
+Recording = namedtuple("Recording", ["rec", "k0"])
 
 
 def make_checkpoints(count, n, m, N):
@@ -114,13 +119,46 @@ def _sample_of(k, every, n_total, K):
     return -1
 
 
+def _record(mdp, h, k, statep, wsp, infop, slot, recp):
+    """After step ``k`` of a retaken segment (the per-step hook of :func:`.drive.run`,
+    :func:`recorder`): its unknowns, times, end and impulse into ``rec`` at ``k − k0``, and
+    its end as the next step's start."""
+    state, ws, r = own(statep), own(wsp), own(recp)
+    rec = r.rec
+    j = k - r.k0
+    n = state.shape[1]
+    for i in range(ws.X.shape[0]):
+        rec.X[j, i] = ws.X[i]
+    rec.time[j, 0] = ws.time[0]
+    rec.time[j, 1] = ws.time[1]
+    for a in range(n):
+        rec.q1[j, a] = state[3, a]
+        rec.v1[j, a] = state[5, a]
+        rec.P[j, a] = ws.P[a]
+    for c in range(sizes(ws)[1]):
+        rec.eta[j, c] = ws.etaJ[c]
+    if j + 1 < rec.qk.shape[0]:
+        for a in range(n):
+            rec.qk[j + 1, a] = state[0, a]
+            rec.pk[j + 1, a] = state[1, a]
+    return OK
+
+
+def recorder(md, state, ws, info, rec):
+    """:func:`_record` compiled as the per-step hook of :func:`.drive.run`
+    (:func:`.drive.step_hook`) for these argument types: what :func:`run_adjoint` passes."""
+    data = types.NamedTuple([numba.typeof(rec), types.int64], Recording)
+    return step_hook(_record, md, state, ws, info, data)
+
+
 @hot
 def run_adjoint(md, tabs, tx, opts, h, state, ws, n_total, every, smp, info, sout, ev, stepk,
-                stages, tw, ck, rec, Lq, Lp, lq, lp, lth):
+                stages, tw, ck, rec, Lq, Lp, lq, lp, lth, each):
     """The backward sweep: ``(lq, lp)`` becomes ``λ_0`` for the sample cotangents ``Lq``,
     ``Lp`` (K, n), and ``lth`` (np,) the gradient by the parameters ``tw.pidx`` through the
     steps. Each segment of ``ck`` (:func:`run_checkpointed`), last first, is retaken into
-    ``rec`` and swept backwards with :func:`.tangent.linearise` and :func:`.tangent.pull`.
+    ``rec`` (by ``each``, the :func:`recorder`) and swept backwards with
+    :func:`.tangent.linearise` and :func:`.tangent.pull`.
     Returns a status code; ``info[I_FAILED]`` is the failed step."""
     mdp, txp, twp = byref(md), byref(tx), byref(tw)
     n = state.shape[1]
@@ -133,32 +171,18 @@ def run_adjoint(md, tabs, tx, opts, h, state, ws, n_total, every, smp, info, sou
     for l in range(lth.shape[0]):
         lth[l] = 0.0
     nseg = (n_total + C - 1) // C
-    # one step a call of `run`, saving nothing, in int64s of run time: literals would have
-    # numba compile `run` once more, for the literals' types
-    one = nseg - nseg + 1
-    no_samples = one - 1
+    no_samples = nseg - nseg  # an int64 of run time: a literal would compile `run` again
     for seg in range(nseg - 1, -1, -1):
         _restore(ck, seg, state, ws, info)
         k0 = ck.steps[seg]
         cnt = min(C, n_total - k0)
-        for j in range(cnt):
-            for a in range(n):
-                rec.qk[j, a] = state[0, a]
-                rec.pk[j, a] = state[1, a]
-            st = run(md, tabs, opts, h, state, ws, one, n_total, no_samples, smp, info, sout, ev,
-                     stepk, stages, None)
-            if st != 0:
-                return st
-            for k in range(ws.X.shape[0]):
-                rec.X[j, k] = ws.X[k]
-            rec.time[j, 0] = ws.time[0]
-            rec.time[j, 1] = ws.time[1]
-            for a in range(n):
-                rec.q1[j, a] = state[3, a]
-                rec.v1[j, a] = state[5, a]
-                rec.P[j, a] = ws.P[a]
-            for c in range(m):
-                rec.eta[j, c] = ws.etaJ[c]
+        for a in range(n):
+            rec.qk[0, a] = state[0, a]
+            rec.pk[0, a] = state[1, a]
+        st = run(md, tabs, opts, h, state, ws, cnt, n_total, no_samples, smp, info, sout, ev,
+                 stepk, stages, None, each, Recording(rec, k0))
+        if st != 0:
+            return st
         for j in range(cnt - 1, -1, -1):
             k = k0 + j
             i = _sample_of(k + 1, every, n_total, K)

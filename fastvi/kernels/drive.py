@@ -8,8 +8,10 @@ book it with :func:`record`, so a member of an ensemble equals :func:`fastvi.int
 that member bit for bit by construction.
 """
 
+import numba
 import numpy as np
 from numba import prange
+from numba.core import types
 
 from .._numba import byref, hot, hot_inline, njit, ptr
 from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_ITERS, F_MAXRES,
@@ -21,8 +23,10 @@ from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_IT
                      sizes, with_plan, workspace_for)
 from .adapt import advance, finished, next_step
 from .events import after_step, event_values, room_for_crossings
+from .step import cached_cfunc
 
-__all__ = ["run", "run_member", "run_ensemble", "energy", "accept", "record", "INFO_SIZE"]
+__all__ = ["run", "run_member", "run_ensemble", "energy", "accept", "record", "step_hook",
+           "INFO_SIZE"]
 
 
 @hot
@@ -118,7 +122,7 @@ def _book(status, k, state, ws, info, sout):
 
 @hot
 def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, sout, ev,
-        stepk, stages, events=None):
+        stepk, stages, events=None, each=None, each_data=None):
     """Advance ``state`` (rows q, p, v, then scratch) by up to ``n_chunk`` steps, step k
     running from ``info[I_T0] + k h``; ``sout`` is the step's output scratch
     (``STEP_OUT_SIZE``); ``ev`` the :class:`.layout.Events` of the run (no events and no
@@ -144,6 +148,15 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
     ``events``: None for a run without events or dense output, whose loop is then compiled
     without the event code (numba prunes what an argument that is None guards), or True.
 
+    ``each``: None, or a C function ``each(mdp, h, k, statep, wsp, infop, slot, datap)``
+    called after every accepted step ``k`` with pointers to ``md``, ``state`` (rows 0–2 and
+    3–5 both hold the new state), ``ws`` (the step's unknowns), ``info`` and ``each_data``;
+    ``slot`` is ``info[I_SLOT]`` before the step, so a sample was saved if it grew. It returns
+    a status code; a non-zero one ends the run with ``info[I_FAILED] = k``. The linearised
+    flow differentiates each step this way (:mod:`.tangent`), in this one time loop: its
+    step-by-step calls of ``run`` had cost more than a step each, in the copies of the
+    named tuples passed by value. None compiles the loop without the call.
+
     Adaptive steps (``info[I_KR] > 0``, another run-time switch): ``h`` is then ε, step k
     has the length of :func:`.adapt.next_step` and the run ends at ``info[I_TEND]``
     (``n_total`` only caps the steps); each sample is saved at the time reached.
@@ -154,6 +167,8 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
     # instead of their flattened fields copied at every call (_numba.byref)
     mdp, tabp, optp, wsp = byref(md), byref(tabs), byref(opts), byref(ws)
     statep, soutp, stagesp = byref(state), byref(sout), byref(stages)
+    if each is not None:
+        infop, datap = byref(info), byref(each_data)
     hk = h
     for _ in range(n_chunk):
         k = int(info[I_STEPS])
@@ -184,11 +199,37 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
             advance(md, h, hk, state, ws, info)
             accept(md, info[I_T], finished(info), state, ws, save_every, smp, info, sout)
         else:
+            if each is not None:
+                slot = int(info[I_SLOT])
             accept(md, ws.time[1], k + 1 == n_total, state, ws, save_every, smp, info, sout)
+            if each is not None:
+                status = each(mdp, h, k, statep, wsp, infop, slot, datap)
+                if status != 0:
+                    info[I_FAILED] = k
+                    return status
         if est != 0:
             _last_sample(md, ws.time[1], state, ws, n_total, save_every, smp, info)
             return est
     return 0
+
+
+#: the compiled per-step hooks of :func:`run`, by function and signature
+_HOOKS = {}
+
+
+def step_hook(fn, md, state, ws, info, data_type):
+    """``fn(mdp, h, k, statep, wsp, infop, slot, datap)`` compiled as a C function (cached
+    on disk) for the types of ``md``, ``state``, ``ws``, ``info`` and of the data, ``data_type``
+    (numba type): the ``each`` hook of :func:`run`. A C function rather than a compiled
+    Python function passed as an argument: numba cannot cache a loop compiled for a
+    function argument, while this one is typed by its signature alone."""
+    P, typeof = types.CPointer, numba.typeof
+    sig = types.int64(P(typeof(md)), types.float64, types.int64, P(typeof(state)),
+                      P(typeof(ws)), P(typeof(info)), types.int64, P(data_type))
+    hook = _HOOKS.get((fn, sig))
+    if hook is None:
+        hook = _HOOKS[(fn, sig)] = cached_cfunc(fn, sig)
+    return hook
 
 
 # ----------------------------------------------------------------------------- ensembles

@@ -55,7 +55,7 @@ from .linalg import (augmented_mass, invert, invert_unpivoted, lu_factor, lu_fac
                      lu_solve, lu_solve_small)
 
 __all__ = ["make_workspace", "assemble", "residual", "linear_force", "step", "step_kernel",
-           "take_step", "step_once",
+           "take_step", "step_once", "cached_cfunc",
            "end_momentum", "velocity_residual", "hidden_residual", "constraint_rate"]
 
 _FD_REL = 6.0554544523933395e-06  # cbrt(machine epsilon): central differences' best step
@@ -1546,7 +1546,7 @@ def _no_work(md_, tabs_, h, qk_, q1_, ws_, n, m, s, J, out_):
     return 0.0
 
 
-def _cfunc(fn, sig, compile=True):
+def cached_cfunc(fn, sig, compile=True):
     """``fn`` as a C function of signature ``sig``, cached on disk; with ``compile`` false,
     only if numba's disk cache holds it (else None, and nothing is compiled).
 
@@ -1626,7 +1626,7 @@ def _sized(key, md, tabs, opts, ws, stages, compile):
         fns = dict(newton_mech=newton_mech, newton_full=newton_full, end_momentum=end_momentum)
         entries = {}
         for name in names:
-            cf = _cfunc(fns[name].py_func, sized[name], compile)
+            cf = cached_cfunc(fns[name].py_func, sized[name], compile)
             if cf is None:
                 _NOT_CACHED.add(skey)
                 return None
@@ -1687,18 +1687,18 @@ def _compile(key, md, tabs, opts, ws, wanted):
     P, arg, i64, f64 = types.CPointer, numba.typeof, types.int64, types.float64
     sigs = _stage_signatures(md, tabs, opts, ws)
     if key not in _STEPS:
-        placeholder = Stages(_cfunc(newton_mech.py_func, sigs["newton_mech"]),
-                             _cfunc(_no_full_newton, sigs["newton_full"]),
-                             _cfunc(end_momentum.py_func, sigs["end_momentum"]),
-                             _cfunc(_no_work, sigs["step_work"]), 0)
+        placeholder = Stages(cached_cfunc(newton_mech.py_func, sigs["newton_mech"]),
+                             cached_cfunc(_no_full_newton, sigs["newton_full"]),
+                             cached_cfunc(end_momentum.py_func, sigs["end_momentum"]),
+                             cached_cfunc(_no_work, sigs["step_work"]), 0)
         # the step's own body becomes the C function (not a call of the njit `step`, whose
         # code numba would compile once more into the wrapper)
         sig = i64(P(arg(md)), P(arg(tabs)), P(arg(opts)), f64, P(arg(np.zeros((1, 1)))),
                   P(arg(ws)), types.boolean, P(arg(np.zeros(1))), P(arg(placeholder)))
-        _STEPS[key] = (_cfunc(step.py_func, sig), placeholder)
+        _STEPS[key] = (cached_cfunc(step.py_func, sig), placeholder)
     for name in wanted:
         fn = newton_full if name == "newton_full" else _step_work
-        _OPTIONAL[(key, name)] = _cfunc(fn.py_func, sigs[name])
+        _OPTIONAL[(key, name)] = cached_cfunc(fn.py_func, sigs[name])
 
 
 @hot

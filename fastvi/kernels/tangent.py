@@ -40,21 +40,24 @@ from collections import namedtuple
 
 import numpy as np
 
+import numba
 from numba import prange
+from numba.core import types
 
 from .._numba import byref, hot, hot_inline, njit, own, ptr
-from .drive import run
-from .layout import (CHESS, CJAC, F_EX_CHESS, F_EX_MJAC, F_MASSFN, FD_T, FD_T_POINTS, I_FAILED,
-                     I_SLOT, I_STEPS, MASS, MJAC, NONFINITE, OK, SINGULAR, SINGULAR_CONSTRAINTS,
-                     SINGULAR_MASS, STEP_OUT_SIZE, EVENT_SLOTS, Events, ModelData, Samples, make_workspace, sizes,
-                     with_plan, workspace_for)
+from .drive import run, step_hook
+from .layout import (CHESS, CJAC, EVENT_SLOTS, F_EX_CHESS, F_EX_MJAC, F_MASSFN, FD_T,
+                     FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SINGULAR,
+                     SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, Events, ModelData,
+                     Samples, make_workspace, sizes, with_plan, workspace_for)
 from .linalg import lu_factor, lu_solve
 from .step import (fd_constraint_hessian, fd_momentum_jacobian, assemble, end_momentum,
                    linear_force)
 
 __all__ = ["PointWork", "TangentWork", "extended_tables", "make_point_work",
            "make_tangent_work", "point", "point_terms", "linearise", "push", "pull",
-           "lu_solve_transposed", "run_tangent", "run_tangent_ensemble", "point_work",
+           "lu_solve_transposed", "run_tangent", "run_tangent_ensemble", "differentiator",
+           "point_work",
            "tangent_work", "index_maps"]
 
 #: the second derivatives at a point of the constrained phase space, and their scratch
@@ -552,42 +555,58 @@ def pull(tw_, lq, lp, lth):
 
 
 # ----------------------------------------------------------------------------- time loop
-@hot
-def run_tangent(md, tabs, tx, opts, h, state, ws, n_total, save_every, smp, info, sout, ev,
-                stepk, stages, tw, dQ, dPs):
-    """:func:`.drive.run` one step at a time, each followed by :func:`linearise` and
-    :func:`push`: the samples of the trajectory into ``smp`` as ``run`` saves them (the
-    same steps, bit for bit), and the directions at each sample into ``dQ``, ``dPs``
-    (K, d, n). Returns a status code; ``info[I_FAILED]`` is the failed step."""
-    mdp, txp, twp = byref(md), byref(tx), byref(tw)
+#: what :func:`_differentiate` needs besides the step: pointers to the extended tables and
+#: the :class:`TangentWork` (set by :func:`run_tangent`), and the directions' samples
+#: (K, d, n)
+TangentRun = namedtuple("TangentRun", ["txp", "twp", "dQ", "dP"])
+
+
+def _differentiate(mdp, h, k, statep, wsp, infop, slot, runp):
+    """After step ``k`` of :func:`.drive.run` (its per-step hook, :func:`differentiator`):
+    :func:`linearise` and :func:`push` from the start ``tw.qk``,
+    ``tw.pk`` to the new state, the directions saved where ``run`` saved the sample, and the
+    new state kept as the next step's start. Returns a status code."""
+    state, ws, info, tr = own(statep), own(wsp), own(infop), own(runp)
+    tw = own(tr.twp)
     n = state.shape[1]
     m = sizes(tw.ws)[1]
-    d = tw.dq.shape[0]
-    # one step a call of `run`, in an int64 of run time: a literal 1 would have numba compile
-    # `run` once more, for the literal's type
-    one = n_total - n_total + 1
-    while int(info[I_STEPS]) < n_total:
-        k = int(info[I_STEPS])
-        for a in range(n):
-            tw.qk[a] = state[0, a]
-            tw.pk[a] = state[1, a]
-        slot = int(info[I_SLOT])
-        st = run(md, tabs, opts, h, state, ws, one, n_total, save_every, smp, info, sout, ev,
-                 stepk, stages, None)
-        if st != 0:
-            return st
-        st = linearise(mdp, txp, h, ws.time, ws.X, state[3], state[5], ws.etaJ[:m], ws.P, twp)
-        if st == OK:
-            st = push(twp)
-        if st != OK:
-            info[I_FAILED] = k
-            return st
-        if int(info[I_SLOT]) > slot:
-            for c in range(d):
-                for a in range(n):
-                    dQ[slot, c, a] = tw.dq[c, a]
-                    dPs[slot, c, a] = tw.dp[c, a]
-    return 0
+    st = linearise(mdp, tr.txp, h, ws.time, ws.X, state[3], state[5], ws.etaJ[:m], ws.P,
+                   tr.twp)
+    if st == OK:
+        st = push(tr.twp)
+    if st != OK:
+        return st
+    if int(info[I_SLOT]) > slot:
+        for c in range(tw.dq.shape[0]):
+            for a in range(n):
+                tr.dQ[slot, c, a] = tw.dq[c, a]
+                tr.dP[slot, c, a] = tw.dp[c, a]
+    for a in range(n):
+        tw.qk[a] = state[0, a]
+        tw.pk[a] = state[1, a]
+    return OK
+
+
+def differentiator(md, state, ws, info, tx, tw, dQ):
+    """:func:`_differentiate` compiled as the per-step hook of :func:`.drive.run`
+    (:func:`.drive.step_hook`) for these argument types: what :func:`run_tangent` passes."""
+    P, typeof = types.CPointer, numba.typeof
+    data = types.NamedTuple([P(typeof(tx)), P(typeof(tw)), typeof(dQ), typeof(dQ)], TangentRun)
+    return step_hook(_differentiate, md, state, ws, info, data)
+
+
+@hot
+def run_tangent(md, tabs, tx, opts, h, state, ws, n_total, save_every, smp, info, sout, ev,
+                stepk, stages, tw, dQ, dPs, each):
+    """:func:`.drive.run` with each step differentiated after it by ``each``
+    (:func:`differentiator`): the samples of the trajectory into ``smp`` (the same steps as
+    ``integrate``'s, bit for bit), and the directions at each sample into ``dQ``, ``dPs``
+    (K, d, n). Returns a status code; ``info[I_FAILED]`` is the failed step."""
+    for a in range(state.shape[1]):
+        tw.qk[a] = state[0, a]
+        tw.pk[a] = state[1, a]
+    return run(md, tabs, opts, h, state, ws, n_total, n_total, save_every, smp, info, sout, ev,
+               stepk, stages, None, each, TangentRun(byref(tx), byref(tw), dQ, dPs))
 
 
 @njit
@@ -605,7 +624,7 @@ def _started(tw, dq, dp, th):
 def run_tangent_ensemble(fns, flags, Mc, P, tabs, tx, opts, h, dims, si, sb, structured, X0,
                          n_total, save_every, T, Qs, Vs, Ps, En, Gr, GVr, It, Wk, WF, infos,
                          efns, ecount, edir, eterm, et, eq, ev_, en, stepk, stages, rows, cols, pidx, DQ,
-                         DP, TH, dQ, dPs, status):
+                         DP, TH, dQ, dPs, status, each):
     """:func:`run_tangent` for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in
     parallel: the members' trajectories equal :func:`fastvi.integrate`'s, and their
     directions :func:`run_tangent`'s, bit for bit.
@@ -618,7 +637,8 @@ def run_tangent_ensemble(fns, flags, Mc, P, tabs, tx, opts, h, dims, si, sb, str
     :func:`.drive.run_ensemble`; ``efns`` … ``en``: the fields of a
     :class:`.layout.Events` with no events (numba cannot hand the named tuple of callbacks
     to the parallel loop's body; nothing writes these without events); ``rows``, ``cols``
-    from :func:`index_maps`. Each member allocates its workspaces inside the loop body, so
+    from :func:`index_maps`; ``each`` the :func:`differentiator` for a member's types. Each
+    member allocates its workspaces inside the loop body, so
     threads share nothing written."""
     n, m, s, r, J = dims[0], dims[1], dims[2], dims[3], dims[4]
     d = DQ.shape[1]
@@ -639,4 +659,4 @@ def run_tangent_ensemble(fns, flags, Mc, P, tabs, tx, opts, h, dims, si, sb, str
                     np.zeros(n), np.zeros(s + 1), np.zeros(s + 1), np.zeros(1))
         status[i] = run_tangent(md, tabs, tx, opts, h, state, ws, n_total, save_every, smp,
                                 infos[i], np.zeros(STEP_OUT_SIZE), ev, stepk, stages, tw,
-                                dQ[i], dPs[i])
+                                dQ[i], dPs[i], each)

@@ -223,53 +223,37 @@ def periodic_orbit(model, q0, v0, *, period: float, n_steps: int | None = None,
                             params=prm)
     phi = _phase(model, phase, q, v, prm, h, method)
 
-    x, S, Z, A, merit = None, None, None, None, None
+    Z, A, S = _linearise(model, q, v, prm, run)
+    polished = False
     for it in range(iters + 1):
-        if S is None:  # the guess (later iterates come with their run from the line search)
-            Z, A, S = _linearise(model, q, v, prm, run)
-            merit = _merit(model, S, phi, prm)
         close, scale = _closing(S), max(1.0, np.abs(q).max(), np.abs(v).max())
-        if close <= tol * scale and abs(phi.value(S)) <= tol * scale:
-            if _flow(model, q, v, prm, h, method)[1] is None:
-                raise PeriodicOrbitError(
-                    "periodic_orbit converged to an equilibrium (the state does not move), "
-                    f"not to an orbit of period {period:g}: start from a guess with more "
-                    "motion, or with a period nearer the linear one", residual=close,
-                    iterations=it, q=q, v=v)
-            return _orbit(model, S, Z, A, q, v, period, h, N, close, it, method)
-        if it == iters:
+        converged = close <= tol * scale and abs(phi.value(S)) <= tol * scale
+        if converged and (polished or it == iters):
             break
-        x = _state(model, S.result.q[0], S.result.v[0], prm)
-        xN = _state(model, S.result.q[-1], S.result.v[-1], prm)
-        Ainv = np.linalg.inv(A)
-        Y = np.vstack([S.dq[-1], S.dp[-1]])
-        lhs = np.vstack([Z.T @ Y @ Ainv - np.eye(Z.shape[1]), phi.row(S) @ Ainv])
-        rhs = -np.concatenate([Z.T @ (xN - x), [phi.value(S)]])
-        xi = np.linalg.lstsq(lhs, rhs, rcond=None)[0]
-        step = 1.0
-        for _ in range(_MAX_HALVINGS + 1):
-            trial = _chart(model, x, Z, step * xi, prm)
-            if trial is not None:
-                try:
-                    Zt, At, St = _linearise(model, *trial, prm, run)
-                except IntegrationError:
-                    St = None
-                if St is not None and _merit(model, St, phi, prm) < merit:
-                    break
-            step *= 0.5
-        else:
+        if not converged and it == iters:
+            raise PeriodicOrbitError(
+                f"periodic_orbit did not converge in `max_iter` = {iters} iterations: closing "
+                f"residual {close:.2e} > `tol` · scale = {tol * scale:.1e}. Raise `max_iter` or "
+                "`tol`, or start from a better guess", residual=close, iterations=iters, q=q, v=v)
+        # once converged, one more full step takes the residual from `tol` to round-off
+        new = _newton_step(model, S, Z, A, phi, prm, run, 0 if converged else _MAX_HALVINGS)
+        if new is None and converged:
+            break
+        if new is None:
             raise PeriodicOrbitError(
                 f"periodic_orbit: no Newton step reduces the closing residual "
                 f"({close:.2e} after {it} iteration(s)): there is no periodic orbit of period "
                 f"{period:g} near the guess, or the guess is too far from one. Start from a "
                 "better guess (a linear normal mode, a period nearer the linear one), or use "
                 "another `phase` condition", residual=close, iterations=it, q=q, v=v)
-        (q, v), Z, A, S = trial, Zt, At, St
-        merit = _merit(model, S, phi, prm)
-    raise PeriodicOrbitError(
-        f"periodic_orbit did not converge in `max_iter` = {iters} iterations: closing residual "
-        f"{close:.2e} > `tol` · scale = {tol * scale:.1e}. Raise `max_iter` or `tol`, or start "
-        "from a better guess", residual=close, iterations=iters, q=q, v=v)
+        (q, v), Z, A, S = new
+        polished = converged
+    if _flow(model, q, v, prm, h, method)[1] is None:
+        raise PeriodicOrbitError(
+            "periodic_orbit converged to an equilibrium (the state does not move), not to an "
+            f"orbit of period {period:g}: start from a guess with more motion, or with a period "
+            "nearer the linear one", residual=close, iterations=it, q=q, v=v)
+    return _orbit(model, S, Z, A, q, v, period, h, N, _closing(S), it, method)
 
 
 # ----------------------------------------------------------------------------- arguments
@@ -375,6 +359,32 @@ def _chart(model, x, Z, xi, prm):
         return consistent_state(model, q, v, params=prm)
     except (ValueError, np.linalg.LinAlgError):
         return None
+
+
+def _newton_step(model, S, Z, A, phi, prm, run, halvings):
+    """The next iterate ``(state, Z, A, run)`` from the run ``S`` at the current one: the
+    least-squares Newton step, halved up to ``halvings`` times until ``|F|² + φ²`` drops;
+    ``None`` if it never does."""
+    r = S.result
+    x = _state(model, r.q[0], r.v[0], prm)
+    xN = _state(model, r.q[-1], r.v[-1], prm)
+    Ainv = np.linalg.inv(A)
+    Y = np.vstack([S.dq[-1], S.dp[-1]])
+    lhs = np.vstack([Z.T @ Y @ Ainv - np.eye(Z.shape[1]), phi.row(S) @ Ainv])
+    rhs = -np.concatenate([Z.T @ (xN - x), [phi.value(S)]])
+    xi = np.linalg.lstsq(lhs, rhs, rcond=None)[0]
+    merit = _merit(model, S, phi, prm)
+    for j in range(halvings + 1):
+        trial = _chart(model, x, Z, 0.5 ** j * xi, prm)
+        if trial is None:
+            continue
+        try:
+            Zt, At, St = _linearise(model, *trial, prm, run)
+        except IntegrationError:  # a step too long: the run from the trial state failed
+            continue
+        if _merit(model, St, phi, prm) < merit:
+            return trial, Zt, At, St
+    return None
 
 
 def _linearise(model, q, v, prm, run):

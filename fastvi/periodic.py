@@ -71,10 +71,16 @@ class PeriodicOrbit:
 
 
 class PeriodicOrbitError(RuntimeError):
-    """Newton's method of :func:`periodic_orbit` did not converge.
+    """Newton's method of :func:`periodic_orbit` did not converge, or found an equilibrium.
 
-    Attributes ``residual`` (the closing residual reached), ``iterations``, and ``q``, ``v``:
-    the last iterate, a starting point for another try.
+    Attributes
+    ----------
+    residual : float
+        The closing residual ``max |(q, v)(period) − (q0, v0)|`` reached.
+    iterations : int
+        Newton iterations taken.
+    q, v : ndarray (n,)
+        The last iterate: a starting point for another try.
     """
 
     def __init__(self, message, *, residual, iterations, q, v):

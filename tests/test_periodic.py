@@ -74,7 +74,8 @@ def test_the_default_section_finds_another_point_of_the_same_orbit(double_pendul
 
 
 def test_the_pendulum_in_polar_coordinates_has_the_elliptic_integral_period():
-    # q = (r, φ): M(q) = diag(m, m r²) moves with q (the ∂(M v)/∂q path); T(α) = 4 K(sin²(α/2)) / √(g/l)
+    # q = (r, φ): M(q) = diag(m, m r²) moves with q (the ∂(M v)/∂q path);
+    # the exact period T(α) = 4 K(sin²(α/2)) / √(g/l)
     pp = models.polar_pendulum()
     alpha = 1.0
     T = 4 * ellipk(np.sin(alpha / 2) ** 2) / np.sqrt(9.81)

@@ -167,7 +167,8 @@ def periodic_orbit(model, q0, v0, *, period: float, n_steps: int | None = None,
         The coordinate must move along the orbit there.
     tol : float, default 1e-12
         Converged when ``max |(q, v)(period) − (q0, v0)| ≤ tol · max(1, |q0|, |v0|)`` and
-        the phase condition holds as closely.
+        the phase condition holds as closely; one more Newton step is then taken if it
+        lowers the residual further (to round-off, for the price of one more run).
     max_iter : int, default 20
         Newton iterations before :class:`PeriodicOrbitError`.
     params : array_like (k,), optional
@@ -185,8 +186,8 @@ def periodic_orbit(model, q0, v0, *, period: float, n_steps: int | None = None,
     ------
     PeriodicOrbitError
         Newton did not converge in ``max_iter`` iterations, or a step could not reduce the
-        residual (no periodic orbit of that period near the guess); carries the last
-        iterate.
+        residual (no periodic orbit of that period near the guess), or it converged to an
+        equilibrium (which closes for any period); carries the last iterate.
     ValueError, TypeError
         Bad arguments, naming them.
     NotImplementedError

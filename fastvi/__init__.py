@@ -2,7 +2,7 @@
 
 Public API: :class:`Model`, :func:`integrate`, :class:`Result`, :class:`IntegrationError`,
 :func:`integrate_ensemble`, :class:`EnsembleResult`, :class:`ModelCheckError`,
-:class:`Status`, :func:`method`, :func:`sensitivity`, :class:`Drawing` (how
+:class:`Status`, :func:`method`, :func:`sensitivity`, :func:`periodic_orbit`, :class:`Drawing` (how
 :meth:`Result.animate` draws a model), and the ready-made mechanisms in :mod:`fastvi.scenes`.
 Optional: :mod:`fastvi.baselines` (RK4, SciPy), :mod:`fastvi.distributed` (Dask),
 :mod:`fastvi.symbolic` (SymPy).
@@ -17,6 +17,7 @@ from .integrate import IntegrationError, Result, integrate
 from .ensemble import EnsembleResult, integrate_ensemble
 from .adjoint import AdjointResult, adjoint
 from .fit import TrajectoryFit
+from .periodic import PeriodicOrbit, PeriodicOrbitError, periodic_orbit
 from .sensitivity import SensitivityResult, largest_lyapunov, sensitivity, tangent_space
 from .sensitivity_ensemble import EnsembleSensitivityResult, sensitivity_ensemble
 from .model import CALLBACK_SIGNATURE, Model
@@ -41,6 +42,9 @@ __all__ = [
     "EnsembleSensitivityResult",
     "tangent_space",
     "largest_lyapunov",
+    "periodic_orbit",
+    "PeriodicOrbit",
+    "PeriodicOrbitError",
     "adjoint",
     "AdjointResult",
     "TrajectoryFit",

@@ -2,8 +2,8 @@
 
 Public API: :class:`Model`, :func:`integrate`, :class:`Result`, :class:`IntegrationError`,
 :func:`integrate_ensemble`, :class:`EnsembleResult`, :class:`ModelCheckError`,
-:class:`Status`, :func:`method`, :func:`sensitivity`, :class:`Drawing` (how
-:meth:`Result.animate` draws a model), and the ready-made mechanisms in :mod:`fastvi.scenes`.
+:class:`Status`, :func:`method`, :func:`sensitivity`, :func:`lyapunov_spectrum`,
+:class:`Drawing` (how :meth:`Result.animate` draws a model), and the ready-made mechanisms in :mod:`fastvi.scenes`.
 Optional: :mod:`fastvi.baselines` (RK4, SciPy), :mod:`fastvi.distributed` (Dask),
 :mod:`fastvi.symbolic` (SymPy).
 """
@@ -17,7 +17,8 @@ from .integrate import IntegrationError, Result, integrate
 from .ensemble import EnsembleResult, integrate_ensemble
 from .adjoint import AdjointResult, adjoint
 from .fit import TrajectoryFit
-from .sensitivity import SensitivityResult, largest_lyapunov, sensitivity, tangent_space
+from .sensitivity import SensitivityResult, sensitivity, tangent_space
+from .lyapunov import LyapunovSpectrum, largest_lyapunov, lyapunov_spectrum
 from .model import CALLBACK_SIGNATURE, Model
 from .status import Status
 from .tables import Method, method
@@ -38,6 +39,8 @@ __all__ = [
     "SensitivityResult",
     "tangent_space",
     "largest_lyapunov",
+    "lyapunov_spectrum",
+    "LyapunovSpectrum",
     "adjoint",
     "AdjointResult",
     "TrajectoryFit",

@@ -2,8 +2,9 @@
 
 Public API: :class:`Model`, :func:`integrate`, :class:`Result`, :class:`IntegrationError`,
 :func:`integrate_ensemble`, :class:`EnsembleResult`, :class:`ModelCheckError`,
-:class:`Status`, :func:`method`, :func:`sensitivity`, :func:`periodic_orbit`, :class:`Drawing` (how
-:meth:`Result.animate` draws a model), and the ready-made mechanisms in :mod:`fastvi.scenes`.
+:class:`Status`, :func:`method`, :func:`sensitivity`, :func:`periodic_orbit`,
+:func:`lyapunov_spectrum`, :class:`Drawing` (how :meth:`Result.animate` draws a model),
+and the ready-made mechanisms in :mod:`fastvi.scenes`.
 Optional: :mod:`fastvi.baselines` (RK4, SciPy), :mod:`fastvi.distributed` (Dask),
 :mod:`fastvi.symbolic` (SymPy).
 """
@@ -18,8 +19,9 @@ from .ensemble import EnsembleResult, integrate_ensemble
 from .adjoint import AdjointResult, adjoint
 from .fit import TrajectoryFit
 from .periodic import PeriodicOrbit, PeriodicOrbitError, periodic_orbit
-from .sensitivity import SensitivityResult, largest_lyapunov, sensitivity, tangent_space
+from .sensitivity import SensitivityResult, sensitivity, tangent_space
 from .sensitivity_ensemble import EnsembleSensitivityResult, sensitivity_ensemble
+from .lyapunov import LyapunovSpectrum, largest_lyapunov, lyapunov_spectrum
 from .model import CALLBACK_SIGNATURE, Model
 from .status import Status
 from .tables import Method, method
@@ -45,6 +47,8 @@ __all__ = [
     "periodic_orbit",
     "PeriodicOrbit",
     "PeriodicOrbitError",
+    "lyapunov_spectrum",
+    "LyapunovSpectrum",
     "adjoint",
     "AdjointResult",
     "TrajectoryFit",

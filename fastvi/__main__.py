@@ -20,6 +20,9 @@ COMMANDS = {
     "paper-b": ("studies.paper_b", "reproduce paper B's tables and figures (source checkout)"),
     "orders": ("studies.orders", "measure convergence orders of every combination (source checkout)"),
     "wpd": ("studies.wpd", "work-precision diagrams against RK4, SciPy and CyRK (source checkout)"),
+    "lyapunov": ("studies.lyapunov",
+                 "Lyapunov exponents of the double pendulum: ensemble, T and h, SciPy reference "
+                 "(source checkout)"),
     "sensitivities": ("studies.sensitivities",
                       "cost, order and symplecticity of the flow's derivatives; a parameter fit "
                       "(source checkout)"),

@@ -20,7 +20,7 @@ from ._launch import Launcher
 from ._numba import quiet
 from .results import Result
 
-__all__ = ["sensitivity", "SensitivityResult", "tangent_space", "largest_lyapunov"]
+__all__ = ["sensitivity", "SensitivityResult", "tangent_space"]
 
 #: the time loop, called through its compiled entry points (no per-call typing: _launch.py)
 _RUN_TANGENT = Launcher(run_tangent)
@@ -219,69 +219,6 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     return SensitivityResult(result, result.t, dq, dv, dp, labels, run.prm, dth, pidx, model)
 
 
-def largest_lyapunov(model, q0, v0, *, h: float, t_end: float, segment: float = 1.0,
-                     method="P2L-Q3G", seed: int = 0) -> np.ndarray:
-    r"""Running estimate of the largest Lyapunov exponent from the discrete tangent flow.
-
-    Benettin's method: one tangent vector, random at the start and projected onto the
-    tangent space of the constraints, is carried by :func:`sensitivity` over each segment of
-    ``segment`` seconds (one solve a step with the step's exact Newton matrix), its growth
-    factor ``g_j`` taken in the Euclidean norm of ``(δq, δv)``, and the vector renormalised:
-
-    .. math:: λ(t_J) = \frac{1}{t_J} \sum_{j=1}^{J} \log g_j, \qquad t_J = J\,\text{segment}.
-
-    A regular (quasi-periodic) motion gives ``λ → 0`` like ``log t / t``; a chaotic one a
-    positive limit. The norm and the start vector change only the transient.
-
-    Parameters
-    ----------
-    model, q0, v0, h, method :
-        As :func:`sensitivity` (a conservative or forced model without time-dependent
-        constraints).
-    t_end : float
-        The span, a whole number of segments.
-    segment : float, default 1.0
-        Renormalisation interval, a whole number of steps ``h``: short enough that the
-        vector does not overflow (``λ · segment ≪ 700``).
-    seed : int, default 0
-        Seed of the random start vector.
-
-    Returns
-    -------
-    ndarray (J,)
-        ``λ(t_j)`` at ``t_j = j · segment``, ``j = 1 … J``.
-
-    Examples
-    --------
-    >>> import numpy as np, fastvi
-    >>> dp = fastvi.scenes.double_pendulum()
-    >>> q0, v0 = dp.initial_state(0.1, 0.1)          # small oscillations: regular
-    >>> lam = fastvi.largest_lyapunov(dp, q0, v0, h=0.01, t_end=50.0)
-    >>> bool(abs(lam[-1]) < 0.02)
-    True
-    """
-    h = valid.step_size(h)
-    segment = float(segment)
-    steps = int(round(segment / h))
-    count = int(round(float(t_end) / segment))
-    if steps < 1 or abs(steps * h - segment) > 1e-9 * segment:
-        raise ValueError(f"`segment` = {segment:g} must be a whole number of steps `h` = {h:g}")
-    if count < 1 or abs(count * segment - float(t_end)) > 1e-9 * float(t_end):
-        raise ValueError(f"`t_end` = {t_end:g} must be a whole number of segments ({segment:g} s)")
-    n, k = model.n, model.params.shape[0]
-    w = np.random.default_rng(seed).normal(size=2 * n)
-    q, v = np.array(q0, dtype=float), np.array(v0, dtype=float)
-    logs = np.empty(count)
-    for j in range(count):
-        raw = np.concatenate([w, np.zeros(k)])[:, None]  # one direction (δq0, δv0, δθ = 0)
-        s = sensitivity(model, q, v, h=h, n_steps=steps, wrt=raw, save_every=steps, method=method)
-        start = np.concatenate([s.dq[0][:, 0], s.dv[0][:, 0]])  # projected onto the tangent space
-        end = np.concatenate([s.dq[-1][:, 0], s.dv[-1][:, 0]])
-        size = np.linalg.norm(end)
-        logs[j] = np.log(size / np.linalg.norm(start))
-        w = end / size
-        q, v = s.result.q[-1].copy(), s.result.v[-1].copy()
-    return np.cumsum(logs) / (segment * np.arange(1, count + 1))
 
 
 def tangent_space(model, q, v, *, params=None) -> np.ndarray:

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import re
+import sys
+from pathlib import Path
 
-__all__ = ["study_parser", "default_out", "plain"]
+__all__ = ["study_parser", "default_out", "plain", "write_sections"]
 
 
 def plain(text: str) -> str:
@@ -27,3 +29,14 @@ def study_parser(prog: str, doc: str) -> argparse.ArgumentParser:
     first = plain(doc.strip().split("\n\n")[0])
     return argparse.ArgumentParser(prog=prog, description=" ".join(first.split()),
                                    formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+
+
+def write_sections(path, parts) -> str:
+    """Write ``parts``, pairs ``(title, body)``, as Markdown sections ``## title`` to ``path``
+    (its directory created) and to standard output; returns the text."""
+    text = "\n\n".join(f"## {title}\n\n{body}" for title, body in parts) + "\n"
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text, encoding="utf-8")
+    sys.stdout.write(text)
+    return text

@@ -103,7 +103,7 @@ def run_checkpointed(md, tabs, opts, h, state, ws, n_total, save_every, smp, inf
         _keep(ck, i, state, ws, info)
         i += 1
         st = run(md, tabs, opts, h, state, ws, C, n_total, save_every, smp, info, sout, ev,
-                 stepk, stages, None)
+                 stepk, stages, None, None, None)
         if st != 0:
             return st
     return 0

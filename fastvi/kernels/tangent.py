@@ -110,9 +110,13 @@ def extended_tables(tabs, s, J):
     constant function at index s + 1 (value 1 at every quadrature and constraint point,
     slope 0; see the module docstring)."""
     one = np.ones((1, tabs.L.shape[1]))
-    return tabs._replace(L=np.vstack([tabs.L, one]),
-                         Ld=np.vstack([tabs.Ld, np.zeros_like(one)]),
-                         Lc=np.vstack([tabs.Lc, np.ones((1, tabs.Lc.shape[1]))]))
+    L, Ld = np.vstack([tabs.L, one]), np.vstack([tabs.Ld, np.zeros_like(one)])
+    Lc = np.vstack([tabs.Lc, np.ones((1, tabs.Lc.shape[1]))])
+    for new, old in ((L, tabs.L), (Ld, tabs.Ld), (Lc, tabs.Lc)):
+        # read-only like the method's own tables: the same type, so the step's compiled
+        # assembly serves the extended step too (a writable copy compiled it again)
+        new.setflags(write=old.flags.writeable)
+    return tabs._replace(L=L, Ld=Ld, Lc=Lc)
 
 
 def index_maps(n, m, s, J):
@@ -157,15 +161,16 @@ def tangent_work(xws, rows, cols, pidx, d):
 
 def make_point_work(n, m):
     """A :class:`PointWork` for ``n`` coordinates and ``m`` constraints."""
-    return point_work(int(n), int(m))
+    return point_work.py_func(int(n), int(m))
 
 
 def make_tangent_work(n, m, s, r, J, d, pidx):
     """A :class:`TangentWork` for ``d`` directions, differentiating by the parameters
-    ``pidx``."""
+    ``pidx``: :func:`tangent_work` run by Python (compiling it costs 2.4 s; the ensemble's
+    members run it compiled)."""
     rows, cols = index_maps(n, m, s, J)
-    return tangent_work(make_workspace(n, m, s + 1, r, J), rows, cols,
-                        np.asarray(pidx, dtype=np.int64), int(d))
+    return tangent_work.py_func(make_workspace(n, m, s + 1, r, J), rows, cols,
+                                np.asarray(pidx, dtype=np.int64), int(d))
 
 
 # ----------------------------------------------------------------------------- second derivatives
@@ -292,7 +297,8 @@ def _theta_differences(md_, tx_, h, q1, P, tw_):
             linear_force(md, wx, tw.qk)
             if m > 0:
                 _start_jacobian(md, tw.qk, wx, n, m)
-            st = assemble(md_, tx_, h, tw.qk, tw.pk, wxp, False)
+            # a bool of run time: a literal would compile `assemble` once more for its type
+            st = assemble(md_, tx_, h, tw.qk, tw.pk, wxp, N < 0)
             if st != OK:
                 break
             for k in range(Rd.shape[0]):
@@ -346,7 +352,9 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
     wx.time[1] = time[1]
     if m > 0:
         _start_jacobian(md, tw.qk, wx, n, m)
-    st = assemble(md_, tx_, h, tw.qk, tw.pk, byref(wx), True)
+    # the matrix too, asked by a bool of run time: a literal would compile `assemble` once
+    # more for its type
+    st = assemble(md_, tx_, h, tw.qk, tw.pk, byref(wx), N > 0)
     if st != OK:
         return st
     if m > 0:
@@ -614,9 +622,12 @@ def _started(tw, dq, dp, th):
     """``tw`` holding the initial tangent state ``dq``, ``dp`` and parameter parts ``th``.
     A call, not statements of the parallel loop's body: written there, numba's parallel
     lowering lost these writes (the members' directions came out zero)."""
-    tw.dq[:, :] = dq
-    tw.dp[:, :] = dp
-    tw.th[:, :] = th
+    for c in range(dq.shape[0]):  # loops: slice assignment compiled in 5 s
+        for a in range(dq.shape[1]):
+            tw.dq[c, a] = dq[c, a]
+            tw.dp[c, a] = dp[c, a]
+        for l in range(th.shape[1]):
+            tw.th[c, l] = th[c, l]
     return tw
 
 

@@ -20,6 +20,7 @@ import time
 import weakref
 
 from numba.core.ccallback import CFunc
+from numba.core.types import WrapperAddressProtocol
 
 from ._numba import quiet
 
@@ -41,10 +42,10 @@ _SIGNATURES: dict = {}
 _TOKENS = weakref.WeakKeyDictionary()
 
 
-def _signature_token(f) -> int:
+def _signature_token(f, sig) -> int:
     tok = _TOKENS.get(f)
     if tok is None:
-        tok = _SIGNATURES.setdefault(f._sig, len(_SIGNATURES))
+        tok = _SIGNATURES.setdefault(sig, len(_SIGNATURES))
         _TOKENS[f] = tok
     return tok
 
@@ -52,7 +53,11 @@ def _signature_token(f) -> int:
 def _key(value):
     """A hashable key equal for two values exactly when numba types them alike."""
     if isinstance(value, CFunc):
-        return _signature_token(value)
+        return _signature_token(value, value._sig)
+    if isinstance(value, WrapperAddressProtocol):
+        # typed as the first-class function of its signature, like a CFunc of that signature
+        # (the stages compiled for a model's sizes, fastvi.kernels.step._SizedStage)
+        return _signature_token(value, value.signature())
     if isinstance(value, tuple):
         try:
             return type(value), _fingerprint(value)

@@ -147,8 +147,8 @@ def _record(mdp, h, k, statep, wsp, infop, slot, recp):
 def recorder(md, state, ws, info, rec):
     """:func:`_record` compiled as the per-step hook of :func:`.drive.run`
     (:func:`.drive.step_hook`) for these argument types: what :func:`run_adjoint` passes."""
-    data = types.NamedTuple([numba.typeof(rec), types.int64], Recording)
-    return step_hook(_record, md, state, ws, info, data)
+    return step_hook(_record, md, state, ws, info, (rec,),
+                     lambda: types.NamedTuple([numba.typeof(rec), types.int64], Recording))
 
 
 @hot

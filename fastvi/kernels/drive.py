@@ -23,6 +23,7 @@ from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_IT
                      sizes, with_plan, workspace_for)
 from .adapt import advance, finished, next_step
 from .events import after_step, event_values, room_for_crossings
+from .._launch import _key
 from .step import cached_cfunc
 
 __all__ = ["run", "run_member", "run_ensemble", "energy", "accept", "record", "step_hook",
@@ -213,22 +214,25 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
     return 0
 
 
-#: the compiled per-step hooks of :func:`run`, by function and signature
+#: the compiled per-step hooks of :func:`run`, by function and argument types
 _HOOKS = {}
 
 
-def step_hook(fn, md, state, ws, info, data_type):
+def step_hook(fn, md, state, ws, info, data, data_type):
     """``fn(mdp, h, k, statep, wsp, infop, slot, datap)`` compiled as a C function (cached
-    on disk) for the types of ``md``, ``state``, ``ws``, ``info`` and of the data, ``data_type``
-    (numba type): the ``each`` hook of :func:`run`. A C function rather than a compiled
-    Python function passed as an argument: numba cannot cache a loop compiled for a
-    function argument, while this one is typed by its signature alone."""
-    P, typeof = types.CPointer, numba.typeof
-    sig = types.int64(P(typeof(md)), types.float64, types.int64, P(typeof(state)),
-                      P(typeof(ws)), P(typeof(info)), types.int64, P(data_type))
-    hook = _HOOKS.get((fn, sig))
+    on disk) for the types of ``md``, ``state``, ``ws``, ``info`` and of the hook's data,
+    made of the values ``data`` and typed ``data_type()`` (a numba type): the ``each`` hook
+    of :func:`run`. A C function rather than a compiled Python function passed as an
+    argument: numba cannot cache a loop compiled for a function argument, while this one is
+    typed by its signature alone. Found again by the arguments' type fingerprints
+    (:func:`fastvi._launch._key`): building numba's types costs milliseconds a call."""
+    key = (fn,) + tuple(_key(x) for x in (md, state, ws, info, *data))
+    hook = _HOOKS.get(key)
     if hook is None:
-        hook = _HOOKS[(fn, sig)] = cached_cfunc(fn, sig)
+        P, typeof = types.CPointer, numba.typeof
+        sig = types.int64(P(typeof(md)), types.float64, types.int64, P(typeof(state)),
+                          P(typeof(ws)), P(typeof(info)), types.int64, P(data_type()))
+        hook = _HOOKS[key] = cached_cfunc(fn, sig)
     return hook
 
 

@@ -599,8 +599,8 @@ def differentiator(md, state, ws, info, tx, tw, dQ):
     """:func:`_differentiate` compiled as the per-step hook of :func:`.drive.run`
     (:func:`.drive.step_hook`) for these argument types: what :func:`run_tangent` passes."""
     P, typeof = types.CPointer, numba.typeof
-    data = types.NamedTuple([P(typeof(tx)), P(typeof(tw)), typeof(dQ), typeof(dQ)], TangentRun)
-    return step_hook(_differentiate, md, state, ws, info, data)
+    return step_hook(_differentiate, md, state, ws, info, (tx, tw, dQ), lambda: types.NamedTuple(
+        [P(typeof(tx)), P(typeof(tw)), typeof(dQ), typeof(dQ)], TangentRun))
 
 
 @hot

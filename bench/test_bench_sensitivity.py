@@ -1,0 +1,87 @@
+"""What derivatives of the discrete flow cost per step, beside a plain run.
+
+The damped double pendulum (c = 0.3, ``P2L-Q3G``, h = 0.01, 5 000 steps, only the end
+saved, everything compiled first, the stages sized for the model included) from
+θ1 = 1, θ2 = 0.5, side by side in one session:
+
+* ``integrate`` with default settings, and with the generic stages (``specialize=False``);
+* ``sensitivity`` along 1 direction (q0[0]) and the 2n = 8 directions of (q0, v0);
+* ``adjoint``: the gradient by q0 and v0 of a cost of the final state.
+
+The medians per step and their ratios to the plain run are printed at the end. Run with
+``make bench`` or ``.venv/bin/python -m pytest bench/test_bench_sensitivity.py
+--benchmark-only``.
+"""
+
+from __future__ import annotations
+
+import statistics
+
+import numpy as np
+import pytest
+
+import fastvi
+
+N_STEPS = 5_000
+ROUNDS = 7
+_times: dict = {}
+
+
+def _model():
+    dp = fastvi.scenes.double_pendulum(damping=0.3)
+    return dp, *dp.initial_state(1.0, 0.5)
+
+
+def _cases():
+    dp, q0, v0 = _model()
+    n, k = dp.n, dp.params.size
+    one = np.zeros((2 * n + k, 1))
+    one[0, 0] = 1.0
+    run = dict(h=0.01, n_steps=N_STEPS, save_every=N_STEPS)
+
+    def final_cost(res):
+        return np.ones((len(res.t), n)), None
+
+    return {
+        "integrate (default)": lambda: fastvi.integrate(dp, q0, v0, **run),
+        "integrate (specialize=False)": lambda: fastvi.integrate(dp, q0, v0, specialize=False,
+                                                                 **run),
+        "sensitivity, 1 direction": lambda: fastvi.sensitivity(dp, q0, v0, wrt=one, **run),
+        "sensitivity, 2n directions": lambda: fastvi.sensitivity(dp, q0, v0, **run),
+        "adjoint, by q0 and v0": lambda: fastvi.adjoint(dp, q0, v0, final_cost, param_index=[],
+                                                        **run),
+    }
+
+
+CASES = list(_cases())
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _compiled():
+    dp, q0, v0 = _model()
+    fastvi.integrate(dp, q0, v0, h=0.01, n_steps=2, specialize=True)  # the sized stages too
+    for call in _cases().values():
+        call()
+
+
+@pytest.mark.parametrize("label", CASES)
+def test_derivative_cost(benchmark, label):
+    call = _cases()[label]
+    benchmark.pedantic(call, rounds=ROUNDS, iterations=1)
+    _times[label] = 1e6 * statistics.median(benchmark.stats.stats.data) / N_STEPS
+    benchmark.extra_info["us_per_step"] = _times[label]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _report(print_uncaptured):
+    yield
+    plain = _times.get("integrate (default)")
+    if not plain:
+        return
+
+    def show(write):
+        write.sep("derivatives of the discrete flow (damped double pendulum, P2L-Q3G, medians)")
+        for label, t in _times.items():
+            write(f"{label:<30} {t:6.2f} µs a step   {t / plain:5.2f} × integrate")
+
+    print_uncaptured(show)

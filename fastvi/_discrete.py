@@ -100,11 +100,6 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
     started = time.perf_counter()
     if not isinstance(model, Model):
         raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
-    if model.time_dependent:
-        raise NotImplementedError(
-            f"{what} does not support time-dependent potentials or constraints yet (model "
-            f"{model.name!r} has `time_dependent=True`): the derivative of the hidden constraint "
-            "G v + g_t = 0 would need ∂g_t/∂q; forces F(t, q, v) are supported")
     n = model.n
     q0 = valid.vector(q0, "q0", n)
     v0 = valid.vector(v0, "v0", n)
@@ -251,7 +246,8 @@ def initial_tangent(run: Run, D: np.ndarray, initial_state=None):
             dv += np.outer(dth[:, j], d[n:])
     M, G, _, Hv, Cq = point_terms(run.model_data, q0, v0, np.zeros(m))
     theta = {l: (theta_derivative(lambda p: model.constraint_value(q0, p, run.t0), prm, l),
-                 theta_derivative(lambda p: model.constraint_jacobian_value(q0, p, run.t0) @ v0,
+                 theta_derivative(lambda p: model.constraint_jacobian_value(q0, p, run.t0) @ v0
+                                  + model.constraint_time_derivative_value(q0, p, run.t0),
                                   prm, l),
                  theta_derivative(lambda p: model.mass_matrix(q0, p) @ v0, prm, l))
              for l in pidx} if (m or model.mass_matrix_constant is None) else {}

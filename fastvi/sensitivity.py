@@ -71,20 +71,20 @@ class SensitivityResult:
         g, gv = np.zeros(K), np.zeros(K)
         if model.m == 0:
             return g, gv
-        md = model.kernel_data(prm)
         res = self.result
         for i in range(K):
-            q, v, p = res.q[i], res.v[i], res.p[i]
-            M, G, _, Hv, Cq = point_terms(md, q, v, np.zeros(model.m))
+            q, v, p, t = res.q[i], res.v[i], res.p[i], float(self.t[i])
+            M, G, _, Hv, Cq = point_terms(model.kernel_data(prm, t), q, v, np.zeros(model.m))
             dq, dp = self.dq[i], self.dp[i]
             lin_g = G @ dq
             lin_h = Hv @ dq + G @ np.linalg.solve(M, dp - Cq @ dq)
             for j, l in enumerate(self._pidx):
-                lin_g += np.outer(disc.theta_derivative(lambda th: model.constraint_value(q, th), prm, l),
-                                  self._dth[:, j])
+                lin_g += np.outer(disc.theta_derivative(lambda th: model.constraint_value(q, th, t),
+                                                        prm, l), self._dth[:, j])
                 hid = disc.theta_derivative(
-                    lambda th: model.constraint_jacobian_value(q, th)
-                    @ np.linalg.solve(model.mass_matrix(q, th), p), prm, l)
+                    lambda th: model.constraint_jacobian_value(q, th, t)
+                    @ np.linalg.solve(model.mass_matrix(q, th), p)
+                    + model.constraint_time_derivative_value(q, th, t), prm, l)
                 lin_h += np.outer(hid, self._dth[:, j])
             g[i] = np.abs(lin_g).max()
             gv[i] = np.abs(lin_h).max()
@@ -162,8 +162,6 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     fastvi.IntegrationError
         A step failed, or its Newton matrix is singular at the solution (the discrete flow
         has no derivative there): the partial result is attached; no NaN is returned.
-    NotImplementedError
-        A model with time-dependent potential or constraints.
 
     Notes
     -----
@@ -221,7 +219,7 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
 
 
 
-def tangent_space(model, q, v, *, params=None) -> np.ndarray:
+def tangent_space(model, q, v, *, params=None, t: float = 0.0) -> np.ndarray:
     r"""An orthonormal basis of the tangent space of the constrained phase space.
 
     At ``(q, p = M(q) v)``, in ``(δq, δp)``: the null space of
@@ -231,18 +229,19 @@ def tangent_space(model, q, v, *, params=None) -> np.ndarray:
         \begin{pmatrix} G & 0 \\ H_v - G M^{-1} C_q & G M^{-1} \end{pmatrix},
 
     the linearised constraint ``G δq = 0`` and hidden constraint ``δ(G M⁻¹ p) = 0``
-    (``H_v = ∂(G v)/∂q``, ``C_q = ∂(M v)/∂q``). Directions in this space are the meaningful
+    (``H_v = ∂(G v + g_t)/∂q``, ``C_q = ∂(M v)/∂q``). Directions in this space are the meaningful
     perturbations of a state; :func:`sensitivity` maps them to tangent vectors at every
     later step.
 
     Parameters
     ----------
     model : Model
-        Without time-dependent constraints.
     q, v : array_like (n,)
-        A consistent state.
+        A consistent state (at time ``t``).
     params : array_like (k,), optional
         Parameters (default: the model's).
+    t : float, default 0.0
+        The time, for time-dependent constraints.
 
     Returns
     -------
@@ -253,12 +252,10 @@ def tangent_space(model, q, v, *, params=None) -> np.ndarray:
     q = valid.vector(q, "q", n)
     v = valid.vector(v, "v", n)
     prm = valid.params(params, model)
-    if model.time_dependent:
-        raise NotImplementedError("tangent_space does not support time-dependent constraints yet")
     model._compile()
     if m == 0:
         return np.eye(2 * n)
-    M, G, _, Hv, Cq = point_terms(model.kernel_data(prm), q, v, np.zeros(m))
+    M, G, _, Hv, Cq = point_terms(model.kernel_data(prm, float(t)), q, v, np.zeros(m))
     Y = np.linalg.solve(M, G.T).T
     C = np.block([[G, np.zeros((m, n))], [Hv - Y @ Cq, Y]])
     _, sv, Vt = np.linalg.svd(C)

@@ -54,12 +54,15 @@ def _cases():
     qr = np.array([0.3, 1.1, 0.3])
     vr = np.array([0.5, 0.2, 0.5])
     pp = models.polar_pendulum(exact=False)
+    kp = fastvi.scenes.kapitza_pendulum(a=0.2, omega=3.0)
     a = 1.2 * np.array([np.sin(0.7), -np.cos(0.7)])
     return [
         ("damped_double_pendulum", dp, q, v, "P2L-Q3G"),
         ("rotary_rod_slider", rr, qr, vr, "P2L-Q3G"),  # M(q, θ) with exact derivatives
         ("polar_pendulum_fd", pp, np.array([1.0, 0.6]), np.array([0.0, 1.3]), "P3L-Q4G"),
         ("circle_fd", _circle(), a, np.array([1.0, a[0] / a[1] * -1.0]) * 0.8, "P2L-Q3G-NE-CE"),
+        # a rheonomic constraint (the pivot driven slowly): ∂g_t/∂q in the hidden constraint
+        ("driven_pivot", kp, *kp.initial_state(2.5, 1.0), "P2L-Q3G"),
     ]
 
 
@@ -222,9 +225,6 @@ def test_trajectory_fit_recovers_damping_and_rod_length():
 
 def test_errors_name_what_is_not_defined(double_pendulum, dp_start):
     q0, v0 = dp_start
-    with pytest.raises(NotImplementedError, match="time-dependent"):
-        kp = fastvi.scenes.kapitza_pendulum()
-        fastvi.sensitivity(kp, *kp.initial_state(0.1), h=0.01, n_steps=2)
     with pytest.raises(ValueError, match="whole number of steps"):
         fastvi.sensitivity(double_pendulum, q0, v0, h=0.3, t_end=1.0)
     with pytest.raises(ValueError, match="`wrt` entries"):

@@ -56,7 +56,8 @@ from .linalg import (augmented_mass, invert, invert_unpivoted, lu_factor, lu_fac
 
 __all__ = ["make_workspace", "assemble", "residual", "linear_force", "step", "step_kernel",
            "take_step", "step_once", "cached_cfunc",
-           "end_momentum", "velocity_residual", "hidden_residual", "constraint_rate"]
+           "end_momentum", "velocity_residual", "hidden_residual", "constraint_rate",
+           "jacobian_rate"]
 
 _FD_REL = 6.0554544523933395e-06  # cbrt(machine epsilon): central differences' best step
 #: the mechanics matrix is abandoned for the full Newton when successive increments shrink
@@ -261,6 +262,17 @@ def constraint_rate(md, q, t, out, scratch):
         md.fns[GT](ptr(q), ptr(q), ptr(md.prm), ptr(out))
     else:
         _d_dt(md, md.fns[CON], q, t, out, scratch, m)
+
+
+@hot
+def jacobian_rate(md, q, t, out, scratch):
+    """``out (m, n) = ∂G/∂t (t, q)``, which is ``∂g_t/∂q``: a five-point difference in time
+    of the constraint Jacobian (leaves the time entry at ``t``). ``scratch`` (m, n)."""
+    m, n = md.flags[F_M], q.shape[0]
+    for c in range(m):
+        for a in range(n):
+            scratch[c, a] = 0.0  # a callback with a declared pattern writes only its non-zeros
+    _d_dt(md, md.fns[CJAC], q, t, out.reshape(m * n), scratch.reshape(m * n), m * n)
 
 
 # ----------------------------------------------------------------------------- assembly

@@ -46,13 +46,13 @@ from numba.core import types
 
 from .._numba import byref, hot, hot_inline, njit, own, ptr
 from .drive import run, step_hook
-from .layout import (CHESS, CJAC, EVENT_SLOTS, F_EX_CHESS, F_EX_MJAC, F_MASSFN, FD_T,
-                     FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SINGULAR,
+from .layout import (CHESS, CJAC, EVENT_SLOTS, F_EX_CHESS, F_EX_MJAC, F_MASSFN, F_TIME,
+                     F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SINGULAR,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, Events, ModelData,
                      Samples, make_workspace, sizes, with_plan, workspace_for)
 from .linalg import lu_factor, lu_solve
 from .step import (fd_constraint_hessian, fd_momentum_jacobian, assemble, end_momentum,
-                   linear_force)
+                   jacobian_rate, linear_force)
 
 __all__ = ["PointWork", "TangentWork", "extended_tables", "make_point_work",
            "make_tangent_work", "point", "point_terms", "linearise", "push", "pull",
@@ -186,7 +186,9 @@ def _hessian(md, q, eta, out, pw, n, m):
 @hot
 def point(md_, q, v, eta, pw_):
     """Fill the :class:`PointWork` at ``(q, v)`` with impulse ``eta`` (m,): ``M(q)``,
-    ``G(q)``, ``Σ η_c ∇²g_c``, ``∂(G v)/∂q`` (row c: ``(∇²g_c v)ᵀ``) and ``∂(M v)/∂q``."""
+    ``G(q)``, ``Σ η_c ∇²g_c``, ``∂(G v + g_t)/∂q`` (row c: ``(∇²g_c v)ᵀ``, plus
+    ``∂G_c/∂t`` for time-dependent constraints, at the time the parameter vector carries)
+    and ``∂(M v)/∂q``."""
     md, pw = own(md_), own(pw_)
     fns, flags, prm = md.fns, md.flags, md.prm
     n = q.shape[0]
@@ -220,6 +222,12 @@ def point(md_, q, v, eta, pw_):
             for a in range(n):
                 acc += Hs[b, a] * v[a]
             Hv[c, b] = acc
+    if flags[F_TIME] != 0:
+        # the rheonomic hidden constraint G v + g_t = 0: ∂g_t/∂q = ∂G/∂t
+        jacobian_rate(md, q, prm[flags[F_TSLOT]], pw.Gp, pw.Gm)
+        for c in range(m):
+            for b in range(n):
+                Hv[c, b] += pw.Gp[c, b]
 
 
 def point_terms(md, q, v, eta):
@@ -264,7 +272,10 @@ def _step_sizes(wx):
 
 @hot_inline
 def _start_jacobian(md, qk, wx, n, m):
-    """``wx.G[0] = G(q_k)``: the extended step's first constraint point, as the step has it."""
+    """``wx.G[0] = G(q_k)``: the extended step's first constraint point, as the step has it
+    (at ``t_k`` for time-dependent constraints; leaves the time entry there)."""
+    if md.flags[F_TIME] != 0:
+        md.prm[md.flags[F_TSLOT]] = wx.time[0]
     G0 = wx.G[0]
     for c in range(m):
         for a in range(n):
@@ -308,6 +319,8 @@ def _theta_differences(md_, tx_, h, q1, P, tw_):
                     for a in range(n):
                         G1s[c, a] = 0.0
                 md.fns[CJAC](ptr(q1), ptr(q1), ptr(prm), ptr(G1s))
+            if md.flags[F_TIME] != 0:
+                prm[md.flags[F_TSLOT]] = wx.time[1]
             st = end_momentum(md_, byref(q1), byref(P), byref(tw.p1s), byref(tw.v1s),
                               byref(G1s), wxp, byref(tw.out))
             if st != OK:
@@ -361,6 +374,8 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
         # ∂/∂q_k of −ℓ_ν(d_0) G(q_k)ᵀ η_0: the step holds G(q_k) fixed, its matrix has no
         # such term
         Hs = pw.Hs
+        if md.flags[F_TIME] != 0:
+            md.prm[md.flags[F_TSLOT]] = time[0]  # the constraint at q_k, at t_k
         _hessian(md, tw.qk, X[sn:sn + m], Hs, pw, n, m)
         for nu in range(s + 1):
             cl = tx.Lc[nu, 0]
@@ -385,6 +400,8 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
         st = _theta_differences(md_, tx_, h, q1, P, tw_)
         if st != OK:
             return st
+    if md.flags[F_TIME] != 0:
+        md.prm[md.flags[F_TSLOT]] = time[1]  # the projection's time, as the step had it
     point(md_, q1, v1, eta, byref(pw))
     if m > 0:
         M, G, Yg, S = pw.M, pw.G, tw.Yg, tw.S

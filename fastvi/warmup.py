@@ -15,7 +15,10 @@ The four first calls are the four kinds of kernel a session uses:
 
 ``--only specialize`` times a fifth kind: ``integrate(..., specialize=True)`` of the
 double pendulum, the step's stages compiled for its sizes (which the default,
-``specialize=None``, then uses for every run of a model of those sizes).
+``specialize=None``, then uses for every run of a model of those sizes). ``--only
+sensitivity,adjoint,sensitivity-ensemble`` compiles (or times) the derivatives of the flow:
+``sensitivity`` of the damped double pendulum by its initial state and parameters (the
+full Newton included), ``adjoint`` of it, and ``sensitivity_ensemble`` of 4 members.
 """
 
 from __future__ import annotations
@@ -91,6 +94,36 @@ def _specialized():
     return fastvi.integrate(model, q0, v0, h=0.01, n_steps=100, specialize=True)
 
 
+def _damped():
+    import fastvi
+
+    model = fastvi.scenes.double_pendulum(damping=0.3)
+    return (model, *model.initial_state(1.0, 0.5))
+
+
+def _sensitivity():
+    import fastvi
+
+    model, q0, v0 = _damped()
+    return fastvi.sensitivity(model, q0, v0, h=0.01, n_steps=10, wrt=("q0", "v0", "params"))
+
+
+def _adjoint():
+    import fastvi
+
+    model, q0, v0 = _damped()
+    return fastvi.adjoint(model, q0, v0, lambda r: (np.ones((len(r.t), model.n)), None),
+                          h=0.01, n_steps=10)
+
+
+def _sensitivity_ensemble():
+    import fastvi
+
+    model, q0, v0 = _damped()
+    return fastvi.sensitivity_ensemble(model, np.tile(q0, (4, 1)), np.tile(v0, (4, 1)), h=0.01,
+                                       n_steps=10)
+
+
 #: name -> the first call of one kind of kernel (the first four: a new session's)
 FIRST_CALLS = {
     "integrate": _conservative,
@@ -98,6 +131,9 @@ FIRST_CALLS = {
     "events+dense": _events,
     "ensemble": _ensemble,
     "specialize": _specialized,
+    "sensitivity": _sensitivity,
+    "adjoint": _adjoint,
+    "sensitivity-ensemble": _sensitivity_ensemble,
 }
 _SESSION = ("integrate", "forces", "events+dense", "ensemble")
 
@@ -150,12 +186,12 @@ def main(argv=None) -> int:
     if unknown:
         parser.error(f"--only: unknown first call(s) {unknown}; choose from {list(FIRST_CALLS)}")
     records = _child(names) if args.report else first_calls(names)
-    print(f"{'first call':14s} {'wall s':>8s} {'CPU s':>8s} {'peak MB':>8s}")
+    print(f"{'first call':20s} {'wall s':>8s} {'CPU s':>8s} {'peak MB':>8s}")
     for r in records:
-        print(f"{r['name']:14s} {r['wall']:8.2f} {r['cpu']:8.2f} {r['peak_mb']:8.0f}")
+        print(f"{r['name']:20s} {r['wall']:8.2f} {r['cpu']:8.2f} {r['peak_mb']:8.0f}")
     if args.report:
         calls = [r for r in records if r["name"] != "process"]
-        print(f"{'all calls':14s} {sum(r['wall'] for r in calls):8.2f} "
+        print(f"{'all calls':20s} {sum(r['wall'] for r in calls):8.2f} "
               f"{sum(r['cpu'] for r in calls):8.2f} {max(r['peak_mb'] for r in calls):8.0f}")
     if args.json:
         with open(args.json, "w") as f:

@@ -22,7 +22,8 @@ from ._numba import quiet
 from .ensemble import parallel_section
 from .integrate import IntegrationError
 from .kernels.layout import Samples
-from .kernels.tangent import differentiator, index_maps, make_tangent_work, run_tangent_ensemble
+from .kernels.tangent import (Members, differentiator, index_maps, make_tangent_work,
+                             member_runner, run_tangent_ensemble)
 from .model import Model
 from .sensitivity import SensitivityResult
 
@@ -181,15 +182,20 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
     # the hook for a member's argument types, which are those of a single run's
     each = differentiator(md, first.state, ws, first.info, first.tx,
                           make_tangent_work(n, m, meth.s, meth.r, meth.J, d, pidx), dQ[0])
-    args = (md.fns, md.flags, md.Mc, KP, first.tabs, first.tx, first.opts, first.h, ws.dims,
-            ws.si, ws.sb, ws.structured, X0, first.total, first.every, *smp, infos, ev.fns,
-            ev.count, ev.direction, ev.terminal, ev.t, ev.q, ev.v, ev.n, first.stepk, first.stages, rows, cols, np.asarray(pidx, dtype=np.int64), DQ, DP, TH,
-            dQ, dP, status, each)
+    group = Members(md.fns, md.flags, md.Mc, KP, first.tabs, first.tx, first.opts, first.h,
+                    ws.dims, ws.si, ws.sb, ws.structured, X0, first.total, first.every, smp,
+                    infos, ev, first.stepk, first.stages, rows, cols,
+                    np.asarray(pidx, dtype=np.int64), DQ, DP, TH, dQ, dP, each)
+    with quiet():
+        t_compile = time.perf_counter()
+        member = member_runner(group)
+        compile_time = time.perf_counter() - t_compile
     with parallel_section(threads, N) as used:
         with quiet():
-            run, compile_time = _RUN.bind(*args)
+            run, seconds = _RUN.bind(member, group, status)
+            compile_time += seconds
             t_loop = time.perf_counter()
-            run(*args)
+            run(member, group, status)
             loop_time = time.perf_counter() - t_loop
     members, failed = [], []
     for i, r in enumerate(runs):

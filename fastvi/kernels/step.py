@@ -1558,14 +1558,16 @@ def _no_work(md_, tabs_, h, qk_, q1_, ws_, n, m, s, J, out_):
     return 0.0
 
 
-def cached_cfunc(fn, sig, compile=True):
+def cached_cfunc(fn, sig, compile=True, allocates=False):
     """``fn`` as a C function of signature ``sig``, cached on disk; with ``compile`` false,
-    only if numba's disk cache holds it (else None, and nothing is compiled).
+    only if numba's disk cache holds it (else None, and nothing is compiled). Without
+    numba's reference counting unless ``allocates`` (a function that allocates its own
+    arrays needs it to free them).
 
     What ``numba.cfunc(sig, cache=True)`` does, with its cache lookup apart (numba's
     ``CFunc.compile`` takes the same steps)."""
     cf = CFunc(fn, sigutils.normalize_signature(sig), locals={},
-               options=dict(error_model="numpy", boundscheck=False, _nrt=False))
+               options=dict(error_model="numpy", boundscheck=False, _nrt=allocates))
     cf.enable_caching()
     if compile:
         cf.compile()

@@ -45,18 +45,20 @@ from numba import prange
 from numba.core import types
 
 from .._numba import byref, hot, hot_inline, njit, own, ptr
+from .._launch import _key
 from .drive import run, step_hook
-from .layout import (CHESS, CJAC, EVENT_SLOTS, F_EX_CHESS, F_EX_MJAC, F_MASSFN, F_TIME,
+from .layout import (CHESS, CJAC, F_EX_CHESS, F_EX_MJAC, F_MASSFN, F_TIME,
                      F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SINGULAR,
-                     SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, Events, ModelData,
+                     SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, ModelData,
                      Samples, make_workspace, sizes, with_plan, workspace_for)
 from .linalg import lu_factor, lu_solve
-from .step import (fd_constraint_hessian, fd_momentum_jacobian, assemble, end_momentum,
-                   jacobian_rate, linear_force)
+from .step import (fd_constraint_hessian, fd_momentum_jacobian, assemble, cached_cfunc,
+                   end_momentum, jacobian_rate, linear_force)
 
 __all__ = ["PointWork", "TangentWork", "extended_tables", "make_point_work",
            "make_tangent_work", "point", "point_terms", "linearise", "push", "pull",
            "lu_solve_transposed", "run_tangent", "run_tangent_ensemble", "differentiator",
+           "Members", "member_runner",
            "point_work",
            "tangent_work", "index_maps"]
 
@@ -636,9 +638,7 @@ def run_tangent(md, tabs, tx, opts, h, state, ws, n_total, save_every, smp, info
 
 @njit
 def _started(tw, dq, dp, th):
-    """``tw`` holding the initial tangent state ``dq``, ``dp`` and parameter parts ``th``.
-    A call, not statements of the parallel loop's body: written there, numba's parallel
-    lowering lost these writes (the members' directions came out zero)."""
+    """``tw`` holding the initial tangent state ``dq``, ``dp`` and parameter parts ``th``."""
     for c in range(dq.shape[0]):  # loops: slice assignment compiled in 5 s
         for a in range(dq.shape[1]):
             tw.dq[c, a] = dq[c, a]
@@ -648,43 +648,74 @@ def _started(tw, dq, dp, th):
     return tw
 
 
-@njit(parallel=True)
-def run_tangent_ensemble(fns, flags, Mc, P, tabs, tx, opts, h, dims, si, sb, structured, X0,
-                         n_total, save_every, T, Qs, Vs, Ps, En, Gr, GVr, It, Wk, WF, infos,
-                         efns, ecount, edir, eterm, et, eq, ev_, en, stepk, stages, rows, cols, pidx, DQ,
-                         DP, TH, dQ, dPs, status, each):
-    """:func:`run_tangent` for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in
-    parallel: the members' trajectories equal :func:`fastvi.integrate`'s, and their
-    directions :func:`run_tangent`'s, bit for bit.
+#: what every member of :func:`run_tangent_ensemble` reads: the model's callbacks, flags
+#: and constant mass, the members' parameter rows ``P`` (N, k + 1), the tables, extended
+#: tables and options, the step ``h``, the sizes ``dims`` = (n, m, s, r, J) and the
+#: structured plan (``si``, ``sb``, ``structured``), the starts ``X0`` (N, 3, n), the steps
+#: and save stride, the members' samples ``smp`` (:class:`.layout.Samples` of arrays indexed
+#: by member first, slot 0 filled), counters ``infos`` (N, INFO_SIZE), the events of a run
+#: without events ``ev`` (read only), the step and its stages, ``rows``, ``cols`` of
+#: :func:`index_maps`, the parameters differentiated ``pidx``, the initial tangent states
+#: ``DQ``, ``DP`` (N, d, n) and parameter parts ``TH`` (N, d, np), the directions' samples
+#: ``dQ``, ``dP`` (N, K, d, n), and the :func:`differentiator` ``each``
+Members = namedtuple("Members", [
+    "fns", "flags", "Mc", "P", "tabs", "tx", "opts", "h", "dims", "si", "sb", "structured",
+    "X0", "n_total", "save_every", "smp", "infos", "ev", "stepk", "stages", "rows", "cols",
+    "pidx", "DQ", "DP", "TH", "dQ", "dP", "each"])
 
-    Member ``i`` has its own parameters ``P[i]`` (the kernels' row), samples ``T[i]``,
-    ``Qs[i]`` … ``WF[i]`` (slot 0 filled by the caller), counters ``infos[i]``, initial
-    tangent state ``DQ[i]``, ``DP[i]`` (d, n) and parameter parts ``TH[i]`` (d, np), and
-    writes its directions into ``dQ[i]``, ``dPs[i]`` (K, d, n) and its status into
-    ``status[i]``. ``dims`` = (n, m, s, r, J), ``si``, ``sb``, ``structured`` as in
-    :func:`.drive.run_ensemble`; ``efns`` … ``en``: the fields of a
-    :class:`.layout.Events` with no events (numba cannot hand the named tuple of callbacks
-    to the parallel loop's body; nothing writes these without events); ``rows``, ``cols``
-    from :func:`index_maps`; ``each`` the :func:`differentiator` for a member's types. Each
-    member allocates its workspaces inside the loop body, so
-    threads share nothing written."""
-    n, m, s, r, J = dims[0], dims[1], dims[2], dims[3], dims[4]
-    d = DQ.shape[1]
-    for i in prange(X0.shape[0]):
-        ws = with_plan(workspace_for(dims), si, sb.copy(), structured)
-        tw = _started(tangent_work(workspace_for((n, m, s + 1, r, J)), rows, cols, pidx, d),
-                      DQ[i], DP[i], TH[i])
-        state = np.zeros((6, n))
-        for a in range(n):
-            state[0, a] = X0[i, 0, a]
-            state[1, a] = X0[i, 1, a]
-            state[2, a] = X0[i, 2, a]
-        md = ModelData(fns, flags, Mc, P[i])
-        linear_force(md, tw.ws, X0[i, 0])
-        smp = Samples(T[i], Qs[i], Vs[i], Ps[i], En[i], Gr[i], GVr[i], It[i], Wk[i], WF[i])
-        ev = Events(efns, ecount, edir, eterm, np.zeros(EVENT_SLOTS), et, eq, ev_, en,
-                    np.zeros((0, s + 1, n)), np.zeros((s + 1, n)), np.zeros(n), np.zeros(n),
-                    np.zeros(n), np.zeros(s + 1), np.zeros(s + 1), np.zeros(1))
-        status[i] = run_tangent(md, tabs, tx, opts, h, state, ws, n_total, save_every, smp,
-                                infos[i], np.zeros(STEP_OUT_SIZE), ev, stepk, stages, tw,
-                                dQ[i], dPs[i], each)
+
+def _member(i, membersp):
+    """Member ``i`` of :func:`run_tangent_ensemble` (the body of :func:`member_runner`):
+    its own workspaces, state and tangent state, then :func:`run_tangent`. Returns its
+    status."""
+    g = own(membersp)
+    n, m, s, r, J = g.dims[0], g.dims[1], g.dims[2], g.dims[3], g.dims[4]
+    ws = with_plan(workspace_for(g.dims), g.si, g.sb.copy(), g.structured)
+    tw = _started(tangent_work(workspace_for((n, m, s + 1, r, J)), g.rows, g.cols, g.pidx,
+                               g.DQ.shape[1]), g.DQ[i], g.DP[i], g.TH[i])
+    state = np.zeros((6, n))
+    for a in range(n):
+        state[0, a] = g.X0[i, 0, a]
+        state[1, a] = g.X0[i, 1, a]
+        state[2, a] = g.X0[i, 2, a]
+    md = ModelData(g.fns, g.flags, g.Mc, g.P[i])
+    linear_force(md, tw.ws, g.X0[i, 0])
+    a = g.smp
+    smp = Samples(a.t[i], a.q[i], a.v[i], a.p[i], a.energy[i], a.g[i], a.gv[i], a.iters[i],
+                  a.work[i], a.work_forces[i])
+    return run_tangent(md, g.tabs, g.tx, g.opts, g.h, state, ws, g.n_total, g.save_every, smp,
+                       g.infos[i], np.zeros(STEP_OUT_SIZE), g.ev, g.stepk, g.stages, tw,
+                       g.dQ[i], g.dP[i], g.each)
+
+
+#: the compiled members, by the fingerprint of their data's types
+_MEMBERS = {}
+
+
+def member_runner(members):
+    """:func:`_member` compiled as a C function (cached on disk) for the types of
+    ``members`` (:class:`Members`): what :func:`run_tangent_ensemble` calls for each member.
+
+    A C function called by address, so that the parallel kernel holds one call and a
+    pointer: with the member's set-up and its time loop in the body of the ``prange`` loop,
+    numba's parallel lowering took 15 s of the kernel's 21 s of compiling, and writes into
+    the fields of a named tuple built there were lost."""
+    key = _key(members)
+    runner = _MEMBERS.get(key)
+    if runner is None:
+        sig = types.int64(types.int64, types.CPointer(numba.typeof(members)))
+        runner = _MEMBERS[key] = cached_cfunc(_member, sig, allocates=True)
+    return runner
+
+
+@njit(parallel=True)
+def run_tangent_ensemble(member, members, status):
+    """:func:`run_tangent` for every member ``i`` of ``members`` (:class:`Members`), in
+    parallel, through ``member`` (:func:`member_runner`): the members' trajectories equal
+    :func:`fastvi.integrate`'s, and their directions :func:`run_tangent`'s, bit for bit.
+    Member ``i`` writes its samples, counters and directions into its rows of
+    ``members``' arrays and its status into ``status[i]``; it allocates its own
+    workspaces, so threads share nothing written."""
+    membersp = byref(members)
+    for i in prange(status.shape[0]):
+        status[i] = member(np.int64(i), membersp)  # prange counts in uint64

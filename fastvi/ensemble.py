@@ -25,6 +25,7 @@ from . import events as events_
 from . import guards
 from . import structure
 from ._launch import Launcher
+from ._numba import quiet
 from .integrate import Result, _timed
 from .kernels import drive
 from .kernels import layout as lay
@@ -648,14 +649,18 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
         stepk, stages = step_kernel(model.kernel_data(), meth.kernel_tables,
                                     opts["newton"], ws, full=True, sized=sized)
         compile_time += time.perf_counter() - t_step
-        args = (fns, flags, Mc, KP, meth.kernel_tables,
-                opts["newton"], h, t0, dims, plan.si, plan.sb, ws.structured, X0, total, mode, every, H0,
-                Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, ev.fns, ev.count, ev.direction,
-                ev.terminal, Te, Qe, Ve, Ne, stepk, stages)
-        run, seconds = _RUN_ENSEMBLE.bind(*args)
+        group = drive.EnsembleMembers(
+            fns, flags, Mc, KP, meth.kernel_tables, opts["newton"], h, t0, dims, plan.si,
+            plan.sb, ws.structured, X0, total, mode, every, H0, Qs, Vs, Ps, En, Gr, GVr, It, Wk,
+            ist, fst, ev.fns, ev.count, ev.direction, ev.terminal, Te, Qe, Ve, Ne, stepk, stages)
+        t_member = time.perf_counter()
+        with quiet():
+            member = drive.ensemble_member(group)
+        compile_time += time.perf_counter() - t_member
+        run, seconds = _RUN_ENSEMBLE.bind(member, group)
         compile_time += seconds
         t_loop = time.perf_counter()
-        run(*args)
+        run(member, group)
         t1 = time.perf_counter()
 
     steps = ist[:, lay.E_STEPS].copy()

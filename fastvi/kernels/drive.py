@@ -8,12 +8,14 @@ book it with :func:`record`, so a member of an ensemble equals :func:`fastvi.int
 that member bit for bit by construction.
 """
 
+from collections import namedtuple
+
 import numba
 import numpy as np
 from numba import prange
 from numba.core import types
 
-from .._numba import byref, hot, hot_inline, njit, ptr
+from .._numba import byref, hot, hot_inline, njit, own, ptr
 from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_ITERS, F_MAXRES,
                      F_RES, F_TSLOT, I_FAILED, I_FIRST, I_FULL, I_ITERS, I_MAXRES, I_KR, I_RES,
                      I_SLOT, I_STEPS, I_T, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK, I_WORK_F,
@@ -26,8 +28,8 @@ from .events import after_step, event_values, room_for_crossings
 from .._launch import _key
 from .step import cached_cfunc
 
-__all__ = ["run", "run_member", "run_ensemble", "energy", "accept", "record", "step_hook",
-           "INFO_SIZE"]
+__all__ = ["run", "run_member", "run_ensemble", "EnsembleMembers", "ensemble_member", "energy",
+           "accept", "record", "step_hook", "INFO_SIZE"]
 
 
 @hot
@@ -317,11 +319,62 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
     return status
 
 
+#: what every member of :func:`run_ensemble` reads and writes (its fields are described
+#: there)
+EnsembleMembers = namedtuple("EnsembleMembers", [
+    "fns", "flags", "Mc", "P", "tabs", "opts", "h", "t0", "dims", "si", "sb", "structured",
+    "X0", "n_total", "mode", "every", "H0", "Qs", "Vs", "Ps", "En", "Gr", "GVr", "It", "Wk",
+    "ist", "fst", "efns", "ecount", "edir", "eterm", "Te", "Qe", "Ve", "Ne", "stepk",
+    "stages"])
+
+
+def _ensemble_member(i, gp):
+    """Member ``i`` of :func:`run_ensemble` (the body of :func:`ensemble_member`): its own
+    workspace, state, samples and event records, then :func:`run_member`."""
+    g = own(gp)
+    n = dim(g.dims[0])
+    s = dim(g.dims[2])
+    ws = with_plan(workspace_for(g.dims), g.si, g.sb.copy(), g.structured)
+    state = np.zeros((6, n))
+    for a in range(n):
+        state[0, a] = g.X0[i, 0, a]
+        state[1, a] = g.X0[i, 1, a]
+        state[2, a] = g.X0[i, 2, a]
+    # the member's times are the caller's grid, so they go to scratch
+    K = g.En.shape[1]
+    smp = Samples(np.zeros(K), g.Qs[i], g.Vs[i], g.Ps[i], g.En[i], g.Gr[i], g.GVr[i], g.It[i],
+                  g.Wk[i], np.zeros(K))
+    ev = Events(g.efns, g.ecount, g.edir, g.eterm, np.zeros(EVENT_SLOTS), g.Te[i], g.Qe[i],
+                g.Ve[i], g.Ne[i], np.zeros((0, s + 1, n)), np.zeros((s + 1, n)), np.zeros(n),
+                np.zeros(n), np.zeros(n), np.zeros(s + 1), np.zeros(s + 1), np.zeros(1))
+    return run_member(ModelData(g.fns, g.flags, g.Mc, g.P[i]), g.tabs, g.opts, g.h, g.t0,
+                      state, ws, g.n_total, g.mode, g.every, g.H0[i], smp, g.ist[i], g.fst[i],
+                      np.zeros(STEP_OUT_SIZE), np.zeros(INFO_SIZE), ev, g.stepk, g.stages)
+
+
+#: the compiled members, by the fingerprint of their data's types
+_MEMBERS = {}
+
+
+def ensemble_member(group):
+    """:func:`_ensemble_member` compiled as a C function (cached on disk) for the types of
+    ``group`` (:class:`EnsembleMembers`): what :func:`run_ensemble` calls for each member.
+    A C function called by address, so that the parallel kernel holds one call and a
+    pointer: with the member's set-up and time loop in the body of the ``prange`` loop,
+    numba's parallel lowering took most of the kernel's compile time."""
+    key = _key(group)
+    member = _MEMBERS.get(key)
+    if member is None:
+        sig = types.int64(types.int64, types.CPointer(numba.typeof(group)))
+        member = _MEMBERS[key] = cached_cfunc(_ensemble_member, sig, allocates=True)
+    return member
+
+
 @njit(parallel=True)
-def run_ensemble(fns, flags, Mc, P, tabs, opts, h, t0, dims, si, sb, structured, X0, n_total,
-                 mode, every, H0, Qs, Vs, Ps, En, Gr, GVr, It, Wk, ist, fst, efns, ecount, edir,
-                 eterm, Te, Qe, Ve, Ne, stepk, stages):
-    """``run_member`` for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in parallel.
+def run_ensemble(member, group):
+    """``run_member`` for every member ``i`` of ``group.X0`` (N, 3, n) = (q0, p0, v0), in
+    parallel, through ``member`` (:func:`ensemble_member`); ``group`` is an
+    :class:`EnsembleMembers`, whose fields are described here.
 
     ``dims`` = (n, m, s, r, J) sizes each member's workspace (the stages in ``stages`` may
     be compiled for these sizes: :func:`.step.step_kernel`), and ``si``,
@@ -341,21 +394,6 @@ def run_ensemble(fns, flags, Mc, P, tabs, opts, h, t0, dims, si, sb, structured,
     ``Ne[i]`` (EVENT_SLOTS,). ``stepk`` is the compiled step for a member's workspace
     and its stages (:func:`.step.step_kernel`).
     """
-    n = dim(dims[0])
-    s = dim(dims[2])
-    for i in prange(X0.shape[0]):
-        ws = with_plan(workspace_for(dims), si, sb.copy(), structured)
-        state = np.zeros((6, n))
-        for a in range(n):
-            state[0, a] = X0[i, 0, a]
-            state[1, a] = X0[i, 1, a]
-            state[2, a] = X0[i, 2, a]
-        # the member's times are the caller's grid, so they go to scratch
-        smp = Samples(np.zeros(En.shape[1]), Qs[i], Vs[i], Ps[i], En[i], Gr[i], GVr[i], It[i],
-                      Wk[i], np.zeros(En.shape[1]))
-        ev = Events(efns, ecount, edir, eterm, np.zeros(EVENT_SLOTS), Te[i], Qe[i], Ve[i], Ne[i],
-                    np.zeros((0, s + 1, n)), np.zeros((s + 1, n)), np.zeros(n), np.zeros(n),
-                    np.zeros(n), np.zeros(s + 1), np.zeros(s + 1), np.zeros(1))
-        run_member(ModelData(fns, flags, Mc, P[i]), tabs, opts, h, t0, state, ws, n_total,
-                   mode, every, H0[i], smp, ist[i], fst[i], np.zeros(STEP_OUT_SIZE),
-                   np.zeros(INFO_SIZE), ev, stepk, stages)
+    gp = byref(group)
+    for i in prange(group.X0.shape[0]):
+        member(np.int64(i), gp)  # prange counts in uint64

@@ -2,7 +2,7 @@
 
 The Python side validates every member with the validators of :func:`fastvi.integrate`,
 projects each initial state, then calls one compiled ``numba.prange`` loop
-(:func:`fastvi.kernels.drive.run_ensemble`) in which each member has its own workspace and runs
+(:func:`fastvi.kernels.drive.run_members`) in which each member has its own workspace and runs
 the same step kernel, in the same order, as the serial loop of ``integrate``: member ``i``
 of an ensemble equals ``integrate`` of member ``i`` bit for bit. A member whose Newton
 iteration fails stops alone; its status, failed step and last good state are recorded.
@@ -45,7 +45,7 @@ CHUNKS_PER_THREAD = 8
 # once, and the thread count is per calling thread: one ensemble at a time per process.
 _PARALLEL_LOCK = threading.Lock()
 #: the parallel loop, called through its compiled entry points (no per-call typing)
-_RUN_ENSEMBLE = Launcher(drive.run_ensemble)
+_RUN_ENSEMBLE = Launcher(drive.run_members)
 
 _MEMBER_FIELDS = ("q", "v", "p", "energy", "constraint_residual", "velocity_residual",
                   "newton_iterations", "max_energy_error", "max_constraint_residual",
@@ -657,10 +657,11 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
         with quiet():
             member = drive.ensemble_member(group)
         compile_time += time.perf_counter() - t_member
-        run, seconds = _RUN_ENSEMBLE.bind(member, group)
+        status = np.zeros(N, dtype=np.int64)  # also in ist[:, E_STATUS]
+        run, seconds = _RUN_ENSEMBLE.bind(member, group, status)
         compile_time += seconds
         t_loop = time.perf_counter()
-        run(member, group)
+        run(member, group, status)
         t1 = time.perf_counter()
 
     steps = ist[:, lay.E_STEPS].copy()

@@ -2,7 +2,8 @@ r"""Forward sensitivities of many members at once: :func:`sensitivity_ensemble`.
 
 Each member (an initial state and its parameters) is set up and validated exactly as by
 :func:`fastvi.sensitivity`; then one compiled ``numba.prange`` loop
-(:func:`fastvi.kernels.tangent.run_tangent_ensemble`) runs every member's linearised flow,
+(:func:`fastvi.kernels.drive.run_members` with
+:func:`fastvi.kernels.tangent.tangent_member`) runs every member's linearised flow,
 each with its own workspaces. Member ``i`` equals ``sensitivity`` of that member bit for bit,
 trajectory and derivatives alike.
 """
@@ -22,15 +23,16 @@ from ._numba import quiet
 from .ensemble import parallel_section
 from .integrate import IntegrationError
 from .kernels.layout import Samples
+from .kernels.drive import member_function, run_members
 from .kernels.tangent import (Members, differentiator, index_maps, make_tangent_work,
-                             member_runner, run_tangent_ensemble)
+                             tangent_member)
 from .model import Model
 from .sensitivity import SensitivityResult
 
 __all__ = ["sensitivity_ensemble", "EnsembleSensitivityResult"]
 
 #: the parallel loop, called through its compiled entry points (no per-call typing)
-_RUN = Launcher(run_tangent_ensemble)
+_RUN = Launcher(run_members)
 
 
 @dataclass
@@ -188,7 +190,7 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
                     np.asarray(pidx, dtype=np.int64), DQ, DP, TH, dQ, dP, each)
     with quiet():
         t_compile = time.perf_counter()
-        member = member_runner(group)
+        member = member_function(tangent_member, group)
         compile_time = time.perf_counter() - t_compile
     with parallel_section(threads, N) as used:
         with quiet():

@@ -2,7 +2,7 @@
 
 ``run`` advances one trajectory by a chunk of steps (the Python driver calls it once, or in
 chunks when it shows progress; the state carries everything, so chunking changes no bit).
-``run_member``/``run_ensemble`` do the same for the members of an ensemble, in parallel.
+``run_member``/``run_members`` do the same for the members of an ensemble, in parallel.
 Both take the step through the one compiled entry point of :func:`.step.step_kernel` and
 book it with :func:`record`, so a member of an ensemble equals :func:`fastvi.integrate` of
 that member bit for bit by construction.
@@ -28,8 +28,8 @@ from .events import after_step, event_values, room_for_crossings
 from .._launch import _key
 from .step import cached_cfunc
 
-__all__ = ["run", "run_member", "run_ensemble", "EnsembleMembers", "ensemble_member", "energy",
-           "accept", "record", "step_hook", "INFO_SIZE"]
+__all__ = ["run", "run_member", "run_members", "EnsembleMembers", "member_function",
+           "ensemble_member", "energy", "accept", "record", "step_hook", "INFO_SIZE"]
 
 
 @hot
@@ -319,18 +319,37 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
     return status
 
 
-#: what every member of :func:`run_ensemble` reads and writes (its fields are described
-#: there)
 EnsembleMembers = namedtuple("EnsembleMembers", [
     "fns", "flags", "Mc", "P", "tabs", "opts", "h", "t0", "dims", "si", "sb", "structured",
     "X0", "n_total", "mode", "every", "H0", "Qs", "Vs", "Ps", "En", "Gr", "GVr", "It", "Wk",
     "ist", "fst", "efns", "ecount", "edir", "eterm", "Te", "Qe", "Ve", "Ne", "stepk",
     "stages"])
+EnsembleMembers.__doc__ = """The ensemble of :func:`fastvi.integrate_ensemble`: :func:`run_member` for every
+    member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in parallel (:func:`run_members` with
+    :func:`_ensemble_member`).
+
+    ``dims`` = (n, m, s, r, J) sizes each member's workspace (the stages in ``stages`` may
+    be compiled for these sizes: :func:`.step.step_kernel`), and ``si``,
+    ``sb`` are the structured-solve plan of the model and method (:func:`fastvi.structure.plan`;
+    each member solves with its own copy of ``sb``; ``structured`` as in
+    :class:`.layout.Workspace`). ``P``
+    (N, k + 1) holds each member's kernel parameters (the kernels write the time into the
+    last entry of a member's own row); the
+    outputs are indexed by
+    member first (``Qs`` (N, K, n), ``En``, ``Wk`` (N, K), ``ist`` (N, E_SIZE), ``fst``
+    (N, F_SIZE)). Each member gets its own workspace and state, allocated inside the loop
+    body, so threads share nothing but read-only model and method data.
+
+    Events: ``efns`` (EVENT_SLOTS callbacks, the first ``ecount`` used), ``edir``, ``eterm``
+    as in :class:`.layout.Events`; member ``i`` keeps its first ``Te.shape[2]`` crossings of
+    each event in ``Te[i]`` (E, K), ``Qe[i]``, ``Ve[i]`` (E, K, n) and counts all of them in
+    ``Ne[i]`` (EVENT_SLOTS,). ``stepk`` is the compiled step for a member's workspace
+    and its stages (:func:`.step.step_kernel`)."""
 
 
 def _ensemble_member(i, gp):
-    """Member ``i`` of :func:`run_ensemble` (the body of :func:`ensemble_member`): its own
-    workspace, state, samples and event records, then :func:`run_member`."""
+    """Member ``i`` of an :class:`EnsembleMembers` (a body of :func:`member_function`): its
+    own workspace, state, samples and event records, then :func:`run_member`."""
     g = own(gp)
     n = dim(g.dims[0])
     s = dim(g.dims[2])
@@ -352,48 +371,40 @@ def _ensemble_member(i, gp):
                       np.zeros(STEP_OUT_SIZE), np.zeros(INFO_SIZE), ev, g.stepk, g.stages)
 
 
-#: the compiled members, by the fingerprint of their data's types
+#: the compiled members, by body and the fingerprint of their data's types
 _MEMBERS = {}
 
 
-def ensemble_member(group):
-    """:func:`_ensemble_member` compiled as a C function (cached on disk) for the types of
-    ``group`` (:class:`EnsembleMembers`): what :func:`run_ensemble` calls for each member.
+def member_function(body, group):
+    """``body(i, gp) -> status`` (member ``i`` of the ensemble whose data ``gp`` points to)
+    compiled as a C function (cached on disk, with reference counting: a member allocates
+    its own workspaces) for the types of ``group``: what :func:`run_members` calls for each
+    member. Bodies: :func:`_ensemble_member` (:func:`fastvi.integrate_ensemble`) and
+    :func:`.tangent.tangent_member` (:func:`fastvi.sensitivity_ensemble`).
+
     A C function called by address, so that the parallel kernel holds one call and a
-    pointer: with the member's set-up and time loop in the body of the ``prange`` loop,
-    numba's parallel lowering took most of the kernel's compile time."""
-    key = _key(group)
+    pointer: with a member's set-up and time loop in the body of the ``prange`` loop,
+    numba's parallel lowering compiled the loop again there (the ensemble sensitivities'
+    kernel took 21.5 s of CPU to compile, 13.0 s this way)."""
+    key = (body, _key(group))
     member = _MEMBERS.get(key)
     if member is None:
         sig = types.int64(types.int64, types.CPointer(numba.typeof(group)))
-        member = _MEMBERS[key] = cached_cfunc(_ensemble_member, sig, allocates=True)
+        member = _MEMBERS[key] = cached_cfunc(body, sig, allocates=True)
     return member
 
 
 @njit(parallel=True)
-def run_ensemble(member, group):
-    """``run_member`` for every member ``i`` of ``group.X0`` (N, 3, n) = (q0, p0, v0), in
-    parallel, through ``member`` (:func:`ensemble_member`); ``group`` is an
-    :class:`EnsembleMembers`, whose fields are described here.
-
-    ``dims`` = (n, m, s, r, J) sizes each member's workspace (the stages in ``stages`` may
-    be compiled for these sizes: :func:`.step.step_kernel`), and ``si``,
-    ``sb`` are the structured-solve plan of the model and method (:func:`fastvi.structure.plan`;
-    each member solves with its own copy of ``sb``; ``structured`` as in
-    :class:`.layout.Workspace`). ``P``
-    (N, k + 1) holds each member's kernel parameters (the kernels write the time into the
-    last entry of a member's own row); the
-    outputs are indexed by
-    member first (``Qs`` (N, K, n), ``En``, ``Wk`` (N, K), ``ist`` (N, E_SIZE), ``fst``
-    (N, F_SIZE)). Each member gets its own workspace and state, allocated inside the loop
-    body, so threads share nothing but read-only model and method data.
-
-    Events: ``efns`` (EVENT_SLOTS callbacks, the first ``ecount`` used), ``edir``, ``eterm``
-    as in :class:`.layout.Events`; member ``i`` keeps its first ``Te.shape[2]`` crossings of
-    each event in ``Te[i]`` (E, K), ``Qe[i]``, ``Ve[i]`` (E, K, n) and counts all of them in
-    ``Ne[i]`` (EVENT_SLOTS,). ``stepk`` is the compiled step for a member's workspace
-    and its stages (:func:`.step.step_kernel`).
-    """
+def run_members(member, group, status):
+    """``status[i] = member(i, &group)`` for every member ``i`` in parallel: the one
+    ``prange`` driver of the ensembles (``member`` from :func:`member_function`). Each member
+    allocates its own workspaces and writes only its own rows of ``group``'s arrays, so
+    threads share nothing written."""
     gp = byref(group)
-    for i in prange(group.X0.shape[0]):
-        member(np.int64(i), gp)  # prange counts in uint64
+    for i in prange(status.shape[0]):
+        status[i] = member(np.int64(i), gp)  # prange counts in uint64
+
+
+def ensemble_member(group):
+    """The member of :func:`fastvi.integrate_ensemble` for an :class:`EnsembleMembers`."""
+    return member_function(_ensemble_member, group)

@@ -202,7 +202,7 @@ STEP_OUT_SIZE = 7
 INFO_SIZE = 20
 
 # ----------------------------------------------------------------------------- ensembles
-#: save modes of ``run_ensemble``
+#: save modes of ``run_member``
 SAVE_FINAL, SAVE_STRIDE, SAVE_DIAGNOSTICS = 0, 1, 2
 # columns of the per-member int64 rows ``ist``
 E_STATUS, E_STEPS, E_FAILED, E_SAVED = range(4)
@@ -392,7 +392,7 @@ def _dim(x):
 
 _scope = dict(np=np, dim=dim, Workspace=Workspace, H_SIZE=H_SIZE, SI_HEADER=SI_HEADER)
 exec(_workspace_for_source(), _scope)  # noqa: S102 - generated from the table above
-# not cached itself (generated source has no file): it is compiled into run_ensemble,
+# not cached itself (generated source has no file): it is compiled into the ensembles' members,
 # whose cache holds it
 workspace_for = nb.njit(nogil=True, error_model="numpy", boundscheck=False)(_scope["workspace_for"])
 workspace_for.__doc__ = """:func:`make_workspace` compiled, for the sizes ``dims = (n, m, s, r, J)``

@@ -41,24 +41,21 @@ from collections import namedtuple
 import numpy as np
 
 import numba
-from numba import prange
 from numba.core import types
 
 from .._numba import byref, hot, hot_inline, njit, own, ptr
-from .._launch import _key
 from .drive import run, step_hook
 from .layout import (CHESS, CJAC, F_EX_CHESS, F_EX_MJAC, F_MASSFN, F_TIME,
                      F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SINGULAR,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, ModelData,
                      Samples, make_workspace, sizes, with_plan, workspace_for)
 from .linalg import lu_factor, lu_solve
-from .step import (fd_constraint_hessian, fd_momentum_jacobian, assemble, cached_cfunc,
-                   end_momentum, jacobian_rate, linear_force)
+from .step import (fd_constraint_hessian, fd_momentum_jacobian, assemble, end_momentum,
+                   jacobian_rate, linear_force)
 
 __all__ = ["PointWork", "TangentWork", "extended_tables", "make_point_work",
            "make_tangent_work", "point", "point_terms", "linearise", "push", "pull",
-           "lu_solve_transposed", "run_tangent", "run_tangent_ensemble", "differentiator",
-           "Members", "member_runner",
+           "lu_solve_transposed", "run_tangent", "differentiator", "Members", "tangent_member",
            "point_work",
            "tangent_work", "index_maps"]
 
@@ -648,7 +645,8 @@ def _started(tw, dq, dp, th):
     return tw
 
 
-#: what every member of :func:`run_tangent_ensemble` reads: the model's callbacks, flags
+#: the ensemble of :func:`fastvi.sensitivity_ensemble` (:func:`.drive.run_members` with
+#: :func:`tangent_member`), what every member reads: the model's callbacks, flags
 #: and constant mass, the members' parameter rows ``P`` (N, k + 1), the tables, extended
 #: tables and options, the step ``h``, the sizes ``dims`` = (n, m, s, r, J) and the
 #: structured plan (``si``, ``sb``, ``structured``), the starts ``X0`` (N, 3, n), the steps
@@ -664,9 +662,9 @@ Members = namedtuple("Members", [
     "pidx", "DQ", "DP", "TH", "dQ", "dP", "each"])
 
 
-def _member(i, membersp):
-    """Member ``i`` of :func:`run_tangent_ensemble` (the body of :func:`member_runner`):
-    its own workspaces, state and tangent state, then :func:`run_tangent`. Returns its
+def tangent_member(i, membersp):
+    """Member ``i`` of a :class:`Members` (a body of :func:`.drive.member_function`): its
+    own workspaces, state and tangent state, then :func:`run_tangent`. Returns its
     status."""
     g = own(membersp)
     n, m, s, r, J = g.dims[0], g.dims[1], g.dims[2], g.dims[3], g.dims[4]
@@ -686,36 +684,3 @@ def _member(i, membersp):
     return run_tangent(md, g.tabs, g.tx, g.opts, g.h, state, ws, g.n_total, g.save_every, smp,
                        g.infos[i], np.zeros(STEP_OUT_SIZE), g.ev, g.stepk, g.stages, tw,
                        g.dQ[i], g.dP[i], g.each)
-
-
-#: the compiled members, by the fingerprint of their data's types
-_MEMBERS = {}
-
-
-def member_runner(members):
-    """:func:`_member` compiled as a C function (cached on disk) for the types of
-    ``members`` (:class:`Members`): what :func:`run_tangent_ensemble` calls for each member.
-
-    A C function called by address, so that the parallel kernel holds one call and a
-    pointer: with the member's set-up and its time loop in the body of the ``prange`` loop,
-    numba's parallel lowering took 15 s of the kernel's 21 s of compiling, and writes into
-    the fields of a named tuple built there were lost."""
-    key = _key(members)
-    runner = _MEMBERS.get(key)
-    if runner is None:
-        sig = types.int64(types.int64, types.CPointer(numba.typeof(members)))
-        runner = _MEMBERS[key] = cached_cfunc(_member, sig, allocates=True)
-    return runner
-
-
-@njit(parallel=True)
-def run_tangent_ensemble(member, members, status):
-    """:func:`run_tangent` for every member ``i`` of ``members`` (:class:`Members`), in
-    parallel, through ``member`` (:func:`member_runner`): the members' trajectories equal
-    :func:`fastvi.integrate`'s, and their directions :func:`run_tangent`'s, bit for bit.
-    Member ``i`` writes its samples, counters and directions into its rows of
-    ``members``' arrays and its status into ``status[i]``; it allocates its own
-    workspaces, so threads share nothing written."""
-    membersp = byref(members)
-    for i in prange(status.shape[0]):
-        status[i] = member(np.int64(i), membersp)  # prange counts in uint64

@@ -384,8 +384,8 @@ def member_function(body, group):
 
     A C function called by address, so that the parallel kernel holds one call and a
     pointer: with a member's set-up and time loop in the body of the ``prange`` loop,
-    numba's parallel lowering compiled the loop again there (the ensemble sensitivities'
-    kernel took 21.5 s of CPU to compile, 13.0 s this way)."""
+    numba's parallel lowering compiled the loop again there
+    (``docs/decisions/0015-ensemble-members.md``)."""
     key = (body, _key(group))
     member = _MEMBERS.get(key)
     if member is None:

@@ -1,5 +1,9 @@
 """Ensemble sensitivities: member ``i`` is ``fastvi.sensitivity`` of that member, bit for bit
-(which ``test_sensitivity.py`` checks against differences of whole runs and theory)."""
+(which ``test_sensitivity.py`` checks against differences of whole runs and theory).
+
+The first ensemble of sensitivities compiles its member (some 11 s of CPU; more inside the
+test suite's two processes), which ``make test``'s 4-minute budget cannot take: the tests
+that run one are marked ``slow`` (``make test-slow``)."""
 
 import numpy as np
 import pytest
@@ -14,6 +18,7 @@ def _members(model, angles):
     return np.array([q for q, _ in starts]), np.array([v for _, v in starts])
 
 
+@pytest.mark.slow
 def test_members_equal_single_sensitivities_bit_for_bit():
     """Different starts and parameters per member, derivatives by q0, v0 and a parameter
     moving the constraints (a rod length)."""
@@ -38,6 +43,7 @@ def test_members_equal_single_sensitivities_bit_for_bit():
     assert np.abs(ens.dq[0, -1] - ens.dq[1, -1]).max() > 0.1
 
 
+@pytest.mark.slow
 def test_a_failed_member_is_named_never_returned_as_nan(double_pendulum):
     # member 1 falls under g = 20000: six Newton iterations cannot follow it
     Q0, V0 = _members(double_pendulum, [(1.5, 1.5), (1.5, 1.5)])

@@ -28,8 +28,8 @@ from .results import Result
 from .status import Status
 from .tables import Method
 
-__all__ = ["Run", "refuse", "prepare", "directions", "param_indices", "linear_part", "initial_tangent", "theta_derivative",
-           "velocity_derivatives", "finish"]
+__all__ = ["Run", "refuse", "prepare", "directions", "param_indices", "linear_part",
+           "initial_tangent", "theta_derivative", "velocity_derivatives", "finish"]
 
 
 @dataclass

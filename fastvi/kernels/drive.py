@@ -324,8 +324,8 @@ EnsembleMembers = namedtuple("EnsembleMembers", [
     "X0", "n_total", "mode", "every", "H0", "Qs", "Vs", "Ps", "En", "Gr", "GVr", "It", "Wk",
     "ist", "fst", "efns", "ecount", "edir", "eterm", "Te", "Qe", "Ve", "Ne", "stepk",
     "stages"])
-EnsembleMembers.__doc__ = """The ensemble of :func:`fastvi.integrate_ensemble`: :func:`run_member` for every
-    member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in parallel (:func:`run_members` with
+EnsembleMembers.__doc__ = """The ensemble of :func:`fastvi.integrate_ensemble`: :func:`run_member`
+    for every member ``i`` of ``X0`` (N, 3, n) = (q0, p0, v0), in parallel (:func:`run_members` with
     :func:`_ensemble_member`).
 
     ``dims`` = (n, m, s, r, J) sizes each member's workspace (the stages in ``stages`` may

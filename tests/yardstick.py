@@ -77,141 +77,143 @@ def _constraint_point(prm, qd, gj, Gj):
 def assemble(prm, tabs, h, qk, pk, X, R, A, D, G, qd, gj, jac):
     """Residual (and, if ``jac``, the Newton matrix) at ``X``; the double pendulum inlined.
 
-    Mirrors ``fastvi.kernels.step.assemble`` row for row. Returns 0 or ``NONFINITE``.
+    Mirrors ``fastvi.kernels.step.residual`` and ``newton_matrix`` row for row: the mass
+    part of ``D`` from the quadratic form ``Am``, the potential's from ``bL`` (M and ∇V are
+    constant, so no quadrature point is visited). Returns 0 or ``NONFINITE``.
     """
-    b, L, Ld, Lc, E, tau = tabs.b, tabs.L, tabs.Ld, tabs.Lc, tabs.E, tabs.tau
+    Lc, Am, bL = tabs.Lc, tabs.Am, tabs.bL
     m1 = prm[0]
     m2 = prm[1]
     grav = prm[4]
-    s = L.shape[0] - 1
-    r = L.shape[1]
+    s = tabs.L.shape[0] - 1
     J = Lc.shape[1] - 1
     sn = s * NQ
     N = sn + J * NC
     inv_h = 1.0 / h
-    # F = ∂T/∂q − ∇V = −∇V, constant
+    # −∇V, constant
     f1 = -(grav * m1)
     f3 = -(grav * m2)
-
-    for k in range(N):
-        R[k] = 0.0
-    if jac:
-        for k in range(N):
-            for l in range(N):
-                A[k, l] = 0.0
-    for nu in range(s + 1):
-        for a in range(NQ):
-            D[nu, a] = 0.0
-
-    for i in range(r):
-        # only v(c_i) matters: M and ∇V are constant
-        v0 = 0.0
-        v1 = 0.0
-        v2 = 0.0
-        v3 = 0.0
-        for nu in range(1, s + 1):
-            c = Ld[nu, i]
-            o = (nu - 1) * NQ
-            v0 += c * X[o]
-            v1 += c * X[o + 1]
-            v2 += c * X[o + 2]
-            v3 += c * X[o + 3]
-        p0 = m1 * (v0 * inv_h)
-        p1 = m1 * (v1 * inv_h)
-        p2 = m2 * (v2 * inv_h)
-        p3 = m2 * (v3 * inv_h)
-        w = h * b[i]
-        for nu in range(s + 1):
-            cl = w * L[nu, i]
-            cd = b[i] * Ld[nu, i]
-            D[nu, 0] += cd * p0
-            D[nu, 1] += cl * f1 + cd * p1
-            D[nu, 2] += cd * p2
-            D[nu, 3] += cl * f3 + cd * p3
-        if not jac:
-            continue
-        # ∂²S_u/∂Q^ν∂Q^μ = b_i ℓ'_ν ℓ'_μ M / h  (∇²V = 0, M constant): diagonal blocks
-        for nu in range(s):
-            for mu in range(1, s + 1):
-                cM = b[i] * Ld[nu, i] * Ld[mu, i] * inv_h
-                r0 = nu * NQ
-                c0 = (mu - 1) * NQ
-                A[r0, c0] += cM * m1
-                A[r0 + 1, c0 + 1] += cM * m1
-                A[r0 + 2, c0 + 2] += cM * m2
-                A[r0 + 3, c0 + 3] += cM * m2
+    mass = (m1, m1, m2, m2)
 
     for a in range(NQ):
-        R[a] = pk[a]
-    for nu in range(s):
+        d0 = 0.0
+        for nu in range(1, s + 1):
+            acc = 0.0
+            for mu in range(s):
+                acc += Am[nu - 1, mu] * X[mu * NQ + a]
+            acc *= inv_h
+            acc *= mass[a]
+            D[nu, a] = acc
+            d0 -= acc
+        D[0, a] = d0
+    for nu in range(s + 1):
+        w = h * bL[nu]
+        D[nu, 0] += w * 0.0
+        D[nu, 1] += w * f1
+        D[nu, 2] += w * 0.0
+        D[nu, 3] += w * f3
+    for a in range(NQ):
+        R[a] = pk[a] + D[0, a]
+    for nu in range(1, s):
         for a in range(NQ):
-            R[nu * NQ + a] += D[nu, a]
+            R[nu * NQ + a] = D[nu, a]
 
     for j in range(1, J + 1):
         for a in range(NQ):
             qa = qk[a]
             for nu in range(1, s + 1):
-                qa += Lc[nu, j] * X[(nu - 1) * NQ + a]
+                cl = Lc[nu, j]
+                if cl != 0.0:
+                    qa += cl * X[(nu - 1) * NQ + a]
             qd[a] = qa
-        Gj = G[j]
-        _constraint_point(prm, qd, gj, Gj)
+        _constraint_point(prm, qd, gj, G[j])
         row = sn + (j - 1) * NC
         R[row] = gj[0]
         R[row + 1] = gj[1]
-        if jac:
-            for mu in range(1, s + 1):
-                cl = Lc[mu, j]
-                if cl != 0.0:
-                    c0 = (mu - 1) * NQ
-                    A[row, c0] = cl * Gj[0, 0]
-                    A[row, c0 + 1] = cl * Gj[0, 1]
-                    A[row + 1, c0] = cl * Gj[1, 0]
-                    A[row + 1, c0 + 1] = cl * Gj[1, 1]
-                    A[row + 1, c0 + 2] = cl * Gj[1, 2]
-                    A[row + 1, c0 + 3] = cl * Gj[1, 3]
-            if j < J:
-                # Σ_a η_a ∇²g_a at an interior constraint point
-                e2 = X[sn + j * NC + 1]
-                ha = X[sn + j * NC] + e2
-                for nu in range(s):
-                    for mu in range(1, s + 1):
-                        cc = Lc[nu, j] * Lc[mu, j]
-                        if cc != 0.0:
-                            r0 = nu * NQ
-                            c0 = (mu - 1) * NQ
-                            A[r0, c0] -= cc * ha
-                            A[r0 + 1, c0 + 1] -= cc * ha
-                            A[r0 + 2, c0 + 2] -= cc * e2
-                            A[r0 + 3, c0 + 3] -= cc * e2
-                            A[r0, c0 + 2] -= cc * -e2
-                            A[r0 + 2, c0] -= cc * -e2
-                            A[r0 + 1, c0 + 3] -= cc * -e2
-                            A[r0 + 3, c0 + 1] -= cc * -e2
     for j in range(J):
         Gj = G[j]
         col = sn + j * NC
-        x0 = X[col]
-        x1 = X[col + 1]
         for nu in range(s):
             cl = Lc[nu, j]
             if cl == 0.0:
                 continue
             r0 = nu * NQ
-            R[r0] -= cl * (Gj[0, 0] * x0 + Gj[1, 0] * x1)
-            R[r0 + 1] -= cl * (Gj[0, 1] * x0 + Gj[1, 1] * x1)
-            R[r0 + 2] -= cl * (Gj[1, 2] * x1)
-            R[r0 + 3] -= cl * (Gj[1, 3] * x1)
-            if jac:
+            e0 = cl * X[col]
+            e1 = cl * X[col + 1]
+            R[r0] -= Gj[0, 0] * e0
+            R[r0 + 1] -= Gj[0, 1] * e0
+            R[r0] -= Gj[1, 0] * e1
+            R[r0 + 1] -= Gj[1, 1] * e1
+            R[r0 + 2] -= Gj[1, 2] * e1
+            R[r0 + 3] -= Gj[1, 3] * e1
+    for k in range(N):
+        if not np.isfinite(R[k]):
+            return NONFINITE
+    if not jac:
+        return OK
+
+    for k in range(N):
+        for l in range(N):
+            A[k, l] = 0.0
+    # ∂²S_u/∂Q^ν∂Q^μ = Am[ν−1, μ−1] M / h (row 0: minus the sum): diagonal blocks
+    for mu in range(1, s + 1):
+        c0 = (mu - 1) * NQ
+        for nu in range(s):
+            if nu == 0:
+                cM = 0.0
+                for k in range(1, s + 1):
+                    cM -= Am[k - 1, mu - 1] * inv_h
+            else:
+                cM = Am[nu - 1, mu - 1] * inv_h
+            r0 = nu * NQ
+            A[r0, c0] = cM * m1
+            A[r0 + 1, c0 + 1] = cM * m1
+            A[r0 + 2, c0 + 2] = cM * m2
+            A[r0 + 3, c0 + 3] = cM * m2
+    for j in range(1, J + 1):
+        Gj = G[j]
+        row = sn + (j - 1) * NC
+        for mu in range(1, s + 1):
+            cl = Lc[mu, j]
+            if cl != 0.0:
+                c0 = (mu - 1) * NQ
+                A[row, c0] = cl * Gj[0, 0]
+                A[row, c0 + 1] = cl * Gj[0, 1]
+                A[row + 1, c0] = cl * Gj[1, 0]
+                A[row + 1, c0 + 1] = cl * Gj[1, 1]
+                A[row + 1, c0 + 2] = cl * Gj[1, 2]
+                A[row + 1, c0 + 3] = cl * Gj[1, 3]
+        if j < J:
+            # Σ_a η_a ∇²g_a at an interior constraint point
+            e2 = X[sn + j * NC + 1]
+            ha = X[sn + j * NC] + e2
+            for nu in range(s):
+                for mu in range(1, s + 1):
+                    cc = Lc[nu, j] * Lc[mu, j]
+                    if cc != 0.0:
+                        r0 = nu * NQ
+                        c0 = (mu - 1) * NQ
+                        A[r0, c0] -= cc * ha
+                        A[r0 + 1, c0 + 1] -= cc * ha
+                        A[r0 + 2, c0 + 2] -= cc * e2
+                        A[r0 + 3, c0 + 3] -= cc * e2
+                        A[r0, c0 + 2] -= cc * -e2
+                        A[r0 + 2, c0] -= cc * -e2
+                        A[r0 + 1, c0 + 3] -= cc * -e2
+                        A[r0 + 3, c0 + 1] -= cc * -e2
+    for j in range(J):
+        Gj = G[j]
+        col = sn + j * NC
+        for nu in range(s):
+            cl = Lc[nu, j]
+            if cl != 0.0:
+                r0 = nu * NQ
                 A[r0, col] = -cl * Gj[0, 0]
                 A[r0, col + 1] = -cl * Gj[1, 0]
                 A[r0 + 1, col] = -cl * Gj[0, 1]
                 A[r0 + 1, col + 1] = -cl * Gj[1, 1]
                 A[r0 + 2, col + 1] = -cl * Gj[1, 2]
                 A[r0 + 3, col + 1] = -cl * Gj[1, 3]
-
-    for k in range(N):
-        if not np.isfinite(R[k]):
-            return NONFINITE
     return OK
 
 

@@ -54,7 +54,7 @@ from .layout import specialize as layout_specialize
 from .linalg import (augmented_mass, invert, invert_unpivoted, lu_factor, lu_factor_small,
                      lu_solve, lu_solve_small)
 
-__all__ = ["make_workspace", "assemble", "residual", "linear_force", "step", "step_kernel",
+__all__ = ["make_workspace", "assemble", "newton_matrix", "residual", "linear_force", "step", "step_kernel",
            "take_step", "step_once", "cached_cfunc",
            "end_momentum", "velocity_residual", "hidden_residual", "constraint_rate",
            "jacobian_rate"]
@@ -318,196 +318,193 @@ def _point_force(md, ws, Mi, has_mass, n):
 
 @hot
 def assemble(md_, tabs_, h, qk, pk, ws_, jac):
-    """Residual (and, if ``jac``, the Newton matrix) at the unknowns ``ws.X``.
+    """:func:`residual` and, if ``jac``, :func:`newton_matrix` at the unknowns ``ws.X``.
 
-    Also leaves ``ws.D`` (∂S_u/∂Q^ν) and ``ws.G[j]`` (G at the constraint points j ≥ 1).
-    Returns 0, or ``NONFINITE`` when a callback produced NaN/inf.
+    Leaves ``ws.R``, ``ws.D`` (∂S_u/∂Q^ν), ``ws.G[j]`` (G at the constraint points j ≥ 1)
+    and, if ``jac``, ``ws.A``. Returns 0, or ``NONFINITE`` when a callback produced NaN/inf.
+    """
+    st = residual(md_, tabs_, h, qk, pk, ws_)
+    if st == OK and jac:
+        newton_matrix(md_, tabs_, h, qk, ws_)
+    return st
+
+
+@hot
+def newton_matrix(md_, tabs_, h, qk, ws_):
+    r"""``ws.A = ∂R/∂X`` at the unknowns ``ws.X``: the exact derivative of :func:`residual`
+    as it computes ``R``, with ``ws.G[0 … J]`` as it leaves them.
+
+    Rows ``E_ν`` (ν < s) and constraint rows, columns ``ΔQ^μ`` (μ = 1…s) and ``η_j``:
+
+        ∂E_ν/∂ΔQ^μ = (1/h) Am[ν−1, μ−1] M  (row 0: minus the sum over ν ≥ 1; constant M)
+                     + Σ_i b_i [h ℓ_ν ℓ_μ ∂F/∂q + ℓ_ν ℓ'_μ (C_qᵀ + F_v) + ℓ'_ν ℓ_μ C_q
+                                + ℓ'_ν ℓ'_μ M(q_i)/h]          (at the quadrature points c_i)
+                     − Σ_{0<j<J} ℓ_ν(d_j) ℓ_μ(d_j) Σ_c η_{j,c} ∇²g_c(q(d_j)),
+        ∂E_ν/∂η_j = −ℓ_ν(d_j) G_jᵀ,     ∂g(q(d_j))/∂ΔQ^μ = ℓ_μ(d_j) G_j,
+
+    with ``∂F/∂q = T_qq − ∇²V + ∂F_nc/∂q``, ``C_q = ∂(M v)/∂q`` and ``F_v = ∂F_nc/∂v``. The
+    quadrature terms are formed only for what the model has: a constant mass, a potential
+    linear in q and no force leave the mass block and the constraint terms alone.
     """
     md, tabs, ws = own(md_), own(tabs_), own(ws_)
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     b, L, Ld, Lc = tabs.b, tabs.L, tabs.Ld, tabs.Lc
-    X, R, A = ws.X, ws.R, ws.A
-    D, G = ws.D, ws.G
+    X, A, G = ws.X, ws.A, ws.G
     qi, vi, F, Pm, fa = ws.qi, ws.vi, ws.F, ws.Pm, ws.fa
     Aq, Cq, Hc, Ma = ws.Aq, ws.Cq, ws.Hc, ws.Ma
-    gj = ws.g
     n, m, s, r, J = sizes(ws)
     has_mass = flags[F_MASSFN] != 0
     diag = flags[F_DIAG] != 0
+    has_force = is_timed(md) and flags[F_FORCE] != 0
     sn = s * n
     N = sn + J * m
     inv_h = 1.0 / h
-
     for k in range(N):
-        R[k] = 0.0
-    if jac:
-        for k in range(N):
-            for l in range(N):
-                A[k, l] = 0.0
-    for nu in range(s + 1):
-        for a in range(n):
-            D[nu, a] = 0.0
+        for l in range(N):
+            A[k, l] = 0.0
 
-    Mi = Mc if not has_mass else ws.Mi
-    has_force = is_timed(md) and flags[F_FORCE] != 0
-    Fv = ws.Fv
-    for i in range(r):
-        _at(md, ws, h, tabs.c[i])
-        for a in range(n):
-            qa = qk[a]
-            va = 0.0
-            for nu in range(1, s + 1):
-                x = X[(nu - 1) * n + a]
-                qa += L[nu, i] * x
-                va += Ld[nu, i] * x
-            qi[a] = qa
-            vi[a] = va * inv_h
-        _point_force(md, ws, Mi, has_mass, n)
-        if diag:
-            for a in range(n):
-                Pm[a] = Mi[a, a] * vi[a]
-        else:
-            for a in range(n):
-                acc = 0.0
-                for c in range(n):
-                    acc += Mi[a, c] * vi[c]
-                Pm[a] = acc
-        w = h * b[i]
-        for nu in range(s + 1):
-            cl = w * L[nu, i]
-            cd = b[i] * Ld[nu, i]
-            for a in range(n):
-                D[nu, a] += cl * F[a] + cd * Pm[a]
-        if not jac:
-            continue
-        # ∂F/∂q = T_qq − V_qq ; ∂(Mv)/∂q
-        if flags[F_LINPOT] != 0:
-            for a in range(n):
-                for c in range(n):
-                    Aq[a, c] = 0.0
-        elif flags[F_EX_PHESS] != 0:
-            fns[PHESS](ptr(qi), ptr(qi), ptr(prm), ptr(Aq))
-        else:
-            _fd_vec_jacobian(fns[PGRAD], _FD_HESSIAN, qi, qi, prm, Aq, fa, F, Pm, n)  # F, Pm: spent scratch
-        for a in range(n):
-            for c in range(n):
-                Aq[a, c] = -Aq[a, c]
-        if has_mass:
-            if flags[F_EX_KHESS] != 0:
-                fns[KHESS](ptr(qi), ptr(vi), ptr(prm), ptr(Hc))
-            else:
-                _fd_vec_jacobian(fns[KGRAD], _FD_HESSIAN, qi, vi, prm, Hc, fa, F, Pm, n)
-            for a in range(n):
-                for c in range(n):
-                    Aq[a, c] += Hc[a, c]
-            if flags[F_EX_MJAC] != 0:
-                fns[MJAC](ptr(qi), ptr(vi), ptr(prm), ptr(Cq))
-            else:
-                fd_momentum_jacobian(fns[MASS], qi, vi, prm, Cq, fa, Ma, n)
-        if has_force:
-            # ∂F_nc/∂q joins the force block, ∂F_nc/∂v the mixed block (docs/method.md §11)
-            if flags[F_EX_FJQ] != 0:
-                fns[FJQ](ptr(qi), ptr(vi), ptr(prm), ptr(Hc))
-            else:
-                _fd_vec_jacobian(fns[FORCE], _FD_Q, qi, vi, prm, Hc, fa, F, Pm, n)
-            for a in range(n):
-                for c in range(n):
-                    Aq[a, c] += Hc[a, c]
-            if flags[F_EX_FJV] != 0:
-                fns[FJV](ptr(qi), ptr(vi), ptr(prm), ptr(Fv))
-            else:
-                _fd_vec_jacobian(fns[FORCE], _FD_V, qi, vi, prm, Fv, Ma[0], fa, F, n)
-        for nu in range(s):
-            for mu in range(1, s + 1):
-                cA = w * L[nu, i] * L[mu, i]
-                cM = b[i] * Ld[nu, i] * Ld[mu, i] * inv_h
+    if not has_mass:
+        # the derivative of the residual's quadratic form, row 0 as its sum (as there)
+        Am = tabs.Am
+        for mu in range(1, s + 1):
+            c0 = (mu - 1) * n
+            for nu in range(s):
+                if nu == 0:
+                    cM = 0.0
+                    for k in range(1, s + 1):
+                        cM -= Am[k - 1, mu - 1] * inv_h
+                else:
+                    cM = Am[nu - 1, mu - 1] * inv_h
                 r0 = nu * n
-                c0 = (mu - 1) * n
+                if diag:
+                    for a in range(n):
+                        A[r0 + a, c0 + a] = cM * Mc[a, a]
+                else:
+                    for a in range(n):
+                        for c in range(n):
+                            A[r0 + a, c0 + c] = cM * Mc[a, c]
+
+    if has_mass or has_force or flags[F_LINPOT] == 0:
+        Mi, Fv = ws.Mi, ws.Fv
+        for i in range(r):
+            _at(md, ws, h, tabs.c[i])
+            for a in range(n):
+                qa = qk[a]
+                va = 0.0
+                for nu in range(1, s + 1):
+                    x = X[(nu - 1) * n + a]
+                    qa += L[nu, i] * x
+                    va += Ld[nu, i] * x
+                qi[a] = qa
+                vi[a] = va * inv_h
+            # ∂F/∂q = T_qq − V_qq (+ ∂F_nc/∂q); F, Pm, fa are spent scratch of the residual
+            if flags[F_LINPOT] != 0:
                 for a in range(n):
                     for c in range(n):
-                        A[r0 + a, c0 + c] += cA * Aq[a, c] + cM * Mi[a, c]
-                if has_mass:
-                    # ∂/∂Q^μ of ℓ_ν ∂T/∂q and of ℓ'_ν M v: the mixed terms, B = Cqᵀ
-                    cB = b[i] * L[nu, i] * Ld[mu, i]
-                    cC = b[i] * Ld[nu, i] * L[mu, i]
+                        Aq[a, c] = 0.0
+            elif flags[F_EX_PHESS] != 0:
+                fns[PHESS](ptr(qi), ptr(qi), ptr(prm), ptr(Aq))
+            else:
+                _fd_vec_jacobian(fns[PGRAD], _FD_HESSIAN, qi, qi, prm, Aq, fa, F, Pm, n)
+            for a in range(n):
+                for c in range(n):
+                    Aq[a, c] = -Aq[a, c]
+            if has_mass:
+                fns[MASS](ptr(qi), ptr(qi), ptr(prm), ptr(Mi))
+                if flags[F_EX_KHESS] != 0:
+                    fns[KHESS](ptr(qi), ptr(vi), ptr(prm), ptr(Hc))
+                else:
+                    _fd_vec_jacobian(fns[KGRAD], _FD_HESSIAN, qi, vi, prm, Hc, fa, F, Pm, n)
+                for a in range(n):
+                    for c in range(n):
+                        Aq[a, c] += Hc[a, c]
+                if flags[F_EX_MJAC] != 0:
+                    fns[MJAC](ptr(qi), ptr(vi), ptr(prm), ptr(Cq))
+                else:
+                    fd_momentum_jacobian(fns[MASS], qi, vi, prm, Cq, fa, Ma, n)
+            if has_force:
+                # ∂F_nc/∂q joins the force block, ∂F_nc/∂v the mixed block (docs/method.md §11)
+                if flags[F_EX_FJQ] != 0:
+                    fns[FJQ](ptr(qi), ptr(vi), ptr(prm), ptr(Hc))
+                else:
+                    _fd_vec_jacobian(fns[FORCE], _FD_Q, qi, vi, prm, Hc, fa, F, Pm, n)
+                for a in range(n):
+                    for c in range(n):
+                        Aq[a, c] += Hc[a, c]
+                if flags[F_EX_FJV] != 0:
+                    fns[FJV](ptr(qi), ptr(vi), ptr(prm), ptr(Fv))
+                else:
+                    _fd_vec_jacobian(fns[FORCE], _FD_V, qi, vi, prm, Fv, Ma[0], fa, F, n)
+            w = h * b[i]
+            for nu in range(s):
+                for mu in range(1, s + 1):
+                    cA = w * L[nu, i] * L[mu, i]
+                    r0 = nu * n
+                    c0 = (mu - 1) * n
                     for a in range(n):
                         for c in range(n):
-                            A[r0 + a, c0 + c] += cB * Cq[c, a] + cC * Cq[a, c]
-                if has_force:
-                    cB = b[i] * L[nu, i] * Ld[mu, i]
-                    for a in range(n):
-                        for c in range(n):
-                            A[r0 + a, c0 + c] += cB * Fv[a, c]
-
-    for a in range(n):
-        R[a] = pk[a]
-    for nu in range(s):
-        for a in range(n):
-            R[nu * n + a] += D[nu, a]
+                            A[r0 + a, c0 + c] += cA * Aq[a, c]
+                    if has_mass:
+                        # ∂/∂Q^μ of ℓ'_ν M v and of ℓ_ν ∂T/∂q: the mass and mixed terms
+                        cM = b[i] * Ld[nu, i] * Ld[mu, i] * inv_h
+                        cB = b[i] * L[nu, i] * Ld[mu, i]
+                        cC = b[i] * Ld[nu, i] * L[mu, i]
+                        for a in range(n):
+                            for c in range(n):
+                                A[r0 + a, c0 + c] += (cM * Mi[a, c] + cB * Cq[c, a]
+                                                      + cC * Cq[a, c])
+                    if has_force:
+                        cB = b[i] * L[nu, i] * Ld[mu, i]
+                        for a in range(n):
+                            for c in range(n):
+                                A[r0 + a, c0 + c] += cB * Fv[a, c]
 
     if m > 0:
         qd = qi
         for j in range(1, J + 1):
-            _at(md, ws, h, tabs.d[j])
-            for a in range(n):
-                qa = qk[a]
-                for nu in range(1, s + 1):
-                    qa += Lc[nu, j] * X[(nu - 1) * n + a]
-                qd[a] = qa
-            fns[CON](ptr(qd), ptr(qd), ptr(prm), ptr(gj))
             Gj = G[j]
-            fns[CJAC](ptr(qd), ptr(qd), ptr(prm), ptr(Gj))
             row = sn + (j - 1) * m
-            for a in range(m):
-                R[row + a] = gj[a]
-            if jac:
-                for mu in range(1, s + 1):
-                    cl = Lc[mu, j]
-                    if cl != 0.0:
-                        c0 = (mu - 1) * n
-                        for a in range(m):
-                            for c in range(n):
-                                A[row + a, c0 + c] = cl * Gj[a, c]
-                if j < J:
-                    eta = X[sn + j * m : sn + (j + 1) * m]
-                    if flags[F_EX_CHESS] != 0:
-                        fns[CHESS](ptr(qd), ptr(eta), ptr(prm), ptr(Hc))
-                    elif ws.si[SI_HC_NG] != 0:  # large models: columns in groups
-                        fd_constraint_hessian_grouped(fns[CJAC], qd, eta, prm, Hc, fa, Pm, ws.Gp,
-                                                       ws.Gm, ws.si, n, m)  # Pm: spent scratch
-                    else:
-                        fd_constraint_hessian(fns[CJAC], qd, eta, prm, Hc, fa, ws.Gp, ws.Gm, n, m)
-                    for nu in range(s):
-                        for mu in range(1, s + 1):
-                            cc = Lc[nu, j] * Lc[mu, j]
-                            if cc != 0.0:
-                                r0 = nu * n
-                                c0 = (mu - 1) * n
-                                for a in range(n):
-                                    for c in range(n):
-                                        A[r0 + a, c0 + c] -= cc * Hc[a, c]
+            for mu in range(1, s + 1):
+                cl = Lc[mu, j]
+                if cl != 0.0:
+                    c0 = (mu - 1) * n
+                    for a in range(m):
+                        for c in range(n):
+                            A[row + a, c0 + c] = cl * Gj[a, c]
+            if j < J:
+                _at(md, ws, h, tabs.d[j])
+                for a in range(n):
+                    qa = qk[a]
+                    for nu in range(1, s + 1):
+                        qa += Lc[nu, j] * X[(nu - 1) * n + a]
+                    qd[a] = qa
+                eta = X[sn + j * m : sn + (j + 1) * m]
+                if flags[F_EX_CHESS] != 0:
+                    fns[CHESS](ptr(qd), ptr(eta), ptr(prm), ptr(Hc))
+                elif ws.si[SI_HC_NG] != 0:  # large models: columns in groups
+                    fd_constraint_hessian_grouped(fns[CJAC], qd, eta, prm, Hc, fa, Pm, ws.Gp,
+                                                   ws.Gm, ws.si, n, m)  # Pm: spent scratch
+                else:
+                    fd_constraint_hessian(fns[CJAC], qd, eta, prm, Hc, fa, ws.Gp, ws.Gm, n, m)
+                for nu in range(s):
+                    for mu in range(1, s + 1):
+                        cc = Lc[nu, j] * Lc[mu, j]
+                        if cc != 0.0:
+                            r0 = nu * n
+                            c0 = (mu - 1) * n
+                            for a in range(n):
+                                for c in range(n):
+                                    A[r0 + a, c0 + c] -= cc * Hc[a, c]
         for j in range(J):
             Gj = G[j]
             col = sn + j * m
             for nu in range(s):
                 cl = Lc[nu, j]
-                if cl == 0.0:
-                    continue
-                r0 = nu * n
-                for a in range(n):
-                    acc = 0.0
-                    for c in range(m):
-                        acc += Gj[c, a] * X[col + c]
-                    R[r0 + a] -= cl * acc
-                if jac:
+                if cl != 0.0:
+                    r0 = nu * n
                     for a in range(n):
                         for c in range(m):
                             A[r0 + a, col + c] = -cl * Gj[c, a]
-
-    for k in range(N):
-        if not np.isfinite(R[k]):
-            return NONFINITE
-    return OK
 
 
 # ----------------------------------------------------------------------------- predictor, full Newton
@@ -797,13 +794,15 @@ def _mech_rows(md, ws, j, n, m):
 
 @hot
 def residual(md_, tabs_, h, qk, pk, ws_):
-    """The residual alone at ``ws.X``, into ``ws.R`` (with ``ws.D`` and ``ws.G[1:]``).
+    r"""The step's residual at the unknowns ``ws.X``, into ``ws.R`` (with ``ws.D`` and
+    ``ws.G[1:]``): the one residual of both Newton iterations and of the linearised step.
 
-    The same equations as :func:`assemble` without the Newton matrix, with the loops
-    ordered so that the innermost one runs over the coordinates independently: the
-    tiny reductions of the generic order (over the s control points) are bound by the
-    latency of their additions. It differs from ``assemble(jac=False)`` at round-off.
-    Returns 0, or ``NONFINITE`` when a callback produced NaN/inf.
+        E_ν = δ_{ν0} p_k + ∂S_u/∂Q^ν − Σ_{j<J} ℓ_ν(d_j) G_jᵀ η_j   (ν < s),
+        g(q(d_j)) = 0   (j = 1…J),   ∂S_u/∂Q^ν = Σ_i b_i [h ℓ_ν F + ℓ'_ν M v](c_i).
+
+    The loops are ordered so that the innermost one runs over the coordinates
+    independently: tiny reductions over the s control points are bound by the latency of
+    their additions. Returns 0, or ``NONFINITE`` when a callback produced NaN/inf.
     """
     md, tabs, ws = own(md_), own(tabs_), own(ws_)
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm

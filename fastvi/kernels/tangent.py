@@ -107,15 +107,19 @@ TangentWork = namedtuple("TangentWork", [
 def extended_tables(tabs, s, J):
     """The :class:`.layout.Tables` of the extended step: the basis ``ℓ_0 … ℓ_s`` and the
     constant function at index s + 1 (value 1 at every quadrature and constraint point,
-    slope 0; see the module docstring)."""
+    slope 0; see the module docstring). Its mass block ``Am`` gains a zero row and column
+    (no slope), its ``bL`` the quadrature's sum of weights."""
     one = np.ones((1, tabs.L.shape[1]))
     L, Ld = np.vstack([tabs.L, one]), np.vstack([tabs.Ld, np.zeros_like(one)])
     Lc = np.vstack([tabs.Lc, np.ones((1, tabs.Lc.shape[1]))])
-    for new, old in ((L, tabs.L), (Ld, tabs.Ld), (Lc, tabs.Lc)):
+    Am = np.zeros((s + 1, s + 1))
+    Am[:s, :s] = tabs.Am
+    bL = np.concatenate([tabs.bL, [float(np.sum(tabs.b))]])
+    for new, old in ((L, tabs.L), (Ld, tabs.Ld), (Lc, tabs.Lc), (Am, tabs.Am), (bL, tabs.bL)):
         # read-only like the method's own tables: the same type, so the step's compiled
         # assembly serves the extended step too (a writable copy compiled it again)
         new.setflags(write=old.flags.writeable)
-    return tabs._replace(L=L, Ld=Ld, Lc=Lc)
+    return tabs._replace(L=L, Ld=Ld, Lc=Lc, Am=Am, bL=bL)
 
 
 def index_maps(n, m, s, J):

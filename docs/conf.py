@@ -58,6 +58,8 @@ sphinx_gallery_conf = {
     # never execute: the figures come from docs/figures (see the module docstring)
     "plot_gallery": "False",
     "filename_pattern": r"^$",
+    # examples/_cli.py and the like: what the scripts share, not an example
+    "ignore_pattern": r"(^|[\\/])_[^\\/]*\.py$",
     "download_all_examples": False,
     "show_signature": False,
     # an example's thumbnail is the figure it draws (its `sphinx_gallery_thumbnail_path`

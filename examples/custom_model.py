@@ -17,15 +17,10 @@ current directory). With ``FASTVI_QUICK=1`` the run is shorter and the figure go
 temporary directory.
 """
 
-import os
-import sys
-import tempfile
-
 import numpy as np
 
 import fastvi
-
-QUICK = os.environ.get("FASTVI_QUICK") == "1"
+from _cli import QUICK, figure, figure_path, save
 
 # params = (M, m, l, g, k); every physical constant travels in params, not in closures,
 # so one compiled model serves every parameter value.
@@ -131,10 +126,7 @@ def to_cartesian(q, v, l=PARAMS[2]):
 
 
 def main(argv=None):
-    argv = sys.argv[1:] if argv is None else argv
-    out = argv[0] if argv else "custom_model.png"
-    if QUICK:
-        out = os.path.join(tempfile.mkdtemp(prefix="fastvi-example-"), "custom_model.png")
+    out = figure_path("custom_model.png", argv)
     t_end, h = (4.0, 0.01) if QUICK else (20.0, 0.01)
     q0, v0 = np.array([0.0, 2.0]), np.array([0.0, 0.0])  # bob raised to 115°, at rest
 
@@ -175,12 +167,8 @@ def main(argv=None):
     if d_same > 1e-10 or d_cart > 1e-4:
         raise SystemExit("the three models disagree")
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(7, 7))
+    fig = figure(figsize=(7, 7))
+    axes = fig.subplots(3, 1, sharex=True)
     axes[0].plot(a.t, a.q[:, 0], label="by hand")
     axes[0].plot(b.t, b.q[:, 0], "--", label="symbolic")
     axes[0].plot(rc.t, rc.q[:, 0], ":", label="Cartesian + constraint")
@@ -196,10 +184,7 @@ def main(argv=None):
     axes[2].set_xlabel("t")
     axes[2].legend(loc="upper right", fontsize=8)
     axes[0].set_title(f"pendulum on a spring-loaded cart, {a.method.name}, h = {h}")
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    print(f"wrote {out}")
+    save(fig, out, dpi=110)
     return out
 
 

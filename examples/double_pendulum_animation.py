@@ -23,23 +23,12 @@ frames per second, written to a temporary directory.
 
 # sphinx_gallery_thumbnail_path = "figures/double_pendulum_paths.png"
 
-import argparse
-import os
-import tempfile
-from pathlib import Path
-
 import fastvi
-
-QUICK = os.environ.get("FASTVI_QUICK") == "1"
+from _cli import QUICK, out_dir
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=None, help="directory of the GIF and the PNG")
-    args = parser.parse_args(argv)
-    if args.out is None:
-        args.out = (Path(tempfile.mkdtemp()) if QUICK else Path(__file__).resolve().parents[1]
-                    / "docs" / "figures")
+    out = out_dir(__doc__, "the GIF and the PNG", argv)
     t_end, fps = (1.0, 10) if QUICK else (8.0, 25)
 
     model = fastvi.scenes.double_pendulum()
@@ -47,9 +36,9 @@ def main(argv=None):
     run = fastvi.integrate(model, q0, v0, h=0.005, t_end=t_end, save_every=4, dense_output=True)
     print(run.summary())
 
-    gif = run.animate(args.out / "double_pendulum.gif", fps=fps, trail=1.5, dpi=70)
+    gif = run.animate(out / "double_pendulum.gif", fps=fps, trail=1.5, dpi=70)
     print(f"animation: {gif} ({gif.stat().st_size / 1e6:.2f} MB)")
-    paths = args.out / "double_pendulum_paths.png"
+    paths = out / "double_pendulum_paths.png"
     run.plot_trajectory(path=paths)
     print(f"paths: {paths}")
 

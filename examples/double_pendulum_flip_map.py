@@ -29,16 +29,14 @@ map and prints the speed-up.
 # sphinx_gallery_thumbnail_path = "figures/flip_map.png"
 
 import argparse
-import os
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
 import fastvi
+from _cli import QUICK, default_dir
 
-QUICK = os.environ.get("FASTVI_QUICK") == "1"
 H = 0.01
 BLOCK = 400  # members per ensemble call: ~50 MB of samples at 1000 steps
 
@@ -130,8 +128,7 @@ def main(argv=None):
                         help="also run the sampled (pre-events) way and print the speed-up")
     args = parser.parse_args(argv)
     if args.out is None:
-        args.out = (Path(tempfile.mkdtemp()) if QUICK else Path(__file__).resolve().parents[1]
-                    / "docs" / "figures") / "flip_map.png"
+        args.out = default_dir() / "flip_map.png"
     args.out.parent.mkdir(parents=True, exist_ok=True)
 
     model = fastvi.scenes.double_pendulum()

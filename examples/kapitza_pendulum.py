@@ -20,16 +20,12 @@ With ``FASTVI_QUICK=1`` the run is shorter and the figure goes to a temporary di
 
 # sphinx_gallery_thumbnail_path = "figures/kapitza_pendulum.png"
 
-import os
-import sys
-import tempfile
-
 import numpy as np
 from scipy.integrate import solve_ivp
 
 import fastvi
+from _cli import QUICK, figure, figure_path, save
 
-QUICK = os.environ.get("FASTVI_QUICK") == "1"
 T = 2.0 if QUICK else 10.0
 H = 1e-3  # ω h = 0.15: the drive is resolved
 
@@ -55,11 +51,7 @@ def main(path):
     fall = fastvi.integrate(still, *still.initial_state(theta0), h=H, t_end=T, save_every=5)
     fall_theta = np.unwrap(still.angle(fall.q, fall.t))
 
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(7, 4))
-    FigureCanvasAgg(fig)
+    fig = figure(figsize=(7, 4))
     ax = fig.subplots()
     ax.plot(run.t, theta, lw=0.8, label=f"pivot shaken: a = {a:g} m, ω = {w:g} rad/s")
     ax.plot(fall.t, fall_theta, lw=0.8, label="pivot at rest")
@@ -68,11 +60,8 @@ def main(path):
     ax.set_ylabel("θ (rad from the downward vertical)")
     ax.set_title("Kapitza's pendulum, fastvi P2L-Q3G, h = 1 ms")
     ax.legend(fontsize="small")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    print(f"figure: {path}")
+    save(fig, path, dpi=120)
 
 
 if __name__ == "__main__":
-    default = os.path.join(tempfile.mkdtemp(), "kapitza.png") if QUICK else "kapitza_pendulum.png"
-    main(sys.argv[1] if len(sys.argv) > 1 else default)
+    main(figure_path("kapitza_pendulum.png"))

@@ -31,26 +31,15 @@ writes ``lyapunov.png`` (the running estimates against T) into ``docs/figures/``
 
 # sphinx_gallery_thumbnail_path = "figures/lyapunov.png"
 
-import argparse
-import os
-import tempfile
-from pathlib import Path
-
 import numpy as np
 
 import fastvi
 from fastvi.scenes.double_pendulum import state_from_angles
-
-QUICK = os.environ.get("FASTVI_QUICK") == "1"
+from _cli import QUICK, figure, out_dir, save
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=None, help="directory of the figure")
-    args = parser.parse_args(argv)
-    if args.out is None:
-        args.out = (Path(tempfile.mkdtemp()) if QUICK else Path(__file__).resolve().parents[1]
-                    / "docs" / "figures")
+    out = out_dir(__doc__, "the figure", argv)
     T, T_ens, members = (20.0, 20.0, 2) if QUICK else (1000.0, 500.0, 8)
     model = fastvi.scenes.double_pendulum()
     chaotic = fastvi.lyapunov_spectrum(model, *state_from_angles(np.pi / 2, np.pi / 2), h=0.01,
@@ -72,11 +61,7 @@ def main(argv=None):
     print(f"λ_1 over {members} starts at rest on E = 0, T = {T_ens:g} s: "
           f"{final.mean():.3f} ± {final.std(ddof=1):.3f} 1/s (mean ± standard deviation)")
 
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(9, 4))
-    FigureCanvasAgg(fig)
+    fig = figure(figsize=(9, 4))
     ax, bx = fig.subplots(1, 2)
     for i in range(chaotic.dimension):
         ax.plot(chaotic.t, chaotic.running[:, i], label=f"λ_{i + 1}, θ1 = θ2 = π/2")
@@ -96,10 +81,7 @@ def main(argv=None):
     bx.set_ylabel("λ_1 estimate (1/s)")
     bx.set_title(f"λ_1, {members} starts at rest on E = 0")
     bx.legend(fontsize=7)
-    fig.tight_layout()
-    path = args.out / "lyapunov.png"
-    fig.savefig(path, dpi=100)
-    print(f"figure: {path}")
+    save(fig, out / "lyapunov.png", dpi=100)
 
 
 if __name__ == "__main__":

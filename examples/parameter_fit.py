@@ -19,9 +19,6 @@ With ``FASTVI_QUICK=1`` the run is shorter and the figure goes to a temporary di
 
 # sphinx_gallery_thumbnail_path = "figures/parameter_fit.png"
 
-import os
-import sys
-import tempfile
 import time
 
 import numpy as np
@@ -29,8 +26,8 @@ from scipy.optimize import least_squares
 
 import fastvi
 from fastvi.scenes.double_pendulum import angles, state_from_angles
+from _cli import QUICK, figure, figure_path, save
 
-QUICK = os.environ.get("FASTVI_QUICK") == "1"
 C, L2 = 5, 3  # indices of the damping and the outer rod length in the parameters
 
 
@@ -67,11 +64,7 @@ def main(path):
     best = fit.trajectory(sol.x)
     first = fit.trajectory(guess)
 
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(7, 5))
-    FigureCanvasAgg(fig)
+    fig = figure(figsize=(7, 5))
     axes = fig.subplots(2, 1, sharex=True)
     for i, ax in enumerate(axes):
         ax.plot(run.t, data[:, i], ".", ms=3, color="0.4", label="noisy data")
@@ -83,12 +76,8 @@ def main(path):
     axes[0].legend(fontsize=8, loc="upper right")
     axes[1].set_xlabel("t (s)")
     fig.suptitle("Damped double pendulum: damping and rod length from noisy angles")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    print(f"figure: {path}")
+    save(fig, path, dpi=110)
 
 
 if __name__ == "__main__":
-    default = (os.path.join(tempfile.mkdtemp(), "parameter_fit.png") if QUICK
-               else "parameter_fit.png")
-    main(sys.argv[1] if len(sys.argv) > 1 else default)
+    main(figure_path("parameter_fit.png"))

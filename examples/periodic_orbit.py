@@ -31,16 +31,11 @@ directory.
 
 # sphinx_gallery_thumbnail_path = "figures/periodic_orbit.png"
 
-import argparse
-import os
-import tempfile
-from pathlib import Path
-
 import numpy as np
 
 import fastvi
+from _cli import QUICK, figure, out_dir, save
 
-QUICK = os.environ.get("FASTVI_QUICK") == "1"
 G = 9.81
 #: the linear modes of the unit double pendulum: ω², the shape θ2 / θ1, and a guess of θ1
 #: for the first period of the branch (the anti-phase mode softens faster)
@@ -70,12 +65,7 @@ def stability_index(orbit):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=None, help="directory of the figure")
-    args = parser.parse_args(argv)
-    if args.out is None:
-        args.out = (Path(tempfile.mkdtemp()) if QUICK else Path(__file__).resolve().parents[1]
-                    / "docs" / "figures")
+    out = out_dir(__doc__, "the figure", argv)
     model = fastvi.scenes.double_pendulum()
     stretches = np.linspace(1.005, 1.08, 31)[:6 if QUICK else None]  # steps small enough to follow
     branches = {name: branch(model, name, stretches, 200) for name in MODES}
@@ -90,11 +80,7 @@ def main(argv=None):
                   f"{o.residual:9.1e} {stability_index(o):8.5f}  {lam[0]:.5f}, {lam[1]:.5f}; "
                   f"{np.abs(lam[2:] - 1).max():.0e}")
 
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(12, 4))
-    FigureCanvasAgg(fig)
+    fig = figure(figsize=(12, 4))
     axes = fig.subplots(1, 3)
     for name, orbits in branches.items():  # the modes are curves in configuration space
         shown = orbits[::max(1, len(orbits) // 4)]
@@ -125,10 +111,7 @@ def main(argv=None):
     axes[2].set_title("stability index (λ + 1/λ)/2: stable in (−1, 1)", fontsize=10)
     axes[2].set_xlabel("energy (J)")
     axes[2].legend(fontsize=7)
-    fig.tight_layout()
-    path = args.out / "periodic_orbit.png"
-    fig.savefig(path, dpi=100)
-    print(f"figure: {path}")
+    save(fig, out / "periodic_orbit.png", dpi=100)
 
 
 if __name__ == "__main__":

@@ -29,17 +29,13 @@ shorter runs and animations, written to a temporary directory.
 
 # sphinx_gallery_thumbnail_path = "figures/heavy_top.gif"
 
-import argparse
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 import fastvi
 from fastvi.bodies import outputs, scenes
-
-QUICK = os.environ.get("FASTVI_QUICK") == "1"
+from _cli import QUICK, out_dir
 
 
 def heavy_top(out: Path) -> None:
@@ -69,14 +65,9 @@ def bricard(out: Path) -> None:
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=None, help="directory of the GIFs")
-    args = parser.parse_args(argv)
-    if args.out is None:
-        args.out = (Path(tempfile.mkdtemp()) if QUICK else Path(__file__).resolve().parents[1]
-                    / "docs" / "figures")
-    heavy_top(args.out)
-    bricard(args.out)
+    out = out_dir(__doc__, "the GIFs", argv)
+    heavy_top(out)
+    bricard(out)
 
 
 if __name__ == "__main__":

@@ -17,16 +17,12 @@ Run ``python examples/slider_crank_drive.py [figure.png]`` (default
 
 # sphinx_gallery_thumbnail_path = "figures/slider_crank_drive.png"
 
-import os
-import sys
-import tempfile
-
 import numpy as np
 
 import fastvi
 from fastvi.scenes.slider_crank import state
+from _cli import figure, figure_path, save
 
-QUICK = os.environ.get("FASTVI_QUICK") == "1"
 OMEGA = 2 * np.pi  # one turn a second
 
 
@@ -57,11 +53,7 @@ def main(path):
     err = np.max(np.abs(tau[inner] - ref[inner]))
     print(f"motor torque: peak {np.max(np.abs(ref)):.3f} N m, max |τ − dH/dφ| = {err:.2e} N m")
 
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(7, 4))
-    FigureCanvasAgg(fig)
+    fig = figure(figsize=(7, 4))
     ax = fig.subplots()
     ax.plot(np.degrees(phi), tau, lw=1.2, label="fastvi: (dW/dt)/Ω of the driving constraint")
     ax.plot(np.degrees(phi), ref, lw=0.8, ls="--", label="exact kinematics: dH/dφ")
@@ -69,11 +61,8 @@ def main(path):
     ax.set_ylabel("motor torque τ (N m)")
     ax.set_title(f"Slider–crank driven at Ω = {OMEGA:.3g} rad/s")
     ax.legend(fontsize="small")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    print(f"figure: {path}")
+    save(fig, path, dpi=120)
 
 
 if __name__ == "__main__":
-    default = os.path.join(tempfile.mkdtemp(), "slider.png") if QUICK else "slider_crank_drive.png"
-    main(sys.argv[1] if len(sys.argv) > 1 else default)
+    main(figure_path("slider_crank_drive.png"))

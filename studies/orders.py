@@ -477,6 +477,20 @@ PLACEMENTS = (
 )
 
 
+def _placement_table(w, degrees, row_of) -> None:
+    """The table "order by constraint placement": the observed order of q on the triple /
+    double pendulum, a row per placement of :data:`PLACEMENTS`, a column per degree;
+    ``row_of(s, name)`` is the measured row of that combination, or None (an empty cell)."""
+    w("| constraint points | " + " | ".join(f"s = {s}" for s in degrees) + " |")
+    w("|---|" + "---|" * len(degrees))
+    for label, fn in PLACEMENTS:
+        cells = []
+        for s in degrees:
+            r = row_of(s, fn(s)) if fn(s) is not None else None
+            cells.append(f"{r['triple'].order('q')} / {r['double'].order('q')}" if r else "")
+        w(f"| {label} | " + " | ".join(cells) + " |")
+
+
 def render(study: dict) -> str:
     """The markdown of ``docs/orders.md``."""
     from fastvi.tables import method as get_method
@@ -540,18 +554,7 @@ def render(study: dict) -> str:
         w("Observed order of q, triple / double pendulum, quadrature `Q<s+1>G` "
           "(the quadrature makes no difference here, see above):")
         w("")
-        w("| constraint points | " + " | ".join(f"s = {s}" for s in degrees) + " |")
-        w("|---|" + "---|" * len(degrees))
-        for label, fn in PLACEMENTS:
-            cells = []
-            for s in degrees:
-                nm = fn(s)
-                if nm is None or (s, get_method(nm).name) not in rows:
-                    cells.append("")
-                    continue
-                r = rows[(s, get_method(nm).name)]
-                cells.append(f"{r['triple'].order('q')} / {r['double'].order('q')}")
-            w(f"| {label} | " + " | ".join(cells) + " |")
+        _placement_table(w, degrees, lambda s, nm: rows.get((s, get_method(nm).name)))
         w("")
         if study["mild"]:
             mdeg = sorted({s for s, _ in study["mild"]})
@@ -559,14 +562,7 @@ def render(study: dict) -> str:
               "where the error is less erratic at the smallest h (the study's window, not the "
               "cleaner hand-picked one of `tests/test_orders.py`):")
             w("")
-            w("| constraint points | " + " | ".join(f"s = {s}" for s in mdeg) + " |")
-            w("|---|" + "---|" * len(mdeg))
-            for label, fn in PLACEMENTS:
-                cells = []
-                for s in mdeg:
-                    r = study["mild"].get((s, fn(s))) if fn(s) is not None else None
-                    cells.append(f"{r['triple'].order('q')} / {r['double'].order('q')}" if r else "")
-                w(f"| {label} | " + " | ".join(cells) + " |")
+            _placement_table(w, mdeg, lambda s, nm: study["mild"].get((s, nm)))
             w("")
 
     # ---------------------------------------------------------------- defaults

@@ -15,6 +15,8 @@ from fastvi.baselines import rk4, solve_ivp
 from fastvi.studies.convergence import drift_slope, observed_order
 from fastvi.studies.reference import chain_cartesian, chain_pendulum_reference
 
+from . import models
+
 REF_TOL = 1e-13
 # the package exports the function `rk4`, which shadows the submodule of the same name
 rk4_module = importlib.import_module("fastvi.baselines.rk4")
@@ -32,35 +34,8 @@ def _pend_dV(q, p, out):
 
 
 # Spring pendulum in polar coordinates q = (r, φ) (n = 2, m = 0, M = diag(m, m r²)):
-# params = (m, g, r0, k). Its mass matrix depends on q: the ∂T/∂q and ∂(Mv)/∂q path.
-
-
-def _sp_mass(q, p, out):
-    out[0, 0] = p[0]
-    out[0, 1] = 0.0
-    out[1, 0] = 0.0
-    out[1, 1] = p[0] * q[0] * q[0]
-
-
-def _sp_dT(q, v, p, out):
-    out[0] = p[0] * q[0] * v[1] * v[1]
-    out[1] = 0.0
-
-
-def _sp_dMv(q, v, p, out):
-    out[:, :] = 0.0
-    out[1, 0] = 2.0 * p[0] * q[0] * v[1]
-
-
-def _sp_V(q, p):
-    return -p[0] * p[1] * q[0] * np.cos(q[1]) + 0.5 * p[3] * (q[0] - p[2]) ** 2
-
-
-def _sp_dV(q, p, out):
-    out[0] = -p[0] * p[1] * np.cos(q[1]) + p[3] * (q[0] - p[2])
-    out[1] = p[0] * p[1] * q[0] * np.sin(q[1])
-
-
+# tests/models.py's polar_pendulum with a spring, params = (m, g, r0, k). Its mass matrix
+# depends on q: the ∂T/∂q and ∂(Mv)/∂q path.
 SP_PARAMS = (1.5, 9.81, 1.0, 40.0)
 
 
@@ -85,9 +60,9 @@ def angle_pendulum():
 
 @pytest.fixture(scope="module", params=["exact", "finite-difference"])
 def spring_pendulum(request):
-    extra = dict(momentum_jacobian=_sp_dMv) if request.param == "exact" else {}
-    return fastvi.Model(2, params=SP_PARAMS, mass=_sp_mass, kinetic_grad=_sp_dT, potential=_sp_V,
-                        potential_grad=_sp_dV, name="spring_pendulum", **extra)
+    # "finite-difference": no second derivatives, so RK4 differences ∂(Mv)/∂q along v
+    m, g, r0, k = SP_PARAMS
+    return models.polar_pendulum(m=m, g=g, l=r0, spring=k, exact=request.param == "exact")
 
 
 def _final_error(model, q0, v0, rhs, T, hs):

@@ -453,36 +453,34 @@ def _project(fns, flags, Mc, prm, q, v, ws):
 
 
 @hot
+def _stage(fns, flags, Mc, prm, q, v, c, kq, kv, kq_next, kv_next, ws):
+    """The next stage from ``(q, v) + c (kq, kv)``: its velocity into ``kq_next``, its
+    acceleration into ``kv_next``; returns the status of :func:`acceleration`."""
+    n = flags[_F_N]
+    qs, vs = ws.stages[8], ws.stages[9]
+    for i in range(n):
+        qs[i] = q[i] + c * kq[i]
+        vs[i] = v[i] + c * kv[i]
+        kq_next[i] = vs[i]
+    return acceleration(fns, flags, Mc, prm, qs, vs, kv_next, ws)
+
+
+@hot
 def rk4_step(fns, flags, Mc, prm, h, q, v, ws):
     """One classical RK4 step of ``(q̇, v̇) = (v, a(q, v))``, in place."""
     n = flags[_F_N]
     S = ws.stages
-    kq1, kq2, kq3, kq4, kv1, kv2, kv3, kv4, qs, vs = (S[0], S[1], S[2], S[3], S[4], S[5],
-                                                       S[6], S[7], S[8], S[9])
+    kq1, kq2, kq3, kq4, kv1, kv2, kv3, kv4 = S[0], S[1], S[2], S[3], S[4], S[5], S[6], S[7]
     for i in range(n):
         kq1[i] = v[i]
     st = acceleration(fns, flags, Mc, prm, q, v, kv1, ws)
-    if st != _OK:
-        return st
-    for i in range(n):
-        qs[i] = q[i] + 0.5 * h * kq1[i]
-        vs[i] = v[i] + 0.5 * h * kv1[i]
-        kq2[i] = vs[i]
-    st = acceleration(fns, flags, Mc, prm, qs, vs, kv2, ws)
-    if st != _OK:
-        return st
-    for i in range(n):
-        qs[i] = q[i] + 0.5 * h * kq2[i]
-        vs[i] = v[i] + 0.5 * h * kv2[i]
-        kq3[i] = vs[i]
-    st = acceleration(fns, flags, Mc, prm, qs, vs, kv3, ws)
-    if st != _OK:
-        return st
-    for i in range(n):
-        qs[i] = q[i] + h * kq3[i]
-        vs[i] = v[i] + h * kv3[i]
-        kq4[i] = vs[i]
-    st = acceleration(fns, flags, Mc, prm, qs, vs, kv4, ws)
+    # c = 0.5 * h: the same rounding as the product 0.5 * h * k written out
+    if st == _OK:
+        st = _stage(fns, flags, Mc, prm, q, v, 0.5 * h, kq1, kv1, kq2, kv2, ws)
+    if st == _OK:
+        st = _stage(fns, flags, Mc, prm, q, v, 0.5 * h, kq2, kv2, kq3, kv3, ws)
+    if st == _OK:
+        st = _stage(fns, flags, Mc, prm, q, v, h, kq3, kv3, kq4, kv4, ws)
     if st != _OK:
         return st
     h6 = h / 6.0

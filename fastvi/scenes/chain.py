@@ -24,6 +24,7 @@ set of module-level functions serves every N.
 from __future__ import annotations
 
 import numpy as np
+from numba.extending import register_jitable
 
 from ..model import Model
 from . import damping as damping_
@@ -49,41 +50,41 @@ def _dV(q, p, out):
         out[2 * i + 1] = p[2 * nb] * p[i]
 
 
+@register_jitable
+def _link(q, i):
+    """``r_i − r_{i−1}`` of link ``i`` (``r_{−1}``: the pivot at the origin)."""
+    if i == 0:
+        return q[0], q[1]
+    return q[2 * i] - q[2 * i - 2], q[2 * i + 1] - q[2 * i - 1]
+
+
 def _g(q, p, out):
     nb = q.shape[0] // 2
-    px = 0.0
-    py = 0.0
     for i in range(nb):
-        dx = q[2 * i] - px
-        dy = q[2 * i + 1] - py
+        dx, dy = _link(q, i)
         li = p[nb + i]
         out[i] = 0.5 * (dx * dx + dy * dy - li * li)
-        px = q[2 * i]
-        py = q[2 * i + 1]
 
 
 def _G(q, p, out):
     # only the entries of `pattern(N)`: the kernels hand `out` zeroed outside it
-    nb = q.shape[0] // 2
-    px = 0.0
-    py = 0.0
-    for i in range(nb):
-        dx = q[2 * i] - px
-        dy = q[2 * i + 1] - py
+    for i in range(q.shape[0] // 2):
+        dx, dy = _link(q, i)
         out[i, 2 * i] = dx
         out[i, 2 * i + 1] = dy
         if i > 0:
             out[i, 2 * i - 2] = -dx
             out[i, 2 * i - 1] = -dy
-        px = q[2 * i]
-        py = q[2 * i + 1]
 
 
 def _ddg(q, eta, p, out):
+    # also the closed chain's (fastvi.scenes.closed_chain): its last link ties the last body
+    # to a fixed point, so η has one entry more than there are bodies
     nb = q.shape[0] // 2
+    m = eta.shape[0]
     out[:, :] = 0.0
     for i in range(nb):
-        d = eta[i] + (eta[i + 1] if i + 1 < nb else 0.0)
+        d = eta[i] + (eta[i + 1] if i + 1 < m else 0.0)
         out[2 * i, 2 * i] = d
         out[2 * i + 1, 2 * i + 1] = d
         if i + 1 < nb:

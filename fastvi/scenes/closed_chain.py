@@ -18,10 +18,12 @@ from ``len(q) // 2``.
 from __future__ import annotations
 
 import numpy as np
+from numba.extending import register_jitable
 
 from ..model import Model
 from ..drawing import cartesian
 from ._common import attach, check_positive
+from .chain import _ddg  # Σ η_i ∇²g_i: block tridiagonal as for the open chain
 
 MIN_LINKS = 3
 
@@ -39,38 +41,34 @@ def _dV(q, p, out):
         out[2 * i + 1] = p[0] * p[3]
 
 
-def _g(q, p, out):
+@register_jitable
+def _link(q, p, i):
+    """``r_i − r_{i−1}`` of link ``i`` (``r_{−1} = A = (0, 0)``, ``r_{N−1} = D = (d, 0)``)."""
     nb = q.shape[0] // 2
-    px = 0.0
-    py = 0.0
-    for i in range(nb + 1):
-        x = q[2 * i] if i < nb else p[2]
-        y = q[2 * i + 1] if i < nb else 0.0
-        dx = x - px
-        dy = y - py
+    x = q[2 * i] if i < nb else p[2]
+    y = q[2 * i + 1] if i < nb else 0.0
+    if i == 0:
+        return x, y
+    return x - q[2 * i - 2], y - q[2 * i - 1]
+
+
+def _g(q, p, out):
+    for i in range(q.shape[0] // 2 + 1):
+        dx, dy = _link(q, p, i)
         out[i] = 0.5 * (dx * dx + dy * dy - p[1] * p[1])
-        px = x
-        py = y
 
 
 def _G(q, p, out):
     # only the entries of `pattern(N)`: the kernels hand `out` zeroed outside it
     nb = q.shape[0] // 2
-    px = 0.0
-    py = 0.0
     for i in range(nb + 1):
-        x = q[2 * i] if i < nb else p[2]
-        y = q[2 * i + 1] if i < nb else 0.0
-        dx = x - px
-        dy = y - py
+        dx, dy = _link(q, p, i)
         if i < nb:
             out[i, 2 * i] = dx
             out[i, 2 * i + 1] = dy
         if i > 0:
             out[i, 2 * i - 2] = -dx
             out[i, 2 * i - 1] = -dy
-        px = x
-        py = y
 
 
 def pattern(N: int):
@@ -84,21 +82,6 @@ def pattern(N: int):
         rows += [i] * (hi - lo)
         cols += range(lo, hi)
     return np.array(rows), np.array(cols)
-
-
-def _ddg(q, eta, p, out):
-    nb = q.shape[0] // 2
-    out[:, :] = 0.0
-    for i in range(nb):
-        d = eta[i] + eta[i + 1]
-        out[2 * i, 2 * i] = d
-        out[2 * i + 1, 2 * i + 1] = d
-        if i + 1 < nb:
-            e = -eta[i + 1]
-            out[2 * i, 2 * i + 2] = e
-            out[2 * i + 2, 2 * i] = e
-            out[2 * i + 1, 2 * i + 3] = e
-            out[2 * i + 3, 2 * i + 1] = e
 
 
 def _arc(N: int, l: float, d: float) -> np.ndarray:

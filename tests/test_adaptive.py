@@ -10,7 +10,7 @@ import pytest
 
 import fastvi
 from fastvi.kernels import layout as lay
-from fastvi.kernels.step import extrapolate, extrapolate_varied
+from fastvi.kernels.step import extrapolate, varied_weights
 from fastvi.studies.convergence import observed_order
 from fastvi.studies.reference import chain_cartesian, chain_pendulum_reference
 
@@ -29,8 +29,8 @@ def _polynomial(rng, deg, n, top=None):
 
 
 def _predict_varied(meth, q, dq, steps, two):
-    """The guess of ``extrapolate_varied`` for the third of ``steps`` = (h2, h1, h), from the
-    control points of the first two on the curve q(t)."""
+    """The guess of ``extrapolate`` with the weights of ``varied_weights`` for the third of
+    ``steps`` = (h2, h1, h), from the control points of the first two on the curve q(t)."""
     s, n, tau = meth.s, dq(0.0).shape[0], meth.kernel_tables.tau
     h2, h1, h = steps
     t2 = 0.1
@@ -41,8 +41,8 @@ def _predict_varied(meth, q, dq, steps, two):
     ws.hist[:] = (h1, h2)
     X = np.zeros(s * n)
     tabs = meth.kernel_tables
-    extrapolate_varied(tabs.tau, tabs.Lw, ws.Ew, ws.Z, ws.hist, Xp, Xpp, X, s, n, two, h,
-                       dq(t0))
+    varied_weights(tabs.tau, tabs.Lw, ws.Ew, ws.hist, h, s, two, ws.Ev, ws.E2v)
+    extrapolate(ws.Ev, ws.E2v, Xp, Xpp, X, ws.Z, s, n, two, h, dq(t0))
     expected = np.concatenate([q(t0 + tau[nu] * h) - q(t0) for nu in range(1, s + 1)])
     return X, expected
 
@@ -64,19 +64,17 @@ def test_the_predictor_of_a_changing_step_is_exact_on_polynomials_of_its_degree(
 
 
 @pytest.mark.parametrize("name", METHODS)
-def test_with_equal_steps_the_changing_step_predictor_is_the_tables_one(name):
+def test_with_equal_steps_the_changing_step_weights_are_the_tables(name):
+    """``varied_weights`` builds its weights in another way (barycentric products and the
+    α, β correction) than the tables (``fastvi.tables``: Vandermonde solves): equal for
+    equal steps, in the columns the extrapolation reads (the new nodes 1…s)."""
     meth = fastvi.tables.method(name)
-    tabs, s, n = meth.kernel_tables, meth.s, 4
-    rng = np.random.default_rng(3)
-    Xp, Xpp = rng.normal(size=s * n) * 1e-2, rng.normal(size=s * n) * 1e-2
-    Xp[(s - 1) * n:] += 0.5  # a displacement the two-step guess is trusted against
-    vk, h = rng.normal(size=n), 0.02
-    ws = lay.make_workspace(n, 0, s, meth.r, meth.J)
+    tabs, s, h = meth.kernel_tables, meth.s, 0.02
+    ws = lay.make_workspace(4, 0, s, meth.r, meth.J)
     ws.hist[:] = (h, h)
-    X1, X2 = np.zeros(s * n), np.zeros(s * n)
-    extrapolate_varied(tabs.tau, tabs.Lw, ws.Ew, ws.Z, ws.hist, Xp, Xpp, X1, s, n, True, h, vk)
-    extrapolate(tabs.E, tabs.E2, Xp, Xpp, X2, np.zeros((s, n)), s, n, True, h, vk)
-    assert np.max(np.abs(X1 - X2)) <= 1e-14 * np.max(np.abs(X2))
+    varied_weights(tabs.tau, tabs.Lw, ws.Ew, ws.hist, h, s, True, ws.Ev, ws.E2v)
+    assert np.max(np.abs(ws.Ev[:, 1:] - tabs.E[:, 1:])) <= 1e-13 * np.max(np.abs(tabs.E))
+    assert np.max(np.abs(ws.E2v[:, 1:] - tabs.E2[:, 1:])) <= 1e-12 * np.max(np.abs(tabs.E2))
 
 
 @pytest.fixture(scope="module")

@@ -2,10 +2,11 @@
 
 ``run`` advances one trajectory by a chunk of steps (the Python driver calls it once, or in
 chunks when it shows progress; the state carries everything, so chunking changes no bit).
-``run_member``/``run_members`` do the same for the members of an ensemble, in parallel.
-Both take the step through the one compiled entry point of :func:`.step.step_kernel` and
-book it with :func:`record`, so a member of an ensemble equals :func:`fastvi.integrate` of
-that member bit for bit by construction.
+It is the one time loop: ``run_member`` runs an ensemble's member through it with the
+member's save policy, ``run_members`` runs the members in parallel, and the linearised
+flow differentiates each step from its per-step hook. The step is the one compiled entry
+point of :func:`.step.step_kernel`, so a member of an ensemble equals
+:func:`fastvi.integrate` of that member bit for bit by construction.
 """
 
 from collections import namedtuple
@@ -16,13 +17,14 @@ from numba import prange
 from numba.core import types
 
 from .._numba import byref, hot, hot_inline, njit, own, ptr
-from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, F_DH, F_G, F_GV, F_ITERS, F_MAXRES,
-                     F_RES, F_TSLOT, I_FAILED, I_FIRST, I_FULL, I_ITERS, I_MAXRES, I_KR, I_RES,
-                     I_SLOT, I_STEPS, I_T, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK, I_WORK_F,
-                     INFO_SIZE, NEEDS_FULL_NEWTON, POT, S_FULL, S_G, S_GV, S_ITERS, S_RES, S_WORK,
-                     S_WORK_F, SAVE_DIAGNOSTICS, SAVE_FINAL, SAVE_STRIDE, STEP_OUT_SIZE,
-                     EVENT_SLOTS, EVENTS_FULL, Events, ModelData, Samples, dim, is_timed,
-                     sizes, with_plan, workspace_for)
+from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, EVENT_SLOTS, EVENT_TERMINAL,
+                     EVENTS_FULL, F_DH, F_G, F_GV, F_ITERS, F_MAXRES, F_RES, F_TSLOT, I_DH,
+                     I_DRIFT, I_FAILED, I_FIRST, I_FULL, I_H0, I_ITERS, I_KR, I_MAXRES, I_RES,
+                     I_SLOT, I_STEPS, I_T, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK,
+                     I_WORK_F, INFO_SIZE, NEEDS_FULL_NEWTON, POT, S_FULL, S_G, S_GV, S_ITERS,
+                     S_RES, S_WORK, S_WORK_F, SAVE_DIAGNOSTICS, SAVE_FINAL, SAVE_STRIDE,
+                     STEP_OUT_SIZE, Events, ModelData, Samples, dim, is_timed, sizes,
+                     with_plan, workspace_for)
 from .adapt import advance, finished, next_step
 from .events import after_step, event_values, room_for_crossings
 from .._launch import _key
@@ -149,7 +151,16 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
     named tuples (:func:`.byref`).
 
     ``events``: None for a run without events or dense output, whose loop is then compiled
-    without the event code (numba prunes what an argument that is None guards), or True.
+    without the event code (numba prunes what an argument that is None guards); True for
+    records that the driver grows (``EVENTS_FULL`` before a step that could overflow one);
+    False for records of fixed length that count the crossings past their end without
+    keeping them (an ensemble member's).
+
+    With ``info[I_DRIFT]`` non-zero, ``info[I_DH]`` becomes the maximum over the steps of
+    ``|H − info[I_H0] − W|`` (W the work of forces and time): the diagnostics save policy
+    of ensembles, which keep no samples but such maxima. A run-time switch, not an
+    argument: an ensemble's member then calls this loop with the argument types of
+    :func:`fastvi.integrate`, whose compiled loop it shares.
 
     ``each``: None, or a C function ``each(mdp, h, k, statep, wsp, infop, slot, datap)``
     called after every accepted step ``k`` with pointers to ``md``, ``state`` (rows 0–2 and
@@ -179,7 +190,7 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
             break
         if events is not None:
             if active:
-                if not room_for_crossings(ev):
+                if events and not room_for_crossings(ev):
                     return EVENTS_FULL
                 for a in range(state.shape[1]):
                     ev.qk[a] = state[0, a]
@@ -210,6 +221,9 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
                 if status != 0:
                     info[I_FAILED] = k
                     return status
+        if info[I_DRIFT] != 0.0:
+            e = energy(md, ws.time[1], state[0], state[1], state[2], ws.g)
+            info[I_DH] = max(info[I_DH], abs(e - info[I_H0] - info[I_WORK]))
         if est != 0:
             _last_sample(md, ws.time[1], state, ws, n_total, save_every, smp, info)
             return est
@@ -242,7 +256,8 @@ def step_hook(fn, md, state, ws, info, data, data_type):
 @hot
 def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, ist, fst, sout,
                info, ev, stepk, stages):
-    """Advance one member (rows q, p, v, then scratch of ``state``) through ``n_total`` steps.
+    """Advance one member (rows q, p, v, then scratch of ``state``) through ``n_total`` steps
+    of the one time loop :func:`run`, with the member's save policy.
 
     ``mode`` is ``SAVE_FINAL`` (the final state into slot 0 of ``smp``), ``SAVE_STRIDE``
     (every ``every``-th step and the last into slots 1, 2, …, exactly as ``run`` fills its
@@ -252,11 +267,10 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
     seeds ``fst[F_G]``, ``fst[F_GV]`` with the initial residuals). Returns the status code,
     also stored in ``ist[E_STATUS]``; a failed step's index goes to ``ist[E_FAILED]``.
 
-    ``ev`` holds the member's event records (``count = 0``: none; no dense rows). They are
-    booked by the same :func:`.events.after_step` as in ``run``, and a record that is full
-    counts further crossings without keeping them. A terminal event ends the member after
-    the step that contains it (status ``EVENT_TERMINAL``); in stride mode that step is then
-    the last sample, as in :func:`fastvi.integrate`.
+    ``ev`` holds the member's event records (``count = 0``: none; no dense rows), of fixed
+    length: a record that is full counts further crossings without keeping them. A terminal
+    event ends the member after the step that contains it (status ``EVENT_TERMINAL``); in
+    stride mode that step is then the last sample, as in :func:`fastvi.integrate`.
 
     ``stepk``, ``stages``: the compiled step (:func:`.step.step_kernel`), the very one
     :func:`fastvi.integrate` of that member calls: the same step, bit for bit.
@@ -266,43 +280,26 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
     info[I_FIRST] = 1.0
     info[I_SLOT] = 1.0
     info[I_T0] = t0
-    dh = 0.0
-    gmax = fst[F_G]
-    gvmax = fst[F_GV]
-    status = 0
-    ist[E_FAILED] = -1
     stride = every if mode == SAVE_STRIDE else 0
-    active = ev.count > 0
-    if active:
+    if ev.count > 0:
         event_values(md, ev, t0, state[0], state[2])
-    mdp, tabp, optp, wsp = byref(md), byref(tabs), byref(opts), byref(ws)
-    statep, soutp, stagesp = byref(state), byref(sout), byref(stages)
-    while int(info[I_STEPS]) < n_total:
-        k = int(info[I_STEPS])
-        if active:
-            for a in range(state.shape[1]):
-                ev.qk[a] = state[0, a]
-        _clock(ws, info, h)
-        first = info[I_FIRST] != 0.0
-        status = stepk(mdp, tabp, optp, h, statep, wsp, first, soutp, stagesp)
-        status = _book(status, k, state, ws, info, sout)
-        fst[F_RES] = sout[S_RES]
-        if status != 0:
-            ist[E_FAILED] = int(info[I_FAILED])
-            break
-        est = 0
-        if active:
-            est = after_step(md, tabs, h, ws.time[0], ws.time[1], k, ev.qk, ws.X, state, ev)
-        accept(md, ws.time[1], k + 1 == n_total, state, ws, stride, smp, info, sout)
-        if mode == SAVE_DIAGNOSTICS:
-            e = energy(md, ws.time[1], state[0], state[1], state[2], ws.g)
-            dh = max(dh, abs(e - H0 - info[I_WORK]))
-            gmax = max(gmax, sout[S_G])
-            gvmax = max(gvmax, sout[S_GV])
-        if est != 0:
-            status = est
-            _last_sample(md, ws.time[1], state, ws, n_total, stride, smp, info)
-            break
+    info[I_DRIFT] = 1.0 if mode == SAVE_DIAGNOSTICS else 0.0
+    info[I_H0] = H0
+    # the argument types of integrate's call (events: a run-time bool, False here, for
+    # fixed-length records; None as Python passes the defaults), so that both share one
+    # compiled loop
+    grow = ev.count < 0
+    status = run(md, tabs, opts, h, state, ws, n_total, n_total, stride, smp, info, sout, ev,
+                 stepk, stages, grow, None, None)
+    fst[F_RES] = sout[S_RES]
+    failed = status != 0 and status != EVENT_TERMINAL
+    if status == NEEDS_FULL_NEWTON:  # the members' step takes the full Newton itself
+        info[I_FAILED] = info[I_STEPS]
+    ist[E_FAILED] = int(info[I_FAILED]) if failed else -1
+    if mode == SAVE_DIAGNOSTICS:
+        # no sample was saved, so the residual windows span every step taken
+        fst[F_G] = max(fst[F_G], info[I_WIN_G])
+        fst[F_GV] = max(fst[F_GV], info[I_WIN_GV])
     slot = int(info[I_SLOT])
     if mode != SAVE_STRIDE:
         # the last good state (the final one unless the member failed)
@@ -313,9 +310,7 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
     ist[E_SAVED] = slot
     fst[F_ITERS] = info[I_ITERS]
     fst[F_MAXRES] = info[I_MAXRES]
-    fst[F_DH] = dh
-    fst[F_G] = gmax
-    fst[F_GV] = gvmax
+    fst[F_DH] = info[I_DH]
     return status
 
 

@@ -196,10 +196,12 @@ STEP_OUT_SIZE = 7
 # adaptive step of kernels/adapt.py, I_KR > 0 switching it on: the energy scale K_r, the
 # energy E0 of the start, the end time, the time reached and its summation error, and the
 # step density ρ_{k+1/2} of the next step, 0 before the first; I_WORK_F: the part of
-# I_WORK done by the applied forces)
+# I_WORK done by the applied forces; I_DRIFT non-zero: I_DH becomes the maximum over the
+# steps of |H − I_H0 − I_WORK|, the diagnostics policy of an ensemble's members)
 (I_STEPS, I_ITERS, I_WIN_G, I_WIN_GV, I_WIN_IT, I_RES, I_FAILED, I_SLOT, I_FIRST, I_MAXRES,
- I_FULL, I_WORK, I_T0, I_KR, I_E0, I_TEND, I_T, I_TC, I_RHO, I_WORK_F) = range(20)
-INFO_SIZE = 20
+ I_FULL, I_WORK, I_T0, I_KR, I_E0, I_TEND, I_T, I_TC, I_RHO, I_WORK_F, I_DRIFT, I_H0,
+ I_DH) = range(23)
+INFO_SIZE = 23
 
 # ----------------------------------------------------------------------------- ensembles
 #: save modes of ``run_member``
@@ -287,7 +289,8 @@ Workspace = namedtuple(
         "gt",  # (m,) ∂g/∂t at the step end (stays zero for an autonomous model)
         "time",  # (2,) t_k, t_{k+1} of the step being taken (set by the driver)
         "hist",  # (2,) the lengths of the last two steps (the predictor's: steps may vary)
-        "Ew",  # (s+2, s+2) the predictor's weights for steps of changing length
+        "Ew",  # (s+2, s+2) Lagrange weights of the predictor for steps of changing length
+        "Ev", "E2v",  # (s+1, s+1), (s+3, s+1) its weights then, in the place of E and E2
         "si",  # int64: structured-solve plan (header SI_*, permutations, patterns)
         "sb",  # float64: band storages and scratch of the structured solves
         # None for a plan of dense solves only, True when something is structured: a
@@ -329,7 +332,8 @@ _WS_SHAPES = dict(
     Gp="(mm, n)", Gm="(mm, n)", g="mm", etaJ="mm", S="(mm, mm)", pivm="mm",
     Mb="(n, n)", pivn="n", pivp="n", minv="n", Sc="(Jm, Jm)", pivs="Jm", w="Jm",
     Z="(s, n)", U="(s, n)", Xprev="N", Xpp="N", P="n", hold="H_SIZE", Fv="(n, n)", Fg="n",
-    gt="mm", time="2", hist="2", Ew="(s + 2, s + 2)", si="SI_HEADER", sb="1",
+    gt="mm", time="2", hist="2", Ew="(s + 2, s + 2)",
+    Ev="(s + 1, s + 1)", E2v="(s + 3, s + 1)", si="SI_HEADER", sb="1",
 )
 _WS_INT = {"piv", "pivm", "pivn", "pivp", "pivs", "hold", "si"}
 assert tuple(_WS_SHAPES) + ("structured", "dims") == Workspace._fields

@@ -550,22 +550,23 @@ def extrapolate(E, E2, Xp, Xpp, X, Z, s, n, two, h, vk):
 
 
 @hot
-def extrapolate_varied(tau, Lw, Ew, Z, hist, Xp, Xpp, X, s, n, two, h, vk):
-    """:func:`extrapolate` for a step of another length than the last two (``ws.hist``):
-    the same polynomials, built for the step lengths at hand rather than read from tables.
+def varied_weights(tau, Lw, Ew, hist, h, s, two, Ev, E2v):
+    """The weights of :func:`extrapolate` for a step of another length than the last two
+    (``hist`` = their lengths h1, h2): ``Ev`` in the place of ``tabs.E`` and, with ``two``,
+    ``E2v`` in that of ``tabs.E2`` (columns 1…s; with equal steps they are those tables).
 
     In the last step's local time τ (length ``h1``), with its control values ``y_μ`` at
     ``τ_μ`` and ``ω(τ) = Π_k (τ − τ_k)``: the one-step guess is the interpolant
     ``P_s(τ) = Σ_μ ℓ_μ(τ) y_μ``; the two-step guess adds ``ω(τ) (α + β (τ − 1))``, with
-    ``α`` from the slope ``h1 v_k`` at τ = 1 (where ω vanishes, ``ω'(1) = 1 / Lw[0, s]``)
-    and ``β`` from the step before's point at ``τ_e = (τ_{s−1} − 1) h2 / h1``. Both are
-    evaluated at this step's nodes ``1 + (h / h1) τ_ν``; with equal steps they are the
-    polynomials of ``tabs.E`` and ``tabs.E2``. Weights by prefix and suffix products
-    (``ws.Ew``: column 0 the point τ_e, columns ν the new nodes, row s + 1 ω), so nothing
-    divides but the two constants of α and β. Called, not inlined, also by the
-    size-specialized step (only runs of changing step length take it; inlined there it
-    made the fixed step ≈ 4 % slower), with arrays rather than the named tuples a call
-    would copy."""
+    ``α = (h1 v_k − P_s'(1)) / ω'(1)`` from the slope at τ = 1 (where ω vanishes,
+    ``ω'(1) = 1 / Lw[0, s]``) and ``β`` from the step before's point at
+    ``τ_e = (τ_{s−1} − 1) h2 / h1``. Both are evaluated at this step's nodes
+    ``x_ν = 1 + (h / h1) τ_ν`` and written as weights of the inputs of :func:`extrapolate`:
+    the point ``τ_e`` (row 0 of ``E2v``), the ``y_μ`` and the slope ``h v_k`` (row s + 2).
+    The Lagrange weights come from prefix and suffix products (``Ew``: column 0 the point
+    τ_e, columns ν the new nodes, row s + 1 ω), so nothing divides but the two constants of
+    α and β. Called, not inlined, also by the size-specialized step (only runs of changing
+    step length take it: inlined there it made the fixed step ≈ 4 % slower)."""
     h1 = hist[0]
     r = h / h1
     te = (tau[s - 1] - 1.0) * hist[1] / h1
@@ -580,38 +581,21 @@ def extrapolate_varied(tau, Lw, Ew, Z, hist, Xp, Xpp, X, s, n, two, h, vk):
         for mu in range(s, -1, -1):
             Ew[mu, col] *= suf * Lw[0, mu]
             suf *= x - tau[mu]
-    inv_b = 1.0 / (Ew[s + 1, 0] * (te - 1.0)) if two else 0.0
-    gap = 0.0
-    move = 0.0
-    for a in range(n):
-        last = Xp[(s - 1) * n + a]
-        slope = 0.0  # P_s'(1)
-        for mu in range(1, s + 1):
-            slope += Lw[1, mu] * Xp[(mu - 1) * n + a]
-        alpha = (h1 * vk[a] - slope) * Lw[0, s]
-        beta = 0.0
-        if two:
-            back = -Xpp[(s - 1) * n + a]
-            if s >= 2:
-                back += Xpp[(s - 2) * n + a]
-            pe = 0.0
-            for mu in range(1, s + 1):
-                pe += Ew[mu, 0] * Xp[(mu - 1) * n + a]
-            beta = (back - pe - Ew[s + 1, 0] * alpha) * inv_b
-        for nu in range(1, s + 1):
-            acc = 0.0
-            for mu in range(1, s + 1):  # y_0 = 0
-                acc += Ew[mu, nu] * Xp[(mu - 1) * n + a]
-            X[(nu - 1) * n + a] = acc - last
-            if two:
-                corr = Ew[s + 1, nu] * (alpha + beta * r * tau[nu])
-                Z[nu - 1, a] = acc + corr - last
-                gap = max(gap, abs(corr))
-                move = max(move, abs(last))
-    if two and gap <= PREDICT_TRUST * move:
-        for nu in range(s):
-            for a in range(n):
-                X[nu * n + a] = Z[nu, a]
+    for mu in range(s + 1):
+        for nu in range(s + 1):
+            Ev[mu, nu] = Ew[mu, nu]
+    if not two:
+        return
+    we = Ew[s + 1, 0]
+    inv_b = 1.0 / (we * (te - 1.0))
+    for nu in range(1, s + 1):
+        # ω(x_ν) (α + β r τ_ν) = a_ν (h1 v_k − P_s'(1)) / Lw[0, s] … in the inputs' weights
+        kappa = Ew[s + 1, nu] * r * tau[nu] * inv_b
+        a = (Ew[s + 1, nu] - kappa * we) * Lw[0, s]
+        E2v[0, nu] = kappa
+        for mu in range(s + 1):
+            E2v[mu + 1, nu] = Ew[mu, nu] - a * Lw[1, mu] - kappa * Ew[mu, 0]
+        E2v[s + 2, nu] = a / r
 
 
 @hot
@@ -637,8 +621,8 @@ def predict(tabs_, n, m, h, vk, ws_, order):
     sn = s * n
     two = order >= 2 and ws.hold[H_HIST] >= 2
     if ws.hist[0] != h or (two and ws.hist[1] != h):
-        extrapolate_varied(tabs.tau, tabs.Lw, ws.Ew, ws.Z, ws.hist, Xp, ws.Xpp, X, s, n, two,
-                           h, vk)
+        varied_weights(tabs.tau, tabs.Lw, ws.Ew, ws.hist, h, s, two, ws.Ev, ws.E2v)
+        extrapolate(ws.Ev, ws.E2v, Xp, ws.Xpp, X, ws.Z, s, n, two, h, vk)
     else:
         extrapolate(E, tabs.E2, Xp, ws.Xpp, X, ws.Z, s, n, two, h, vk)
     for k in range(sn, sn + J * m):

@@ -329,6 +329,17 @@ def assemble(md_, tabs_, h, qk, pk, ws_, jac):
     return st
 
 
+@hot_inline
+def _jacobian(md, exact, slot, of, kind, q, v, out, s1, s2, s3, n):
+    """``out`` (n, n) = the model's callback ``slot`` where it has it (``exact``), else central
+    differences (:func:`_fd_vec_jacobian` of ``kind``) of the callback ``of`` it
+    differentiates; ``s1 … s3`` (n,) scratch."""
+    if exact != 0:
+        md.fns[slot](ptr(q), ptr(v), ptr(md.prm), ptr(out))
+    else:
+        _fd_vec_jacobian(md.fns[of], kind, q, v, md.prm, out, s1, s2, s3, n)
+
+
 @hot
 def newton_matrix(md_, tabs_, h, qk, ws_):
     r"""``ws.A = ∂R/∂X`` at the unknowns ``ws.X``: the exact derivative of :func:`residual`
@@ -402,19 +413,16 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                 for a in range(n):
                     for c in range(n):
                         Aq[a, c] = 0.0
-            elif flags[F_EX_PHESS] != 0:
-                fns[PHESS](ptr(qi), ptr(qi), ptr(prm), ptr(Aq))
             else:
-                _fd_vec_jacobian(fns[PGRAD], _FD_HESSIAN, qi, qi, prm, Aq, fa, F, Pm, n)
+                _jacobian(md, flags[F_EX_PHESS], PHESS, PGRAD, _FD_HESSIAN, qi, qi, Aq, fa, F,
+                          Pm, n)
             for a in range(n):
                 for c in range(n):
                     Aq[a, c] = -Aq[a, c]
             if has_mass:
                 fns[MASS](ptr(qi), ptr(qi), ptr(prm), ptr(Mi))
-                if flags[F_EX_KHESS] != 0:
-                    fns[KHESS](ptr(qi), ptr(vi), ptr(prm), ptr(Hc))
-                else:
-                    _fd_vec_jacobian(fns[KGRAD], _FD_HESSIAN, qi, vi, prm, Hc, fa, F, Pm, n)
+                _jacobian(md, flags[F_EX_KHESS], KHESS, KGRAD, _FD_HESSIAN, qi, vi, Hc, fa, F,
+                          Pm, n)
                 for a in range(n):
                     for c in range(n):
                         Aq[a, c] += Hc[a, c]
@@ -424,17 +432,11 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                     fd_momentum_jacobian(fns[MASS], qi, vi, prm, Cq, fa, Ma, n)
             if has_force:
                 # ∂F_nc/∂q joins the force block, ∂F_nc/∂v the mixed block (docs/method.md §11)
-                if flags[F_EX_FJQ] != 0:
-                    fns[FJQ](ptr(qi), ptr(vi), ptr(prm), ptr(Hc))
-                else:
-                    _fd_vec_jacobian(fns[FORCE], _FD_Q, qi, vi, prm, Hc, fa, F, Pm, n)
+                _jacobian(md, flags[F_EX_FJQ], FJQ, FORCE, _FD_Q, qi, vi, Hc, fa, F, Pm, n)
                 for a in range(n):
                     for c in range(n):
                         Aq[a, c] += Hc[a, c]
-                if flags[F_EX_FJV] != 0:
-                    fns[FJV](ptr(qi), ptr(vi), ptr(prm), ptr(Fv))
-                else:
-                    _fd_vec_jacobian(fns[FORCE], _FD_V, qi, vi, prm, Fv, Ma[0], fa, F, n)
+                _jacobian(md, flags[F_EX_FJV], FJV, FORCE, _FD_V, qi, vi, Fv, Ma[0], fa, F, n)
             w = h * b[i]
             for nu in range(s):
                 for mu in range(1, s + 1):

@@ -22,7 +22,7 @@ from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, EVENT_SLOTS, EVENT_TE
                      I_DRIFT, I_FAILED, I_FIRST, I_FULL, I_H0, I_ITERS, I_KR, I_MAXRES, I_RES,
                      I_SLOT, I_STEPS, I_T, I_T0, I_WIN_G, I_WIN_GV, I_WIN_IT, I_WORK,
                      I_WORK_F, INFO_SIZE, NEEDS_FULL_NEWTON, POT, S_FULL, S_G, S_GV, S_ITERS,
-                     S_RES, S_WORK, S_WORK_F, SAVE_DIAGNOSTICS, SAVE_FINAL, SAVE_STRIDE,
+                     S_RES, S_WORK, S_WORK_F, SAVE_DIAGNOSTICS, SAVE_STRIDE,
                      STEP_OUT_SIZE, Events, ModelData, Samples, dim, is_timed, sizes,
                      with_plan, workspace_for)
 from .adapt import advance, finished, next_step

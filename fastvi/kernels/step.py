@@ -81,6 +81,16 @@ _MASS_ROWS_SMALL = 8
 _FD_Q, _FD_HESSIAN, _FD_V = 0, 1, 2
 
 
+@hot_inline
+def _symmetrize(out, n):
+    """``out ← (out + outᵀ) / 2``: a Hessian by differences, symmetric as the exact one."""
+    for a in range(n):
+        for b in range(a + 1, n):
+            t = 0.5 * (out[a, b] + out[b, a])
+            out[a, b] = t
+            out[b, a] = t
+
+
 @hot
 def _fd_vec_jacobian(fn, kind, q, v, prm, out, xa, fa, fb, n):
     """out[:, b] = ∂f/∂x_b by central differences of a vector callback f(q, v), with x = q
@@ -105,11 +115,7 @@ def _fd_vec_jacobian(fn, kind, q, v, prm, out, xa, fa, fb, n):
         for a in range(n):
             out[a, b] = (fa[a] - fb[a]) * inv
     if kind == _FD_HESSIAN:
-        for a in range(n):
-            for b in range(a + 1, n):
-                t = 0.5 * (out[a, b] + out[b, a])
-                out[a, b] = t
-                out[b, a] = t
+        _symmetrize(out, n)
 
 
 @hot
@@ -160,11 +166,7 @@ def fd_constraint_hessian(fjac, q, eta, prm, out, qa, Gp, Gm, n, m):
             for c in range(m):
                 acc += (Gp[c, a] - Gm[c, a]) * eta[c]
             out[a, b] = acc * inv
-    for a in range(n):
-        for b in range(a + 1, n):
-            t = 0.5 * (out[a, b] + out[b, a])
-            out[a, b] = t
-            out[b, a] = t
+    _symmetrize(out, n)
 
 
 @hot
@@ -216,11 +218,7 @@ def fd_constraint_hessian_grouped(fjac, q, eta, prm, out, qa, d, Gp, Gm, si, n, 
             a = si[pr + k]
             b = si[pb + k]
             out[a, b] = d[a] * (0.5 / (_FD_REL * max(1.0, abs(q[b]))))
-    for a in range(n):
-        for b in range(a + 1, n):
-            t = 0.5 * (out[a, b] + out[b, a])
-            out[a, b] = t
-            out[b, a] = t
+    _symmetrize(out, n)
 
 
 # ----------------------------------------------------------------------------- time

@@ -369,7 +369,7 @@ def _freeze_background(fig, ax, moving, dpi: float) -> None:
 
 
 def _progress_bar(frames: int, progress):
-    from .results import ProgressBar
+    from .progress import ProgressBar
 
     if progress is None:
         isatty = getattr(sys.stderr, "isatty", None)

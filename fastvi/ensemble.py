@@ -530,7 +530,7 @@ _PROGRESS_GROUPS = 20
 def _ensemble_with_progress(model, Q0, V0, params, opts, threads, run_check, events):
     """:func:`_ensemble` over consecutive groups of members, a progress line updated after
     each group (the kernel runs a member to its end in one go), joined in order."""
-    from .results import ProgressBar
+    from .progress import ProgressBar
 
     Q0, V0, P = _members(model, Q0, V0, params)
     N = Q0.shape[0]

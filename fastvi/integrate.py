@@ -24,7 +24,8 @@ from .kernels import layout as lay
 from .kernels.layout import Samples
 from .kernels.step import step_kernel
 from .model import Model
-from .results import NoDenseOutput, ProgressBar, Result
+from .progress import ProgressBar
+from .results import NoDenseOutput, Result
 from .status import MESSAGES, Status
 from .tables import Method
 

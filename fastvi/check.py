@@ -75,7 +75,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ._numba import njit, ptr, quiet
-from .model import SLOTS, Model, _call
+from .model import SLOTS, Model, call_callback
 
 __all__ = ["check_model", "CheckReport", "CheckRow", "ModelCheckError", "DEFAULT_RTOL"]
 
@@ -458,7 +458,7 @@ class _Callbacks:
             q = np.ascontiguousarray(q, dtype=np.float64)
             v = q if v is None else np.ascontiguousarray(v, dtype=np.float64)
             with quiet():
-                _call(self.fn[slot], q, v, self.p, out)
+                call_callback(self.fn[slot], q, v, self.p, out)
             self.count += 1
             mask = self.pattern.get(slot)
             if mask is not None and np.any(out.ravel()[~mask] != 0.0):

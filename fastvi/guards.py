@@ -27,6 +27,7 @@ import numpy as np
 
 from . import check as check_
 from ._numba import quiet
+from .model import call_callback
 
 __all__ = ["sizes", "events", "EventFunctionError"]
 
@@ -148,7 +149,7 @@ def _plain(fn, q, v, p, n):
     qq, vv, pp = (np.concatenate([x, np.zeros(pad)]) for x in (q, v, p))
     out = np.zeros(1 + pad)
     with quiet():
-        check_._call(fn, qq, vv, pp, out)
+        call_callback(fn, qq, vv, pp, out)
     return float(out[0])
 
 

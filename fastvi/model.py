@@ -92,14 +92,14 @@ def _absent(q, v, params, out):  # pragma: no cover - never called: flags skip i
 
 
 @njit
-def _call(fn, q, v, params, out):
+def call_callback(fn, q, v, params, out):
     """Evaluate one compiled callback from Python (validation, diagnostics, baselines)."""
     fn(ptr(q), ptr(v), ptr(params), ptr(out))
 
 
 #: the callback signature as a ctypes prototype: Python calls a callback by its address in
-#: ≈ 4 µs, where numba's dispatcher of :func:`_call` re-types the callback argument on every
-#: call (≈ 16 µs; a dozen evaluations in every ``integrate`` call's validation)
+#: ≈ 4 µs, where numba's dispatcher of :func:`call_callback` re-types the callback argument
+#: on every call (≈ 16 µs; a dozen evaluations in every ``integrate`` call's validation)
 _DIRECT = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
                            ctypes.c_void_p)
 

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from fastvi.model import SLOTS, _call
+from fastvi.model import SLOTS, call_callback
 
 
 def fd_jacobian(f, q, eps=1e-6):
@@ -15,8 +15,8 @@ def slot_value(model, slot, q, v, shape):
     ``constraint_hessian``), written into a new array of ``shape``."""
     fns, _, _ = model.kernel_arguments()
     out = np.zeros(shape)
-    _call(fns[SLOTS.index(slot)], np.ascontiguousarray(q, float), np.ascontiguousarray(v, float),
-          np.asarray(model.params, float), out)
+    call_callback(fns[SLOTS.index(slot)], np.ascontiguousarray(q, float),
+                  np.ascontiguousarray(v, float), np.asarray(model.params, float), out)
     return out
 
 

@@ -303,13 +303,13 @@ def _badness(row: CheckRow) -> float:
 # up as a changed bit pattern, instead of corrupting the heap. The guard is longer than any
 # plausible mistake: a transposed (n, m) write into an (m, n) output reaches flat index
 # (n−1)·n + m − 1 < n², a loop over the wrong count at most n² as well.
-_FILL = np.array([0x7FF80BADF00D0001, 0x7FF80BADF00D0002], dtype=np.uint64)
-_GUARD_MARGIN = 64
+GUARD_FILL = np.array([0x7FF80BADF00D0001, 0x7FF80BADF00D0002], dtype=np.uint64)
+GUARD_MARGIN = 64
 _OK, _UNSET, _OUTSIDE = 0, 1, 2
 #: a callback with a declared pattern (``constraint_jacobian_pattern``) wrote a non-zero
 #: outside it (set in Python after the guarded call, which knows nothing of patterns)
 _OFF_PATTERN = 3
-_ENTRY: list = []  # compiled entry point of _guarded_call, once known
+_ENTRY: list = []  # compiled entry point of guarded_call, once known
 
 _DIMS = dict(mass=("n", "n"), kinetic_grad=("n",), potential=(), potential_grad=("n",),
              constraint=("m",), constraint_jacobian=("m", "n"), potential_hessian=("n", "n"),
@@ -333,7 +333,7 @@ def _intact(f, u, start, end, src, length, fill):
 
 
 @njit
-def _guarded_call(fn, f, u, q, v, p, lay, fill):
+def guarded_call(fn, f, u, q, v, p, lay, fill):
     """Evaluate ``fn`` with its ``out``, ``q``, ``v``, ``params`` inside the guarded buffer
     ``f`` (``u`` is the same memory as uint64) and say whether it wrote exactly the
     declared output: ``_OK``, ``_UNSET`` (a declared entry still holds the fill), or
@@ -389,7 +389,7 @@ class _Callbacks:
                           constraint_hessian=(n, n), kinetic_hessian=(n, n),
                           momentum_jacobian=(n, n), force=(n,), force_jacobian_q=(n, n),
                           force_jacobian_v=(n, n), constraint_time_derivative=(m,))
-        self.pad = n * n + 2 * n + _GUARD_MARGIN
+        self.pad = n * n + 2 * n + GUARD_MARGIN
         self.layout, self.buf, self.size = {}, {}, {}
         for slot, shape in self.shape.items():
             size = int(np.prod(shape)) if shape else 1
@@ -410,20 +410,20 @@ class _Callbacks:
         # the entry point below takes these as C-contiguous float64 vectors without checking
         q = np.ascontiguousarray(q, dtype=np.float64)
         v = q if v is None else np.ascontiguousarray(v, dtype=np.float64)
-        args = (self.fn[slot], f, u, q, v[:lay[2]], self.p, lay, _FILL[fill])
+        args = (self.fn[slot], f, u, q, v[:lay[2]], self.p, lay, GUARD_FILL[fill])
         if _ENTRY:
             status = _ENTRY[0](*args)
         else:
             with quiet():
-                status = _guarded_call(*args)
+                status = guarded_call(*args)
             # the dispatcher re-derives the type of the callback argument on every call (15 µs,
             # most of an evaluation); every argument here has one fixed type, so later calls go
             # straight to the compiled entry point
-            _ENTRY[:] = [cres.entry_point for cres in _guarded_call.overloads.values()][:1]
+            _ENTRY[:] = [cres.entry_point for cres in guarded_call.overloads.values()][:1]
         self.count += 1
         mask = self.pattern.get(slot)
         if mask is not None and status in (_OK, _UNSET):
-            status = self._apply_pattern(slot, f, u, mask, _FILL[fill])
+            status = self._apply_pattern(slot, f, u, mask, GUARD_FILL[fill])
         return status, f, u
 
     def _apply_pattern(self, slot: str, f, u, mask, fill):
@@ -489,7 +489,7 @@ class _Callbacks:
         after = []
         for fill in (0, 1):
             _, f, u = self._run(slot, q, v, fill)
-            expected = np.full(u.shape, _FILL[fill], dtype=np.uint64)
+            expected = np.full(u.shape, GUARD_FILL[fill], dtype=np.uint64)
             ef = expected.view(np.float64)
             ef[qs:qs + nq] = q
             ef[vs:vs + nv] = (q if v is None else v)[:nv]
@@ -524,7 +524,7 @@ class _Callbacks:
                            f"model's `{slot}_pattern` ({int(mask.sum())} entries declared): add the "
                            "entries to the pattern, or fix the function", int(off[0]))
         if problem is None:
-            unset = np.flatnonzero((a0[:size] == _FILL[0]) & (a1[:size] == _FILL[1]))
+            unset = np.flatnonzero((a0[:size] == GUARD_FILL[0]) & (a1[:size] == GUARD_FILL[1]))
             if unset.size:
                 problem = (self._unset(slot, unset), int(unset[0]))
         if problem is None:
@@ -846,7 +846,7 @@ def _t_column(fd):
     return J[..., 0], est[..., 0], fscale, hmin
 
 
-def _check_sizes(model: Model, q, v=None, *, params=None, t: float = 0.0) -> None:
+def check_sizes(model: Model, q, v=None, *, params=None, t: float = 0.0) -> None:
     """Only the first part of :func:`check_model`: every callback evaluated twice at ``(q, v)``
     into guarded buffers (well under a millisecond once compiled).
 

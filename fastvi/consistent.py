@@ -106,9 +106,9 @@ def consistent_state(model: Model, q, v, *, fixed=(), t: float = 0.0, params=Non
     if m == 0:
         return q, v
     if not model._checked:  # our evaluations below use the plain (unguarded) buffers
-        from .check import _check_sizes
+        from .check import check_sizes
 
-        _check_sizes(model, q, v, params=prm, t=t)
+        check_sizes(model, q, v, params=prm, t=t)
     if free.size < m:
         raise ValueError(
             f"`fixed` leaves {free.size} free coordinate(s) for m = {m} constraints: fixing "

@@ -26,12 +26,12 @@ from . import guards
 from . import structure
 from ._launch import Launcher
 from ._numba import quiet
-from .integrate import Result, _timed
+from .integrate import Result, timed
 from .kernels import drive
 from .kernels import layout as lay
 from .kernels.step import step_kernel
 from .model import Model
-from .results import ResultBase, _finish_figure, _new_figure
+from .results import ResultBase, finish_figure, new_figure
 from .status import MESSAGES, Status
 from .tables import Method
 
@@ -232,7 +232,7 @@ class EnsembleResult(ResultBase):
         i, j = (int(c) for c in coordinates)
         q, _ = self.final_state()
         ok = np.asarray(self.success)
-        fig = _new_figure(path, figsize=(10, 4.2))
+        fig = new_figure(path, figsize=(10, 4.2))
         a1, a2 = fig.subplots(1, 2)
         a1.scatter(q[ok, i], q[ok, j], s=6, label="reached t_end")
         if (~ok).any():
@@ -255,7 +255,7 @@ class EnsembleResult(ResultBase):
             a2.set_title("energy error")
         fig.suptitle(f"{self.model_name}, {self._label()}, h = {self.h:g}, {self.n_steps} steps")
         fig.tight_layout()
-        return _finish_figure(fig, path)
+        return finish_figure(fig, path)
 
     @property
     def failed(self) -> np.ndarray:
@@ -302,8 +302,8 @@ class EnsembleResult(ResultBase):
             f"Newton iterations/step = {st['newton_iterations'] / max(1, st['member_steps']):.2f}",
         ]
         if self.max_energy_error is not None:
-            timed = self.stats.get("timed")
-            lines.append(f"max {'|ΔH − W|' if timed else '|ΔH|'} = {np.max(self.max_energy_error):.3e}, "
+            balance = self.stats.get("timed")
+            lines.append(f"max {'|ΔH − W|' if balance else '|ΔH|'} = {np.max(self.max_energy_error):.3e}, "
                          f"max |g| = {np.max(self.max_constraint_residual):.3e}, "
                          f"max {'|Gv + g_t|' if timed else '|Gv|'} = "
                          f"{np.max(self.max_velocity_residual):.3e}")
@@ -598,7 +598,7 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
               events=None) -> EnsembleResult:
     t_setup = time.perf_counter()
     Q0, V0, P = _members(model, Q0, V0, params)
-    compile_time = _timed(model._compile)
+    compile_time = timed(model._compile)
     t_events = time.perf_counter()
     guards.signatures(events)  # SciPy's ev(t, y) named before numba's typing error
     ev = events_.prepare(model, opts["method"], events, 0, 1)  # compiles the event functions
@@ -606,9 +606,9 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
     check_time = 0.0
     t0 = opts.get("t0", 0.0)
     if run_check and not getattr(model, "_checked", True):  # as integrate: before the projection
-        check_time = _timed(lambda: model.check(Q0[0], V0[0], params=P[0], n_random=1, t=t0))
+        check_time = timed(lambda: model.check(Q0[0], V0[0], params=P[0], n_random=1, t=t0))
     else:  # the sizes always (check=False skips the derivatives only)
-        check_time = _timed(lambda: guards.sizes(model, Q0[0], V0[0], P[0], t0))
+        check_time = timed(lambda: guards.sizes(model, Q0[0], V0[0], P[0], t0))
     if ev.count:
         guards.events(model, ev, Q0[0], V0[0], P[0], t0)
     X0, H0, g0, gv0 = _initial_states(model, Q0, V0, P, first_member, t0)

@@ -108,7 +108,7 @@ class DenseSolution:
                 f"n={self.points.shape[2]}, {self.points.nbytes / max(1, self.points.shape[0]):.0f} bytes/step)")
 
 
-def _as_list(events):
+def as_list(events):
     if events is None:
         return []
     if callable(events):
@@ -126,7 +126,7 @@ def _as_list(events):
 def check_list(events) -> None:
     """Refuse a bad ``events`` argument (not a function or list of them, or too many, or a
     bad ``terminal``/``direction``) before anything is compiled or sent anywhere."""
-    fns = _as_list(events)
+    fns = as_list(events)
     if len(fns) > EVENT_SLOTS:
         raise ValueError(f"`events` may hold at most {EVENT_SLOTS} functions, got {len(fns)}")
     for i, fn in enumerate(fns):
@@ -158,7 +158,7 @@ def prepare(model, method, events, dense_steps: int, capacity: int = _INITIAL_CA
     from .model import _absent, _wrap
 
     check_list(events)
-    fns = _as_list(events)
+    fns = as_list(events)
     k = model.params.shape[0]
     compiled = []
     with warnings.catch_warnings():

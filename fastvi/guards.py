@@ -52,7 +52,7 @@ def sizes(model, q, v, params, t: float) -> None:
     """
     if getattr(model, "_checked", False) or getattr(model, "_sized", False):
         return
-    check_._check_sizes(model, q, v, params=params, t=t)
+    check_.check_sizes(model, q, v, params=params, t=t)
     model._sized = True  # an instance attribute: a pickled model is checked again where it lands
 
 
@@ -75,9 +75,9 @@ def _positional_count(fn):
 def signatures(events) -> None:
     """Refuse event functions that cannot take ``(t, q, v, params)``, naming SciPy's
     ``(t, y)`` convention when that is what they follow (before numba compiles them)."""
-    from .events import _as_list
+    from .events import as_list
 
-    for i, fn in enumerate(_as_list(events)):
+    for i, fn in enumerate(as_list(events)):
         counted = _positional_count(fn)
         if counted is None or counted[1]:
             continue
@@ -104,7 +104,7 @@ def events(model, ev, q, v, params, t: float) -> None:
     """
     n = model.n
     p = model.kernel_params(params, t)
-    pad = n * n + 2 * n + check_._GUARD_MARGIN
+    pad = n * n + 2 * n + check_.GUARD_MARGIN
     starts, at = [], 0
     for length in (1, n, n, p.shape[0]):  # out, q, v, params, each followed by a guard
         starts.append(at)
@@ -123,7 +123,7 @@ def events(model, ev, q, v, params, t: float) -> None:
         where = f"`events[{e}]`"
         for qq, vv in ((probe_q, probe_v), (q, v)):
             with quiet():
-                status = check_._guarded_call(fn, f, u, qq, vv, p, lay, check_._FILL[0])
+                status = check_.guarded_call(fn, f, u, qq, vv, p, lay, check_.GUARD_FILL[0])
             if status == check_._OUTSIDE:
                 raise EventFunctionError(
                     f"{where} {_what_changed(f, u, lay, qq, vv, p)} (n = {n}). Event functions must "
@@ -145,7 +145,7 @@ def events(model, ev, q, v, params, t: float) -> None:
 
 def _plain(fn, q, v, p, n):
     """The event with its inputs followed by zeros (not NaN) instead of guards."""
-    pad = n * n + 2 * n + check_._GUARD_MARGIN
+    pad = n * n + 2 * n + check_.GUARD_MARGIN
     qq, vv, pp = (np.concatenate([x, np.zeros(pad)]) for x in (q, v, p))
     out = np.zeros(1 + pad)
     with quiet():
@@ -156,7 +156,7 @@ def _plain(fn, q, v, p, n):
 def _what_changed(f, u, lay, q, v, p) -> str:
     """Which input (or guard past it) a guarded event evaluation changed, in words."""
     size, nq, nv, npar, qs, vs, ps = (int(x) for x in lay)
-    fill = check_._FILL[0]
+    fill = check_.GUARD_FILL[0]
     for name, start, src, end in (("q", qs, q, vs), ("v", vs, v, ps), ("params", ps, p, u.shape[0])):
         now = f[start:start + src.shape[0]]
         changed = np.flatnonzero(~((now == src) | (np.isnan(now) & np.isnan(src))))

@@ -380,12 +380,12 @@ def integrate(
     if recover and (dense_output or events is not None):
         raise ValueError("`recover` cannot be combined with `dense_output`, `t_eval` or `events` (a "
                          "recovered step has no single polynomial); use a smaller `h` instead")
-    compile_time = _timed(model._compile)
+    compile_time = timed(model._compile)
     check_time = 0.0
     if check and not model._checked:  # before the projection, which trusts G(q)
-        check_time = _timed(lambda: model.check(q0, v0, params=prm, n_random=1, t=t0))
+        check_time = timed(lambda: model.check(q0, v0, params=prm, n_random=1, t=t0))
     else:  # check=False skips the derivatives, never the sizes (a size mistake corrupts memory)
-        check_time = _timed(lambda: guards.sizes(model, q0, v0, prm, t0))
+        check_time = timed(lambda: guards.sizes(model, q0, v0, prm, t0))
     guards.signatures(events)
     q0, v0 = valid.initial_state(model, q0, v0, prm, t0)
 
@@ -532,7 +532,7 @@ def integrate(
     return result
 
 
-def _timed(fn) -> float:
+def timed(fn) -> float:
     t = time.perf_counter()
     fn()
     return time.perf_counter() - t

@@ -170,7 +170,7 @@ class TrajectoryResult(ResultBase):
             labels = [str(x) for x in labels]
             if len(labels) != n:
                 raise ValueError(f"`labels` must name each of the n = {n} coordinates, got {len(labels)}")
-        fig = _new_figure(path, figsize=(7, 5.0 + 2.5 * len(groups)))
+        fig = new_figure(path, figsize=(7, 5.0 + 2.5 * len(groups)))
         axes = fig.subplots(len(groups) + 2, 1, sharex=True)
         a1, a2 = axes[-2], axes[-1]
         for ax, (title, idx) in zip(axes, groups):
@@ -196,7 +196,7 @@ class TrajectoryResult(ResultBase):
         a2.set_xlabel("t")
         a0.set_title(f"{self.model_name}, {self._label()}, h = {self.h:g}")
         fig.tight_layout()
-        return _finish_figure(fig, path)
+        return finish_figure(fig, path)
 
     def animate(self, path, *, drawing=None, fps=30, duration=None, every=None, trail=1.0,
                 trail_points=None, dpi=80, progress=None):
@@ -252,7 +252,7 @@ class TrajectoryResult(ResultBase):
         """
         from .animation import render
 
-        return render(self, path, _new_figure(path, (5.5, 5.5)), drawing=drawing, fps=fps,
+        return render(self, path, new_figure(path, (5.5, 5.5)), drawing=drawing, fps=fps,
                       duration=duration, every=every, trail=trail, trail_points=trail_points,
                       dpi=dpi, progress=progress)
 
@@ -280,8 +280,8 @@ class TrajectoryResult(ResultBase):
         """
         from .animation import draw_paths
 
-        fig = draw_paths(self, _new_figure(path, (6, 6)), points=points, drawing=drawing)
-        return _finish_figure(fig, path)
+        fig = draw_paths(self, new_figure(path, (6, 6)), points=points, drawing=drawing)
+        return finish_figure(fig, path)
 
 
 class NoDenseOutput:
@@ -464,7 +464,7 @@ def _coordinate_groups(coordinates, n: int) -> list:
     return [(None, indices(coordinates, "coordinates"))]
 
 
-def _new_figure(path, figsize):
+def new_figure(path, figsize):
     """A figure that does not touch pyplot's state when it is only saved to ``path``.
 
     With a path the figure gets its own Agg canvas (``matplotlib.use`` would switch the
@@ -483,7 +483,7 @@ def _new_figure(path, figsize):
     return plt.figure(figsize=figsize)
 
 
-def _finish_figure(fig, path):
+def finish_figure(fig, path):
     if path is not None:
         fig.savefig(path, dpi=120)
     return fig

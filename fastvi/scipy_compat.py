@@ -150,12 +150,12 @@ def end_at_event(result, model, prm, events):
     else the crossing's record, the same polynomial). Crossings after it, in the same last
     step, are dropped. The work there (a forced or driven model) is interpolated linearly
     between the last two samples (the ends of the step with ``save_every=1``)."""
-    from .events import _as_list, _terminal
+    from .events import as_list, _terminal
     from .status import Status
 
     if result.status != Status.TERMINATED or not result.t_events:
         return result
-    fns = _as_list(events)
+    fns = as_list(events)
     best = None
     for e, fn in enumerate(fns):
         count = _terminal(fn, e)

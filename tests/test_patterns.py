@@ -9,7 +9,8 @@ from fastvi import structure
 from fastvi.check import ModelCheckError
 from fastvi.scenes import chain as chain_scene
 from fastvi.scenes import ladder
-from fastvi.scenes.chain import _G, _dV, _g, _V, pattern
+from fastvi.scenes.chain import (constraint as _g, constraint_jacobian as _G, pattern,
+                                 potential as _V, potential_grad as _dV)
 from fastvi._numba import njit
 
 N = 5

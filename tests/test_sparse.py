@@ -10,7 +10,9 @@ from fastvi.kernels import layout as lay
 from fastvi.kernels.banded import band_factor, band_ld, band_solve
 from fastvi.kernels.step import assemble
 from fastvi.scenes import chain, double_pendulum
-from fastvi.scenes.chain import _dV, _G, _g, _ddg, _V, pattern
+from fastvi.scenes.chain import (constraint as _g, constraint_hessian as _ddg,
+                                 constraint_jacobian as _G, pattern, potential as _V,
+                                 potential_grad as _dV)
 
 P2 = fastvi.method("P2L-Q3G")
 

@@ -35,7 +35,8 @@ from ._common import attach, check_positive
 MIN_LINKS = 1
 
 
-def _V(q, p):
+def potential(q, p):
+    """``V = g Σ_i m_i y_i`` (``params = (m_1 … m_N, l_1 … l_N, g)``)."""
     nb = q.shape[0] // 2
     acc = 0.0
     for i in range(nb):
@@ -43,7 +44,8 @@ def _V(q, p):
     return p[2 * nb] * acc
 
 
-def _dV(q, p, out):
+def potential_grad(q, p, out):
+    """``∇V``: ``g m_i`` at each ``y_i``, zero at each ``x_i``."""
     nb = q.shape[0] // 2
     for i in range(nb):
         out[2 * i] = 0.0
@@ -58,7 +60,8 @@ def _link(q, i):
     return q[2 * i] - q[2 * i - 2], q[2 * i + 1] - q[2 * i - 1]
 
 
-def _g(q, p, out):
+def constraint(q, p, out):
+    """``g_i = ½ (|r_i − r_{i−1}|² − l_i²)``, link i from body i − 1 (the origin for i = 0)."""
     nb = q.shape[0] // 2
     for i in range(nb):
         dx, dy = _link(q, i)
@@ -66,7 +69,8 @@ def _g(q, p, out):
         out[i] = 0.5 * (dx * dx + dy * dy - li * li)
 
 
-def _G(q, p, out):
+def constraint_jacobian(q, p, out):
+    """``G``: row i is ``(r_i − r_{i−1})ᵀ`` at body i and its negative at body i − 1."""
     # only the entries of `pattern(N)`: the kernels hand `out` zeroed outside it
     for i in range(q.shape[0] // 2):
         dx, dy = _link(q, i)
@@ -77,7 +81,9 @@ def _G(q, p, out):
             out[i, 2 * i - 1] = -dy
 
 
-def _ddg(q, eta, p, out):
+def constraint_hessian(q, eta, p, out):
+    """``Σ_i η_i ∇²g_i``: block tridiagonal, ``(η_i + η_{i+1}) I`` on the diagonal blocks and
+    ``−η_{i+1} I`` beside them."""
     # also the closed chain's (fastvi.scenes.closed_chain): its last link ties the last body
     # to a fixed point, so η has one entry more than there are bodies
     nb = q.shape[0] // 2
@@ -161,7 +167,7 @@ def angles(q):
     return np.arctan2(dx, -dy)
 
 
-def _per_link(name: str, value, N: int) -> tuple[float, ...]:
+def per_link(name: str, value, N: int) -> tuple[float, ...]:
     """A scalar broadcast to N links, or a sequence of N positive numbers."""
     if np.ndim(value) == 0:
         check_positive(**{name: value})
@@ -210,14 +216,15 @@ def chain(N: int, m=1.0, l=1.0, g: float = 9.81, damping: float = 0.0) -> Model:
     if N < MIN_LINKS:
         raise ValueError(f"`N` must be >= {MIN_LINKS}, got {N}")
     N = int(N)
-    ms = _per_link("m", m, N)
-    ls = _per_link("l", l, N)
+    ms = per_link("m", m, N)
+    ls = per_link("l", l, N)
     check_positive(g=g)
     c = damping_.check(damping)
     model = Model(
         2 * N, N, params=(*ms, *ls, g) + ((c,) if c else ()), mass=np.repeat(ms, 2),
-        potential=_V, potential_grad=_dV, potential_hessian=0, constraint=_g,
-        constraint_jacobian=_G, constraint_hessian=_ddg, constraint_jacobian_pattern=pattern(N),
+        potential=potential, potential_grad=potential_grad, potential_hessian=0,
+        constraint=constraint, constraint_jacobian=constraint_jacobian,
+        constraint_hessian=constraint_hessian, constraint_jacobian_pattern=pattern(N),
         name=f"chain{N}" + ("-damped" if c else ""),
         **damping_.options(c),
     )

@@ -23,7 +23,8 @@ from numba.extending import register_jitable
 from ..model import Model
 from ..drawing import cartesian
 from ._common import attach, check_positive
-from .chain import _ddg  # Σ η_i ∇²g_i: block tridiagonal as for the open chain
+# Σ η_i ∇²g_i: block tridiagonal as for the open chain
+from .chain import constraint_hessian as _ddg
 
 MIN_LINKS = 3
 

@@ -19,11 +19,13 @@ from ._common import attach, check_positive
 # params = (m1, m2, l1, l2, g)
 
 
-def _V(q, p):
+def potential(q, p):
+    """``V = g (m1 y1 + m2 y2)`` (``params = (m1, m2, l1, l2, g)``)."""
     return p[4] * (p[0] * q[1] + p[1] * q[3])
 
 
-def _dV(q, p, out):
+def potential_grad(q, p, out):
+    """``∇V = (0, g m1, 0, g m2)``."""
     out[0] = 0.0
     out[1] = p[4] * p[0]
     out[2] = 0.0
@@ -116,7 +118,7 @@ def double_pendulum(m1: float = 1.0, m2: float = 1.0, l1: float = 1.0, l2: float
     c = damping_.check(damping)
     model = Model(
         4, 2, params=(m1, m2, l1, l2, g) + ((c,) if c else ()), mass=np.diag([m1, m1, m2, m2]),
-        potential=_V, potential_grad=_dV, potential_hessian=0, constraint=_g,
+        potential=potential, potential_grad=potential_grad, potential_hessian=0, constraint=_g,
         constraint_jacobian=_G, constraint_hessian=_ddg,
         name="double_pendulum" + ("-damped" if c else ""), **damping_.options(c),
     )

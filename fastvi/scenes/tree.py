@@ -31,7 +31,7 @@ from ..model import Model
 from . import damping as damping_
 from ..drawing import cartesian
 from ._common import attach, check_positive
-from .chain import _dV, _per_link, _V
+from .chain import per_link, potential as _V, potential_grad as _dV
 
 
 @njit(inline="always", cache=True)
@@ -140,8 +140,8 @@ def tree(branches: int = 3, links: int = 3, m=1.0, l=1.0, g: float = 9.81, dampi
     branches = _count("branches", branches)
     links = _count("links", links)
     N = 1 + branches * links
-    ms = _per_link("m", m, N)
-    ls = _per_link("l", l, N)
+    ms = per_link("m", m, N)
+    ls = per_link("l", l, N)
     check_positive(g=g)
     c = damping_.check(damping)
     par = parents(branches, links)

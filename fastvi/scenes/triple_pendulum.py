@@ -19,7 +19,8 @@ import numpy as np
 
 from ..model import Model
 from ._common import attach, check_positive
-from .chain import _G, _V, _dV, _ddg, _g
+from .chain import (constraint as _g, constraint_hessian as _ddg,
+                    constraint_jacobian as _G, potential as _V, potential_grad as _dV)
 from .chain import pattern as _chain_pattern
 from .chain import angles as _chain_angles
 from .chain import drawing as _chain_drawing

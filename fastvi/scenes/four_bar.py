@@ -18,7 +18,8 @@ import numpy as np
 from ..model import Model
 from ..drawing import cartesian
 from ._common import attach, check_positive
-from .double_pendulum import potential as _V, potential_grad as _dV  # same masses-then-g layout: V = g (mB yB + mC yC)
+# the same masses-then-g layout: V = g (mB yB + mC yC)
+from .double_pendulum import potential as _V, potential_grad as _dV
 
 # params = (mB, mC, a, L, g)
 

@@ -26,7 +26,7 @@ def zero_hessian(q, p, out):
 def _double_pendulum(declared):
     """The scene's own callbacks; ∇²V declared zero, or given as a callback."""
     return fastvi.Model(4, 2, params=(1.3, 1.0, 1.0, 0.7, 9.81), mass=np.array([1.3, 1.3, 1.0, 1.0]),
-                        potential=dp_module._V, potential_grad=dp_module._dV,
+                        potential=dp_module.potential, potential_grad=dp_module.potential_grad,
                         potential_hessian=0 if declared else zero_hessian,
                         constraint=dp_module._g, constraint_jacobian=dp_module._G,
                         constraint_hessian=dp_module._ddg, name="dp-" + ("linear" if declared else "callback"))
@@ -112,8 +112,8 @@ def test_specialized_kernels_take_the_same_path_bit_for_bit():
 @pytest.mark.parametrize("bad", [1.0, "0", False, np.zeros((4, 4))])
 def test_only_the_number_zero_declares_it(bad):
     with pytest.raises(TypeError, match=r"`potential_hessian` must be a function, 0 \(∇V does not depend on q\) or None"):
-        fastvi.Model(4, 2, params=(1.0,), mass=np.ones(4), potential=dp_module._V,
-                     potential_grad=dp_module._dV, potential_hessian=bad,
+        fastvi.Model(4, 2, params=(1.0,), mass=np.ones(4), potential=dp_module.potential,
+                     potential_grad=dp_module.potential_grad, potential_hessian=bad,
                      constraint=dp_module._g, constraint_jacobian=dp_module._G)
 
 

@@ -119,7 +119,7 @@ def prototype_model(E0: float, Kr: float) -> fastvi.Model:
     """The plain double pendulum with (E0, K_r) appended to its parameters: what the
     prototype kernel of ``docs/decisions/scripts/time_transform_kernel.patch`` transforms by itself."""
     return fastvi.Model(4, 2, params=(1.0, 1.0, 1.0, 1.0, G_ACC, E0, Kr), mass=np.eye(4),
-                        potential=_dp._V, potential_grad=_dp._dV, potential_hessian=0,
+                        potential=_dp.potential, potential_grad=_dp.potential_grad, potential_hessian=0,
                         constraint=_dp._g, constraint_jacobian=_dp._G,
                         constraint_hessian=_dp._ddg, name="double_pendulum-prototype")
 

@@ -188,6 +188,19 @@ def test_kernels_compile_once_for_all_models(pendulum, double_pendulum):
     assert len(generic) == 1, drive.run_members.signatures
 
 
+def test_members_share_the_compiled_time_loop_of_integrate(double_pendulum, dp_members):
+    """A member runs the one time loop with the argument types of ``integrate``'s call, so an
+    ensemble compiles no second loop (docs/decisions/0017-one-time-loop.md): with an empty
+    cache a second overload of ``run`` would appear here."""
+    Q0, V0 = dp_members
+    fastvi.integrate(double_pendulum, Q0[0], V0[0], h=H, n_steps=5, events=double_pendulum.flips)
+    loops = set(drive.run.overloads)
+    ens = fastvi.integrate_ensemble(double_pendulum, Q0, V0, h=H, n_steps=5,
+                                    events=double_pendulum.flips)
+    assert ens.q.shape == (6, 4)
+    assert set(drive.run.overloads) == loops
+
+
 def test_projection_of_members_is_reported_in_one_warning(pendulum):
     Q0, V0 = _states(pendulum, [(0.3,), (0.4,), (0.5,)])
     Q0[1] *= 1 + 1e-9

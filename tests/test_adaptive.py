@@ -150,7 +150,10 @@ def test_energy_of_a_regular_motion_does_not_creep_with_adaptive_steps(dp):
     assert np.max(np.abs(res.constraint_residual)) < 1e-14
 
 
-@pytest.mark.parametrize("name, order", [("P2L-Q3G", 4), ("P3L-Q4G", 6)])
+# P3L-Q4G in `make test-slow` only: its first adaptive compile costs `make test` ≈ 10 s, and
+# P2L-Q3G checks the same code
+@pytest.mark.parametrize("name, order", [("P2L-Q3G", 4),
+                                         pytest.param("P3L-Q4G", 6, marks=pytest.mark.slow)])
 def test_adaptive_steps_keep_the_methods_order(name, order):
     """Global error in q on the triple pendulum from 45° over 2 s against a SciPy reference
     in angle coordinates, for ε halving: the log–log slope is the method's order."""

@@ -278,7 +278,9 @@ def test_large_mechanism_members_solve_banded_and_equal_integrate_bit_for_bit():
 
 
 # the members take the sized stages of integrate (≈ 8 s to compile on an empty cache) through
-# the one generic parallel loop
+# the one generic parallel loop; in `make test-slow` for that compile (the sized stages are
+# compared with the generic ones bit for bit in `make test` by tests/test_specialize.py)
+@pytest.mark.slow
 def test_specialized_members_are_the_generic_ones_bit_for_bit(double_pendulum, dp_members):
     Q0, V0 = dp_members
     kw = dict(h=H, n_steps=103, save=10, threads=2)

@@ -25,6 +25,10 @@ from .results import Result
 
 __all__ = ["adjoint", "AdjointResult"]
 
+#: the default keeps every step's records (no segment retaken) while they take no more
+#: than this many bytes, and checkpoints every ⌈√N⌉ steps beyond
+KEEP_ALL_BYTES = 64 * 2**20
+
 #: the forward and backward loops, called through their compiled entry points (_launch.py)
 _FORWARD = Launcher(run_checkpointed)
 _BACKWARD = Launcher(run_adjoint)
@@ -83,8 +87,12 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     ``⟨∇J, δ⟩`` equals the forward derivative of ``J`` along any direction ``δ`` to
     round-off. Each step costs one linearisation and one transposed solve with its exact
     Newton matrix (plus four residual evaluations a parameter, for the parameters'
-    differences). Memory stays ∝ √N: the forward run keeps its state every
-    ``checkpoint_every`` steps, and the sweep retakes each segment from its checkpoint.
+    differences). The forward run records each step's converged unknowns for the sweep:
+    all of them while they take at most :data:`KEEP_ALL_BYTES` (64 MiB: 288 bytes a step
+    for a double pendulum with ``P2L-Q3G``, about 2.3 × 10⁵ steps), so that nothing is
+    solved twice. Beyond that memory stays ∝ √N: the forward run keeps its state every
+    ``checkpoint_every`` steps, and the sweep retakes each segment but the last from its
+    checkpoint (one more trajectory's worth of steps).
 
     Parameters
     ----------
@@ -98,7 +106,9 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     initial_state : callable, optional
         ``initial_state(params) -> (q0, v0)``, as in :func:`fastvi.sensitivity`.
     checkpoint_every : int, optional
-        Steps between checkpoints (default ``⌈√N⌉``).
+        Steps between checkpoints: ``N`` keeps every step, smaller values trade time for
+        memory (``∝ N / C + C``). Default: ``N`` within :data:`KEEP_ALL_BYTES`, else
+        ``⌈√N⌉``.
 
     Returns
     -------
@@ -122,30 +132,34 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     n, m, k = model.n, model.m, run.prm.shape[0]
     meth = run.meth
     N = meth.s * n + meth.J * m
-    C = (math.ceil(math.sqrt(run.total)) if checkpoint_every is None
-         else valid.count(checkpoint_every, "checkpoint_every", 1))
+    if checkpoint_every is None:
+        C = run.total if run.total * _record_bytes(n, m, N) <= KEEP_ALL_BYTES else math.isqrt(
+            run.total - 1) + 1
+    else:
+        C = valid.count(checkpoint_every, "checkpoint_every", 1)
     C = min(C, run.total)
     ck = make_checkpoints(-(-run.total // C), n, m, N)
+    rec = make_records(C, n, m, N)
+    info = run.info.copy()
+    each = recorder(run.model_data, run.state, run.ws, info, rec)
     t_loop = time.perf_counter()
     with quiet():
         status = _FORWARD(run.model_data, run.tabs, run.opts, run.h, run.state, run.ws,
                           run.total, run.every, run.smp, run.info, run.sout, run.ev,
-                          run.stepk, run.stages, ck, C)
+                          run.stepk, run.stages, ck, rec, each)
     loop_time = time.perf_counter() - t_loop
     result = disc.finish(run, int(status), loop_time, 0.0, "the adjoint")
     pidx = list(range(k)) if param_index is None else disc.param_indices(param_index, k)
     Lq, Lp, direct = _cotangents(run, result, cotangent, pidx)
     tw = make_tangent_work(n, m, meth.s, meth.r, meth.J, 1, pidx)
     disc.linear_part(run, tw)
-    rec = make_records(C, n, m, N)
     lq, lp, lth = np.zeros(n), np.zeros(n), np.zeros(max(len(pidx), 1))
     t_back = time.perf_counter()
-    info = run.info.copy()
+    info[:] = run.info
     with quiet():
         status = _BACKWARD(run.model_data, run.tabs, run.tx, run.opts, run.h, run.state, run.ws,
                            run.total, run.every, run.smp, info, run.sout, run.ev, run.stepk,
-                           run.stages, tw, ck, rec, Lq, Lp, lq, lp, lth,
-                           recorder(run.model_data, run.state, run.ws, info, rec))
+                           run.stages, tw, ck, rec, Lq, Lp, lq, lp, lth, each)
     back_time = time.perf_counter() - t_back
     if status != 0:
         run.info[:] = info
@@ -157,6 +171,11 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     grad[2 * n:] += lth[:len(pidx)] + direct
     return AdjointResult(result, grad[:n], grad[n:2 * n], grad[2 * n:], pidx, lq, lp,
                          dict(checkpoints=ck.steps.shape[0], segment=C, backward_time=back_time))
+
+
+def _record_bytes(n, m, N):
+    """The bytes of one step's records (:func:`.kernels.adjoint.make_records`)."""
+    return 8 * (5 * n + N + 2 + max(m, 1))
 
 
 def _cotangents(run, result, cotangent, pidx):

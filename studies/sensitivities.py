@@ -218,32 +218,52 @@ def fit_table() -> str:
 
 def memory_table(sizes=(1_000, 10_000, 100_000), h: float = 0.01,
                  method: str = "P2L-Q3G") -> str:
-    """Peak memory of :func:`fastvi.adjoint` (``tracemalloc``: the NumPy arrays, checkpoints
-    and per-segment records included) with the default ``⌈√N⌉`` checkpoints and with every
-    step kept (``checkpoint_every = N``), one sample saved at each end."""
+    """Peak memory (``tracemalloc``: the NumPy arrays, checkpoints and records included) and
+    time of :func:`fastvi.adjoint` with ``⌈√N⌉`` checkpoints and with every step kept
+    (``checkpoint_every = N``, the default within ``fastvi.adjoint.KEEP_ALL_BYTES``), one
+    sample saved at each end; times relative to :func:`fastvi.integrate` (sized stages)."""
+    import math
     import tracemalloc
 
     import fastvi
 
     dp = fastvi.scenes.double_pendulum(damping=0.3)
     q0, v0 = dp.initial_state(1.0, 0.5)
+    fastvi.integrate(dp, q0, v0, h=h, n_steps=10, method=method, specialize=True)
+
+    def gradient(N, every):
+        return fastvi.adjoint(dp, q0, v0, lambda r: (np.ones((len(r.t), dp.n)), None), h=h,
+                              n_steps=N, save_every=N, method=method, param_index=[],
+                              checkpoint_every=every)
 
     def peak(N, every):
         tracemalloc.start()
-        A = fastvi.adjoint(dp, q0, v0, lambda r: (np.ones((len(r.t), dp.n)), None), h=h,
-                           n_steps=N, save_every=N, method=method, checkpoint_every=every)
+        A = gradient(N, every)
         size = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
         return size, A.stats["checkpoints"], A.stats["segment"]
 
+    def took(N, every):
+        A = gradient(N, every)
+        return A.result.stats["integration_time"] + A.stats["backward_time"]
+
+    def plain(N):
+        return fastvi.integrate(dp, q0, v0, h=h, n_steps=N, save_every=N,
+                                method=method).stats["integration_time"]
+
     out = [f"Damped double pendulum, `{method}`, h = {h}: peak memory of one adjoint gradient "
-           "(`tracemalloc`).", "",
-           "| steps N | checkpoints × segment | peak (KiB) | every step kept (KiB) |",
-           "|---|---|---|---|"]
+           "by q0 and v0 (`tracemalloc`), and its time over a plain run's (the compiled "
+           "loops, best of 3).", "",
+           "| steps N | checkpoints × segment | peak (KiB) | × integrate | every step kept (KiB) "
+           "| × integrate |", "|---|---|---|---|---|---|"]
+    took(100, 10)  # compiled
     for N in sizes:
-        size, ck, seg = peak(N, None)
-        full, _, _ = peak(N, N)
-        out.append(f"| {N} | {ck} × {seg} | {size / 1024:.0f} | {full / 1024:.0f} |")
+        t0 = min(plain(N) for _ in range(3))
+        C = math.isqrt(N - 1) + 1
+        size, nck, seg = peak(N, C)
+        out.append(f"| {N} | {nck} × {seg} | {size / 1024:.0f} | "
+                   f"{min(took(N, C) for _ in range(3)) / t0:.1f} | {peak(N, N)[0] / 1024:.0f} | "
+                   f"{min(took(N, N) for _ in range(3)) / t0:.1f} |")
     return "\n".join(out)
 
 

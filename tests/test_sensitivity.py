@@ -173,6 +173,11 @@ def test_adjoint_gradient_equals_the_forward_derivative():
     grad = np.concatenate([A.grad_q0, A.grad_v0, A.grad_params])
     assert np.allclose(grad @ D, forward, rtol=1e-12, atol=0)  # measured 7.7e-15
     assert np.array_equal(A.result.q, S.result.q)
+    # the default keeps every step's records (nothing retaken): the same gradient, bit for bit
+    kept = fastvi.adjoint(model, q0, v0, lambda r: (Lq, Lv), h=0.02, n_steps=N,
+                          save_every=every)
+    assert kept.stats["checkpoints"] == 1 and kept.stats["segment"] == N
+    assert np.array_equal(np.concatenate([kept.grad_q0, kept.grad_v0, kept.grad_params]), grad)
 
 
 def test_adjoint_with_a_configuration_dependent_mass():

@@ -7,11 +7,13 @@ the adjoint of step k (:func:`.tangent.pull`) maps ``λ_{k+1}`` to
 
 ``Λ(k)`` the cotangent of the sample at step k, if any: one transposed solve with the
 step's exact Newton matrix a step, whatever the number of parameters. The backward sweep
-needs each step's converged unknowns. Rather than keep them for the whole run (memory ∝ N),
-:func:`run_checkpointed` keeps the step's state and the predictor's history every ``C``
-steps, and :func:`run_adjoint` retakes each segment of ``C`` steps from its checkpoint —
-the same steps, bit for bit — into :class:`Records` before sweeping it backwards: memory ∝
-``N / C + C`` (``C ≈ √N``), one more trajectory's worth of steps in time.
+needs each step's converged unknowns. :func:`run_checkpointed` keeps the step's state and
+the predictor's history every ``C`` steps, and records each segment's steps into
+:class:`Records` as it goes; :func:`run_adjoint` sweeps the segment the forward run
+recorded last as it is, and retakes every other segment of ``C`` steps from its
+checkpoint — the same steps, bit for bit — before sweeping it backwards. Memory is
+``∝ N / C + C`` and time one trajectory's worth of steps times ``1 − C / N`` more than
+the forward run: with ``C = N`` (every step kept) nothing is retaken.
 """
 
 from collections import namedtuple
@@ -94,16 +96,31 @@ def _restore(ck, i, state, ws, info):
 
 
 @hot
+def _segment(md, tabs, opts, h, state, ws, cnt, n_total, every, smp, info, sout, ev, stepk,
+             stages, rec, each):
+    """``cnt`` steps of :func:`.drive.run` from the state of step ``info[I_STEPS]``, each
+    recorded into ``rec`` by ``each`` (the :func:`recorder`). Returns a status code."""
+    for a in range(state.shape[1]):
+        rec.qk[0, a] = state[0, a]
+        rec.pk[0, a] = state[1, a]
+    return run(md, tabs, opts, h, state, ws, cnt, n_total, every, smp, info, sout, ev, stepk,
+               stages, None, each, Recording(rec, int(info[I_STEPS])))
+
+
+@hot
 def run_checkpointed(md, tabs, opts, h, state, ws, n_total, save_every, smp, info, sout, ev,
-                     stepk, stages, ck, C):
-    """:func:`.drive.run` in segments of ``C`` steps, keeping a checkpoint before each in
-    ``ck`` (``ceil(n_total / C)`` of them). Returns a status code."""
+                     stepk, stages, ck, rec, each):
+    """:func:`.drive.run` in segments of ``C`` steps (``rec`` holds ``C``), keeping a
+    checkpoint before each in ``ck`` (``ceil(n_total / C)`` of them) and recording each
+    segment into ``rec`` by ``each`` (the :func:`recorder`): at the end ``rec`` holds the
+    last segment, which :func:`run_adjoint` then needs not retake. Returns a status code."""
+    C = rec.qk.shape[0]
     i = 0
     while int(info[I_STEPS]) < n_total:
         _keep(ck, i, state, ws, info)
         i += 1
-        st = run(md, tabs, opts, h, state, ws, C, n_total, save_every, smp, info, sout, ev,
-                 stepk, stages, None, None, None)
+        st = _segment(md, tabs, opts, h, state, ws, C, n_total, save_every, smp, info, sout,
+                      ev, stepk, stages, rec, each)
         if st != 0:
             return st
     return 0
@@ -156,9 +173,10 @@ def run_adjoint(md, tabs, tx, opts, h, state, ws, n_total, every, smp, info, sou
                 stages, tw, ck, rec, Lq, Lp, lq, lp, lth, each):
     """The backward sweep: ``(lq, lp)`` becomes ``λ_0`` for the sample cotangents ``Lq``,
     ``Lp`` (K, n), and ``lth`` (np,) the gradient by the parameters ``tw.pidx`` through the
-    steps. Each segment of ``ck`` (:func:`run_checkpointed`), last first, is retaken into
-    ``rec`` (by ``each``, the :func:`recorder`) and swept backwards with
-    :func:`.tangent.linearise` and :func:`.tangent.pull`.
+    steps. Each segment of ``ck`` (:func:`run_checkpointed`), last first, is swept backwards
+    with :func:`.tangent.linearise` and :func:`.tangent.pull`: the last one from ``rec`` as
+    the forward run left it, the others retaken into ``rec`` (by ``each``, the
+    :func:`recorder`) from their checkpoints.
     Returns a status code; ``info[I_FAILED]`` is the failed step."""
     mdp, txp, twp = byref(md), byref(tx), byref(tw)
     n = state.shape[1]
@@ -173,16 +191,14 @@ def run_adjoint(md, tabs, tx, opts, h, state, ws, n_total, every, smp, info, sou
     nseg = (n_total + C - 1) // C
     no_samples = nseg - nseg  # an int64 of run time: a literal would compile `run` again
     for seg in range(nseg - 1, -1, -1):
-        _restore(ck, seg, state, ws, info)
         k0 = ck.steps[seg]
         cnt = min(C, n_total - k0)
-        for a in range(n):
-            rec.qk[0, a] = state[0, a]
-            rec.pk[0, a] = state[1, a]
-        st = run(md, tabs, opts, h, state, ws, cnt, n_total, no_samples, smp, info, sout, ev,
-                 stepk, stages, None, each, Recording(rec, k0))
-        if st != 0:
-            return st
+        if seg < nseg - 1:
+            _restore(ck, seg, state, ws, info)
+            st = _segment(md, tabs, opts, h, state, ws, cnt, n_total, no_samples, smp, info,
+                          sout, ev, stepk, stages, rec, each)
+            if st != 0:
+                return st
         for j in range(cnt - 1, -1, -1):
             k = k0 + j
             i = _sample_of(k + 1, every, n_total, K)

@@ -338,6 +338,16 @@ def _jacobian(md, exact, slot, of, kind, q, v, out, s1, s2, s3, n):
         _fd_vec_jacobian(md.fns[of], kind, q, v, md.prm, out, s1, s2, s3, n)
 
 
+@hot_inline
+def _nonzero(B, n):
+    """Whether the (n, n) block ``B`` has an entry other than zero."""
+    for a in range(n):
+        for c in range(n):
+            if B[a, c] != 0.0:
+                return True
+    return False
+
+
 @hot
 def newton_matrix(md_, tabs_, h, qk, ws_):
     r"""``ws.A = ∂R/∂X`` at the unknowns ``ws.X``: the exact derivative of :func:`residual`
@@ -435,15 +445,32 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                     for c in range(n):
                         Aq[a, c] += Hc[a, c]
                 _jacobian(md, flags[F_EX_FJV], FJV, FORCE, _FD_V, qi, vi, Fv, Ma[0], fa, F, n)
+            # a block of zeros (a linear potential and a force of v alone: viscous damping)
+            # adds nothing: skipping it leaves A as it was, and the force block then costs
+            # one pass over A instead of two
+            force_q = _nonzero(Aq, n)
             w = h * b[i]
             for nu in range(s):
                 for mu in range(1, s + 1):
                     cA = w * L[nu, i] * L[mu, i]
                     r0 = nu * n
                     c0 = (mu - 1) * n
-                    for a in range(n):
-                        for c in range(n):
-                            A[r0 + a, c0 + c] += cA * Aq[a, c]
+                    if has_force and not has_mass:
+                        cB = b[i] * L[nu, i] * Ld[mu, i]
+                        if force_q:
+                            for a in range(n):
+                                for c in range(n):
+                                    A[r0 + a, c0 + c] = (A[r0 + a, c0 + c] + cA * Aq[a, c]
+                                                         + cB * Fv[a, c])
+                        else:
+                            for a in range(n):
+                                for c in range(n):
+                                    A[r0 + a, c0 + c] += cB * Fv[a, c]
+                        continue
+                    if force_q:
+                        for a in range(n):
+                            for c in range(n):
+                                A[r0 + a, c0 + c] += cA * Aq[a, c]
                     if has_mass:
                         # ∂/∂Q^μ of ℓ'_ν M v and of ℓ_ν ∂T/∂q: the mass and mixed terms
                         cM = b[i] * Ld[nu, i] * Ld[mu, i] * inv_h

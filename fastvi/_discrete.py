@@ -22,7 +22,7 @@ from . import structure
 from .integrate import IntegrationError, _buffers, _filled
 from .kernels import layout as lay
 from .kernels.step import linear_force, step_kernel
-from .kernels.tangent import extended_tables, point_terms
+from .kernels.tangent import extended_tables, make_sparsity, point_terms, step_band
 from .model import Model
 from .results import Result
 from .status import Status
@@ -62,6 +62,8 @@ class Run:
     compile_time: float
     check_time: float
     monitor: bool
+    #: what the linearised step uses of the model's structure (large mechanisms)
+    sparsity: object
 
 
 #: options of :func:`fastvi.integrate` that the derivatives of the discrete flow do not take,
@@ -125,6 +127,8 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
     md = model.kernel_data(prm, t0)
     tabs = meth.kernel_tables
     ws = structure.workspace(model, meth, prm, solver)
+    sparsity = make_sparsity(step_band(ws),
+                             structure.plan(model, meth, prm, solver).patterns.get("G"))
     # the stages compiled for the model's sizes when integrate has compiled them: the same
     # steps bit for bit, at half the cost
     stepk, stages = step_kernel(md, tabs, opts, ws, full=True,
@@ -138,7 +142,7 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
                extended_tables(tabs, meth.s, meth.J), ws, opts,
                events_.prepare(model, meth, None, 0), stepk, stages, state, info,
                np.zeros(lay.STEP_OUT_SIZE), smp, K, started, compile_time, check_time,
-               valid.flag(monitor, "monitor"))
+               valid.flag(monitor, "monitor"), sparsity)
 
 
 def linear_part(run: Run, tw) -> None:

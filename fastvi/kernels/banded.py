@@ -28,7 +28,7 @@ from .layout import (NONFINITE, OK, S_GV, SI_A_BAND, SI_A_KL, SI_A_KU, SI_A_PERM
                      SI_SC_PERM, SI_SCOL, SI_SPTR, SINGULAR_CONSTRAINTS, SOLVE_BANDED)
 from .sparse_lu import sparse_factor, sparse_solve
 
-__all__ = ["band_factor", "band_solve", "band_pack", "newton_banded", "schur_structured",
+__all__ = ["band_factor", "band_solve", "band_solve_transposed", "band_pack", "newton_banded", "schur_structured",
            "schur_solve_structured", "mech_impulses_structured", "g_times", "gt_times", "band_ld",
            "mech_rows_sparse", "project_structured", "gmg_factor", "gmg_solve"]
 
@@ -106,6 +106,34 @@ def band_solve(ab, piv, b, N, kl, ku):
         if bj != 0.0:
             for i in range(max(0, j - kv), j):
                 b[i] -= ab[cj + i - j] * bj
+
+
+@hot
+def band_solve_transposed(ab, piv, b, N, kl, ku):
+    """Solve ``Aᵀ x = b`` with the factors of :func:`band_factor` (LAPACK ``dgbtrs``,
+    ``trans = 'T'``: ``Uᵀ``, then ``Lᵀ`` with the row interchanges in reverse); ``b``
+    (length ≥ N) is overwritten."""
+    kv = kl + ku
+    ld = 2 * kl + ku + 1
+    for j in range(N):
+        cj = ld * j + kv
+        acc = b[j]
+        for i in range(max(0, j - kv), j):
+            acc -= ab[cj + i - j] * b[i]
+        b[j] = acc / ab[cj]
+    if kl > 0:
+        for j in range(N - 2, -1, -1):
+            lm = min(kl, N - 1 - j)
+            cj = ld * j + kv
+            acc = b[j]
+            for i in range(1, lm + 1):
+                acc -= ab[cj + i] * b[j + i]
+            b[j] = acc
+            p = piv[j]
+            if p != j:
+                t = b[p]
+                b[p] = b[j]
+                b[j] = t
 
 
 @hot

@@ -45,10 +45,12 @@ from numba.core import types
 
 from .._numba import byref, hot, hot_inline, njit, own, ptr
 from .drive import run, step_hook
-from .layout import (CHESS, CJAC, F_EX_CHESS, F_EX_MJAC, F_MASSFN, F_TIME,
-                     F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SINGULAR,
+from .layout import (CHESS, CJAC, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_MJAC, F_MASSFN, F_TIME,
+                     F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SI_A,
+                     SI_A_KL, SI_A_KU, SI_A_PERM, SINGULAR, SOLVE_BANDED,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, ModelData,
                      Samples, make_workspace, sizes, with_plan, workspace_for)
+from .banded import band_factor, band_ld, band_solve, band_solve_transposed
 from .linalg import lu_factor, lu_solve
 from .step import (fd_constraint_hessian, fd_momentum_jacobian, assemble, end_momentum,
                    jacobian_rate, linear_force)
@@ -56,8 +58,8 @@ from .step import (fd_constraint_hessian, fd_momentum_jacobian, assemble, end_mo
 __all__ = ["PointWork", "TangentWork", "extended_tables", "make_point_work",
            "make_tangent_work", "point", "point_terms", "linearise", "push", "pull",
            "lu_solve_transposed", "run_tangent", "differentiator", "Members", "tangent_member",
-           "point_work",
-           "tangent_work", "index_maps"]
+           "point_work", "tangent_work", "index_maps", "step_band", "Sparsity",
+           "make_sparsity"]
 
 #: the second derivatives at a point of the constrained phase space, and their scratch
 PointWork = namedtuple("PointWork", [
@@ -71,6 +73,17 @@ PointWork = namedtuple("PointWork", [
     "qa",  # (n,) scratch of the differences
     "Ma",  # (n, n) scratch of the mass differences
     "Gp", "Gm",  # (m, n) scratch of the Jacobian differences
+    "sp",  # the model's Sparsity
+])
+
+#: what the linearised step uses of a large model's structure (:func:`make_sparsity`);
+#: empty arrays where it has none, or is small enough to be treated as dense
+Sparsity = namedtuple("Sparsity", [
+    "perm", "kl", "ku",  # the step's banded plan: fill-reducing ordering (N,), bandwidths
+    "gptr", "gcol",  # the pattern of G by rows: the columns of row c at gcol[gptr[c] …]
+    # groups of constraints whose patterns share no coordinate (the rows of group k at
+    # grow[gsta[k] …]): one constraint Hessian for a group gives each member's own rows
+    "gsta", "grow",
 ])
 
 #: the linearised step (:func:`linearise`) and the tangent state of the directions
@@ -79,7 +92,10 @@ TangentWork = namedtuple("TangentWork", [
     "pt",  # PointWork at q_{k+1}: M (factored), G, He, Hv, Cq
     "rows",  # (N,) int64: the rows of the extended Newton matrix that are the step's equations
     "cols",  # (N,) int64: its columns that are the step's unknowns
-    "K", "piv",  # (N, N) the step's exact Newton matrix, factored; its pivots
+    "K", "piv",  # (N, N) the step's exact Newton matrix, factored ((1, 1) if banded); pivots
+    # K in band storage, factored in the order ``sp.perm`` (banded plans only), and a
+    # permuted right-hand side (N,)
+    "ab", "t",
     "Tq",  # (N + n, n) R_q, then P_q, at fixed increments
     "PX",  # (n, N) P_X: ∂P/∂X
     "pidx",  # (np,) int64: the parameters differentiated
@@ -133,27 +149,60 @@ def index_maps(n, m, s, J):
 
 
 @njit
-def point_work(n, m):
-    """A :class:`PointWork` for ``n`` coordinates and ``m`` constraints (compiled: the
-    ensemble's members build their own inside the parallel loop)."""
+def point_work(n, m, sp):
+    """A :class:`PointWork` for ``n`` coordinates and ``m`` constraints of the structure
+    ``sp`` (compiled: the ensemble's members build their own inside the parallel loop)."""
     mm = max(m, 1)
     return PointWork(np.zeros((n, n)), np.zeros((mm, n)), np.zeros((n, n)), np.zeros((mm, n)),
                      np.zeros((n, n)), np.zeros((n, n)), np.zeros(mm), np.zeros(n),
-                     np.zeros((n, n)), np.zeros((mm, n)), np.zeros((mm, n)))
+                     np.zeros((n, n)), np.zeros((mm, n)), np.zeros((mm, n)), sp)
+
+
+def make_sparsity(band=None, PG=None):
+    """The :class:`Sparsity` of a model: ``band = (perm, kl, ku)`` the banded plan of its
+    step's Newton matrix (:func:`step_band`), ``PG`` the pattern of ``G`` (m, n) booleans
+    (:func:`fastvi.structure.plan`'s ``patterns["G"]``); None: dense. The constraint
+    groups are a greedy colouring of ``G Gᵀ``, kept when they save at least half of the
+    ``m`` constraint Hessians a point would need one by one."""
+    z = np.zeros(0, dtype=np.int64)
+    perm, kl, ku = (z, 0, 0) if band is None else band
+    gptr = gcol = gsta = grow = z
+    if PG is not None and PG.shape[0] > 0:
+        PG = np.asarray(PG, dtype=bool)
+        m = PG.shape[0]
+        share = (PG.astype(np.int64) @ PG.T.astype(np.int64)) > 0
+        colour = np.full(m, -1, dtype=np.int64)
+        for c in range(m):
+            used = set(colour[np.nonzero(share[c])[0]].tolist())
+            k = 0
+            while k in used:
+                k += 1
+            colour[c] = k
+        ng = int(colour.max()) + 1
+        if 2 * ng <= m:
+            gptr = np.concatenate(([0], np.cumsum(PG.sum(axis=1)))).astype(np.int64)
+            gcol = np.nonzero(PG)[1].astype(np.int64)
+            grow = np.argsort(colour, kind="stable").astype(np.int64)
+            gsta = np.searchsorted(colour[grow], np.arange(ng + 1)).astype(np.int64)
+    return Sparsity(np.asarray(perm, dtype=np.int64), int(kl), int(ku), gptr, gcol, gsta, grow)
 
 
 @njit
-def tangent_work(xws, rows, cols, pidx, d):
+def tangent_work(xws, rows, cols, pidx, d, sp):
     """A :class:`TangentWork` for ``d`` directions around the extended step's workspace
     ``xws`` (sizes ``n, m, s + 1, r, J``), differentiating by the parameters ``pidx``
-    (int64); ``rows``, ``cols`` from :func:`index_maps`."""
+    (int64); ``rows``, ``cols`` from :func:`index_maps`; ``sp`` the model's
+    :class:`Sparsity`."""
     n, m, sx, J = xws.dims[0], xws.dims[1], xws.dims[2], xws.dims[4]
     s = sx - 1
     N = s * n + J * m
     mm = max(m, 1)
     npar = max(pidx.shape[0], 1)
+    banded = sp.perm.shape[0] > 0
+    Nd = 1 if banded else N
     return TangentWork(
-        xws, point_work(n, m), rows, cols, np.zeros((N, N)), np.zeros(N, dtype=np.int64),
+        xws, point_work(n, m, sp), rows, cols, np.zeros((Nd, Nd)), np.zeros(N, dtype=np.int64),
+        np.zeros(band_ld(sp.kl, sp.ku) * N if banded else 1), np.zeros(N),
         np.zeros((N + n, n)), np.zeros((n, N)), pidx, np.zeros((N + n, npar)),
         np.zeros((n, npar)), np.zeros((mm, n)), np.zeros((mm, mm)), np.zeros(mm, dtype=np.int64),
         np.zeros(n, dtype=np.int64), np.zeros((d, n)), np.zeros((d, n)), np.zeros((d, npar)),
@@ -163,17 +212,30 @@ def tangent_work(xws, rows, cols, pidx, d):
 
 
 def make_point_work(n, m):
-    """A :class:`PointWork` for ``n`` coordinates and ``m`` constraints."""
-    return point_work.py_func(int(n), int(m))
+    """A :class:`PointWork` for ``n`` coordinates and ``m`` constraints (dense)."""
+    return point_work.py_func(int(n), int(m), make_sparsity())
 
 
-def make_tangent_work(n, m, s, r, J, d, pidx):
+def make_tangent_work(n, m, s, r, J, d, pidx, sp=None):
     """A :class:`TangentWork` for ``d`` directions, differentiating by the parameters
-    ``pidx``: :func:`tangent_work` run by Python (compiling it costs 2.4 s; the ensemble's
-    members run it compiled)."""
+    ``pidx``, for a model of :class:`Sparsity` ``sp`` (None: dense): :func:`tangent_work`
+    run by Python (compiling it costs 2.4 s; the ensemble's members run it compiled)."""
     rows, cols = index_maps(n, m, s, J)
     return tangent_work.py_func(make_workspace(n, m, s + 1, r, J), rows, cols,
-                                np.asarray(pidx, dtype=np.int64), int(d))
+                                np.asarray(pidx, dtype=np.int64), int(d),
+                                make_sparsity() if sp is None else sp)
+
+
+def step_band(ws):
+    """``(perm, kl, ku)``, the banded plan of the Newton matrix of the step whose workspace
+    is ``ws`` (:func:`fastvi.structure.plan`), or None where that matrix is dense: the
+    linearised step factors the same matrix, with the same ordering."""
+    si = ws.si
+    if si[SI_A] != SOLVE_BANDED:
+        return None
+    n, m, s, _, J = (int(x) for x in ws.dims)
+    N = s * n + J * m
+    return si[si[SI_A_PERM]: si[SI_A_PERM] + N].copy(), int(si[SI_A_KL]), int(si[SI_A_KU])
 
 
 # ----------------------------------------------------------------------------- second derivatives
@@ -215,16 +277,39 @@ def point(md_, q, v, eta, pw_):
             G[c, a] = 0.0  # a callback with a declared pattern writes only its non-zeros
     fns[CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
     _hessian(md, q, eta, pw.He, pw, n, m)
-    for c in range(m):
-        for i in range(m):
-            e[i] = 0.0
-        e[c] = 1.0
-        _hessian(md, q, e, Hs, pw, n, m)
-        for b in range(n):
-            acc = 0.0
-            for a in range(n):
-                acc += Hs[b, a] * v[a]
-            Hv[c, b] = acc
+    sp = pw.sp
+    if sp.gsta.shape[0] > 0:
+        # one Hessian a group of constraints that share no coordinate: row b of the sum is
+        # that of the one constraint whose pattern holds b, and zero is added elsewhere
+        for c in range(m):
+            for b in range(n):
+                Hv[c, b] = 0.0
+        for k in range(sp.gsta.shape[0] - 1):
+            for i in range(m):
+                e[i] = 0.0
+            for i in range(sp.gsta[k], sp.gsta[k + 1]):
+                e[sp.grow[i]] = 1.0
+            _hessian(md, q, e, Hs, pw, n, m)
+            for i in range(sp.gsta[k], sp.gsta[k + 1]):
+                c = sp.grow[i]
+                for jb in range(sp.gptr[c], sp.gptr[c + 1]):
+                    b = sp.gcol[jb]
+                    acc = 0.0
+                    for ja in range(sp.gptr[c], sp.gptr[c + 1]):
+                        a = sp.gcol[ja]
+                        acc += Hs[b, a] * v[a]
+                    Hv[c, b] = acc
+    else:
+        for c in range(m):
+            for i in range(m):
+                e[i] = 0.0
+            e[c] = 1.0
+            _hessian(md, q, e, Hs, pw, n, m)
+            for b in range(n):
+                acc = 0.0
+                for a in range(n):
+                    acc += Hs[b, a] * v[a]
+                Hv[c, b] = acc
     if flags[F_TIME] != 0:
         # the rheonomic hidden constraint G v + g_t = 0: ∂g_t/∂q = ∂G/∂t
         jacobian_rate(md, q, prm[flags[F_TSLOT]], pw.Gp, pw.Gm)
@@ -386,10 +471,15 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
                 for a in range(n):
                     for b in range(n):
                         A[nu * n + a, tcol + b] -= cl * Hs[a, b]
+    sp = tw.pt.sp
+    banded = sp.perm.shape[0] > 0
+    if banded:
+        _band_gather(A, rows, cols, sp.perm, tw.ab, N, sp.kl, sp.ku)
     for i in range(N):
         ri = rows[i]
-        for j in range(N):
-            K[i, j] = A[ri, cols[j]]
+        if not banded:
+            for j in range(N):
+                K[i, j] = A[ri, cols[j]]
         for b in range(n):
             Tq[i, b] = A[ri, tcol + b]
     for a in range(n):
@@ -397,7 +487,10 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
             PX[a, j] = A[sn + a, cols[j]]
         for b in range(n):
             Tq[N + a, b] = A[sn + a, tcol + b]
-    if lu_factor(K, tw.piv, N) != 0:
+    if banded:
+        if band_factor(tw.ab, tw.piv, N, sp.kl, sp.ku) != 0:
+            return SINGULAR
+    elif lu_factor(K, tw.piv, N) != 0:
         return SINGULAR
     if tw.pidx.shape[0] > 0:
         st = _theta_differences(md_, tx_, h, q1, P, tw_)
@@ -408,12 +501,36 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
     point(md_, q1, v1, eta, byref(pw))
     if m > 0:
         M, G, Yg, S = pw.M, pw.G, tw.Yg, tw.S
-        if lu_factor(M, tw.pivn, n) != 0:
-            return SINGULAR_MASS
-        for c in range(m):
+        if md.flags[F_DIAG] != 0 and md.flags[F_MASSFN] == 0 and md.flags[F_AUGMENT] == 0:
+            # G M⁻¹ by the reciprocals, as the LU of a diagonal M would (bit for bit), in
+            # O(m n) instead of O(n³ + m n²): the large mechanisms' case
             for a in range(n):
-                Yg[c, a] = G[c, a]
-            lu_solve(M, tw.pivn, Yg[c], n)
+                if not (M[a, a] != 0.0):
+                    return SINGULAR_MASS
+            for a in range(n):
+                inv = 1.0 / M[a, a]
+                for c in range(m):
+                    Yg[c, a] = G[c, a] * inv
+            if sp.gsta.shape[0] > 0:
+                # Y = G M⁻¹ has the pattern of G: S = Y Gᵀ over it, O(nnz(G) m)
+                for c in range(m):
+                    for e in range(m):
+                        S[c, e] = 0.0
+                    for ja in range(sp.gptr[c], sp.gptr[c + 1]):
+                        a = sp.gcol[ja]
+                        y = Yg[c, a]
+                        for e in range(m):
+                            S[c, e] += y * G[e, a]
+                if lu_factor(S, tw.pivm, m) != 0:
+                    return SINGULAR_CONSTRAINTS
+                return OK
+        else:
+            if lu_factor(M, tw.pivn, n) != 0:
+                return SINGULAR_MASS
+            for c in range(m):
+                for a in range(n):
+                    Yg[c, a] = G[c, a]
+                lu_solve(M, tw.pivn, Yg[c], n)
         for c in range(m):
             for e in range(m):
                 acc = 0.0
@@ -423,6 +540,43 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
         if lu_factor(S, tw.pivm, m) != 0:
             return SINGULAR_CONSTRAINTS
     return OK
+
+
+@hot_inline
+def _band_gather(A, rows, cols, perm, ab, N, kl, ku):
+    """The band storage ``ab`` of ``K[perm][:, perm]``, ``K`` the step's rows and columns
+    of the extended matrix ``A``: :func:`.banded.band_pack` without forming ``K``."""
+    kv = kl + ku
+    ld = band_ld(kl, ku)
+    for k in range(ld * N):
+        ab[k] = 0.0
+    for j in range(N):
+        cj = cols[perm[j]]
+        for i in range(max(0, j - ku), min(N, j + kl + 1)):
+            ab[ld * j + kv + i - j] = A[rows[perm[i]], cj]
+
+
+@hot_inline
+def _solve(tw, y, N, transposed):
+    """``y ← K⁻¹ y`` (``K⁻ᵀ y`` if ``transposed``) with the factors of :func:`linearise`:
+    dense, or banded in the step's ordering (``K[perm][:, perm]`` factored, so both sides
+    are permuted alike)."""
+    sp = tw.pt.sp
+    if sp.perm.shape[0] == 0:
+        if transposed:
+            lu_solve_transposed(tw.K, tw.piv, y, N)
+        else:
+            lu_solve(tw.K, tw.piv, y, N)
+        return
+    perm, t = sp.perm, tw.t
+    for i in range(N):
+        t[i] = y[perm[i]]
+    if transposed:
+        band_solve_transposed(tw.ab, tw.piv, t, N, sp.kl, sp.ku)
+    else:
+        band_solve(tw.ab, tw.piv, t, N, sp.kl, sp.ku)
+    for i in range(N):
+        y[perm[i]] = t[i]
 
 
 @hot_inline
@@ -464,7 +618,7 @@ def push(tw_):
             for l in range(npar):
                 acc += Rth[i, l] * th[l]
             y[i] = acc
-        lu_solve(K, tw.piv, y, N)
+        _solve(tw, y, N, False)
         for a in range(n):
             dq1[a] = dq[a] - y[sn - n + a]
             acc = 0.0
@@ -561,7 +715,7 @@ def pull(tw_, lq, lp, lth):
         yb[j] = acc
     for a in range(n):
         yb[sn - n + a] -= dq1b[a]
-    lu_solve_transposed(tw.K, tw.piv, yb, N)  # B̄ = K⁻ᵀ ȳ
+    _solve(tw, yb, N, True)  # B̄ = K⁻ᵀ ȳ
     for b in range(n):
         acc = dq1b[b]
         for a in range(n):
@@ -657,13 +811,14 @@ def _started(tw, dq, dp, th):
 #: and save stride, the members' samples ``smp`` (:class:`.layout.Samples` of arrays indexed
 #: by member first, slot 0 filled), counters ``infos`` (N, INFO_SIZE), the events of a run
 #: without events ``ev`` (read only), the step and its stages, ``rows``, ``cols`` of
-#: :func:`index_maps`, the parameters differentiated ``pidx``, the initial tangent states
+#: :func:`index_maps`, the parameters differentiated ``pidx``, the model's
+#: :class:`Sparsity` ``sp``, the initial tangent states
 #: ``DQ``, ``DP`` (N, d, n) and parameter parts ``TH`` (N, d, np), the directions' samples
 #: ``dQ``, ``dP`` (N, K, d, n), and the :func:`differentiator` ``each``
 Members = namedtuple("Members", [
     "fns", "flags", "Mc", "P", "tabs", "tx", "opts", "h", "dims", "si", "sb", "structured",
     "X0", "n_total", "save_every", "smp", "infos", "ev", "stepk", "stages", "rows", "cols",
-    "pidx", "DQ", "DP", "TH", "dQ", "dP", "each"])
+    "pidx", "sp", "DQ", "DP", "TH", "dQ", "dP", "each"])
 
 
 def tangent_member(i, membersp):
@@ -674,7 +829,7 @@ def tangent_member(i, membersp):
     n, m, s, r, J = g.dims[0], g.dims[1], g.dims[2], g.dims[3], g.dims[4]
     ws = with_plan(workspace_for(g.dims), g.si, g.sb.copy(), g.structured)
     tw = _started(tangent_work(workspace_for((n, m, s + 1, r, J)), g.rows, g.cols, g.pidx,
-                               g.DQ.shape[1]), g.DQ[i], g.DP[i], g.TH[i])
+                               g.DQ.shape[1], g.sp), g.DQ[i], g.DP[i], g.TH[i])
     state = np.zeros((6, n))
     for a in range(n):
         state[0, a] = g.X0[i, 0, a]

@@ -151,7 +151,7 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     result = disc.finish(run, int(status), loop_time, 0.0, "the adjoint")
     pidx = list(range(k)) if param_index is None else disc.param_indices(param_index, k)
     Lq, Lp, direct = _cotangents(run, result, cotangent, pidx)
-    tw = make_tangent_work(n, m, meth.s, meth.r, meth.J, 1, pidx, run.sparsity)
+    tw = make_tangent_work(n, m, meth.s, meth.r, meth.J, 1, pidx, run.sparsity, run.ws)
     disc.linear_part(run, tw)
     lq, lp, lth = np.zeros(n), np.zeros(n), np.zeros(max(len(pidx), 1))
     t_back = time.perf_counter()

@@ -194,7 +194,8 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     dq0, dp0, pidx, dth = disc.initial_tangent(run, D, initial_state)
     meth = run.meth
     d = D.shape[0]
-    tw = make_tangent_work(n, model.m, meth.s, meth.r, meth.J, d, pidx, run.sparsity)
+    tw = make_tangent_work(n, model.m, meth.s, meth.r, meth.J, d, pidx, run.sparsity,
+                           run.ws)
     tw.dq[:], tw.dp[:] = dq0, dp0
     tw.th[:, :len(pidx)] = dth
     disc.linear_part(run, tw)

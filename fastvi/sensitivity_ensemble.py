@@ -184,7 +184,7 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
     # the hook for a member's argument types, which are those of a single run's
     each = differentiator(md, first.state, ws, first.info, first.tx,
                           make_tangent_work(n, m, meth.s, meth.r, meth.J, d, pidx,
-                                            first.sparsity), dQ[0])
+                                            first.sparsity, ws), dQ[0])
     group = Members(md.fns, md.flags, md.Mc, KP, first.tabs, first.tx, first.opts, first.h,
                     ws.dims, ws.si, ws.sb, ws.structured, X0, first.total, first.every, smp,
                     infos, ev, first.stepk, first.stages, rows, cols,

@@ -295,6 +295,50 @@ def ensemble_table(members: int = 16, steps: int = 2_000, h: float = 0.01,
             f"Speed-up {serial / t_ens:.2f}; members equal bit for bit: {same}.")
 
 
+def chain_start(links: int, angle: float = 0.3):
+    """A planar chain of ``links`` unit links hanging at ``angle`` from the vertical, at
+    rest: ``(q0, v0)`` in Cartesian coordinates."""
+    a = np.full(links, angle)
+    q0 = np.zeros(2 * links)
+    q0[0::2], q0[1::2] = np.cumsum(np.sin(a)), -np.cumsum(np.cos(a))
+    return q0, np.zeros(2 * links)
+
+
+def scaling_table(links=(8, 16, 32, 64, 128), steps: int = 200, h: float = 0.01,
+                  method: str = "P2L-Q3G", repeat: int = 3) -> str:
+    """One forward direction and one adjoint gradient (by q0 and v0) of planar chains of
+    growing length, against a plain run: the compiled loops' time, best of ``repeat``."""
+    import fastvi
+
+    out = [f"Planar chains of N links (n = 2N, m = N), `{method}`, h = {h}, {steps} steps: "
+           f"the compiled loops' time, best of {repeat}.", "",
+           "| links N | Newton matrix | plain step (µs) | sensitivity, 1 direction | "
+           "adjoint by q0, v0 |", "|---|---|---|---|---|"]
+    for N in links:
+        ch = fastvi.scenes.chain(N)
+        q0, v0 = chain_start(N)
+        run = dict(h=h, n_steps=steps, save_every=steps, method=method)
+        D = np.zeros((4 * N + ch.params.size, 1))
+        D[2 * N, 0] = 1.0
+
+        def plain():
+            return fastvi.integrate(ch, q0, v0, **run).stats["integration_time"]
+
+        def sens():
+            return fastvi.sensitivity(ch, q0, v0, wrt=D, **run).result.stats["integration_time"]
+
+        def adj():
+            A = fastvi.adjoint(ch, q0, v0, lambda r: (np.ones((len(r.t), 2 * N)), None),
+                               param_index=[], **run)
+            return A.result.stats["integration_time"] + A.stats["backward_time"]
+
+        t0, ts, ta = (_best(f, repeat) for f in (plain, sens, adj))
+        solver = fastvi.structure.plan(ch, fastvi.tables.method(method)).solvers["newton"]
+        out.append(f"| {N} | {solver} | {t0 / steps * 1e6:.1f} | {ts / t0:.1f} | "
+                   f"{ta / t0:.1f} |")
+    return "\n".join(out)
+
+
 def main(argv=None) -> int:
     parser = study_parser("python -m fastvi sensitivities", __doc__)
     parser.add_argument("--steps", type=int, default=10_000, help="steps of the cost and symplecticity runs")
@@ -310,6 +354,7 @@ def main(argv=None) -> int:
     fastvi.adjoint(dp, *dp.initial_state(1.0, 0.5), lambda r: (np.ones((len(r.t), 4)), None),
                    h=0.01, n_steps=2)
     parts = [("Cost", cost_table(args.steps, args.repeat)), ("Adjoint memory", memory_table()),
+             ("Large mechanisms", scaling_table()),
              ("Ensembles", ensemble_table()), ("Order", order_table()),
              ("Symplecticity", symplectic_table(args.steps)), ("Fit", fit_table())]
     text = "\n\n".join(f"## {title}\n\n{body}" for title, body in parts) + "\n"

@@ -47,10 +47,11 @@ from .._numba import byref, hot, hot_inline, njit, own, ptr
 from .drive import run, step_hook
 from .layout import (CHESS, CJAC, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_MJAC, F_MASSFN, F_TIME,
                      F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SI_A,
-                     SI_A_KL, SI_A_KU, SI_A_PERM, SINGULAR, SOLVE_BANDED,
+                     SI_A_KL, SI_A_KU, SI_A_PERM, SI_S, SINGULAR, SOLVE_BANDED, SOLVE_DENSE,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, ModelData,
                      Samples, make_workspace, sizes, with_plan, workspace_for)
-from .banded import band_factor, band_ld, band_solve, band_solve_transposed
+from .banded import (band_factor, band_ld, band_solve, band_solve_transposed, gmg_factor,
+                     gmg_solve)
 from .linalg import lu_factor, lu_solve
 from .step import (fd_constraint_hessian, fd_momentum_jacobian, assemble, end_momentum,
                    jacobian_rate, linear_force)
@@ -198,11 +199,14 @@ def tangent_work(xws, rows, cols, pidx, d, sp):
     N = s * n + J * m
     mm = max(m, 1)
     npar = max(pidx.shape[0], 1)
+    # sizes first: a conditional expression among the arguments of the record's
+    # constructor is bytecode numba cannot compile
     banded = sp.perm.shape[0] > 0
     Nd = 1 if banded else N
+    Nb = band_ld(sp.kl, sp.ku) * N if banded else 1
     return TangentWork(
         xws, point_work(n, m, sp), rows, cols, np.zeros((Nd, Nd)), np.zeros(N, dtype=np.int64),
-        np.zeros(band_ld(sp.kl, sp.ku) * N if banded else 1), np.zeros(N),
+        np.zeros(Nb), np.zeros(N),
         np.zeros((N + n, n)), np.zeros((n, N)), pidx, np.zeros((N + n, npar)),
         np.zeros((n, npar)), np.zeros((mm, n)), np.zeros((mm, mm)), np.zeros(mm, dtype=np.int64),
         np.zeros(n, dtype=np.int64), np.zeros((d, n)), np.zeros((d, n)), np.zeros((d, npar)),
@@ -216,13 +220,18 @@ def make_point_work(n, m):
     return point_work.py_func(int(n), int(m), make_sparsity())
 
 
-def make_tangent_work(n, m, s, r, J, d, pidx, sp=None):
+def make_tangent_work(n, m, s, r, J, d, pidx, sp=None, step_ws=None):
     """A :class:`TangentWork` for ``d`` directions, differentiating by the parameters
-    ``pidx``, for a model of :class:`Sparsity` ``sp`` (None: dense): :func:`tangent_work`
-    run by Python (compiling it costs 2.4 s; the ensemble's members run it compiled)."""
+    ``pidx``, for a model of :class:`Sparsity` ``sp`` (None: dense) whose step has the
+    workspace ``step_ws`` (its structured-solve plan, if any, serves the extended step:
+    grouped differences of the constraint Hessian, the projection's banded or sparse
+    ``G M⁻¹ Gᵀ``): :func:`tangent_work` run by Python (compiling it costs 2.4 s; the
+    ensemble's members run it compiled)."""
     rows, cols = index_maps(n, m, s, J)
-    return tangent_work.py_func(make_workspace(n, m, s + 1, r, J), rows, cols,
-                                np.asarray(pidx, dtype=np.int64), int(d),
+    xws = make_workspace(n, m, s + 1, r, J)
+    if step_ws is not None and step_ws.structured:
+        xws = xws._replace(si=step_ws.si, sb=step_ws.sb.copy(), structured=True)
+    return tangent_work.py_func(xws, rows, cols, np.asarray(pidx, dtype=np.int64), int(d),
                                 make_sparsity() if sp is None else sp)
 
 
@@ -511,6 +520,11 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
                 inv = 1.0 / M[a, a]
                 for c in range(m):
                     Yg[c, a] = G[c, a] * inv
+            si = tw.ws.si
+            if si[SI_S] != SOLVE_DENSE:  # the step's own plan for G M⁻¹ Gᵀ (banded.py)
+                if gmg_factor(si, tw.ws.sb, G, md.Mc, m, tw.pivm) != 0:
+                    return SINGULAR_CONSTRAINTS
+                return OK
             if sp.gsta.shape[0] > 0:
                 # Y = G M⁻¹ has the pattern of G: S = Y Gᵀ over it, O(nnz(G) m)
                 for c in range(m):
@@ -580,6 +594,20 @@ def _solve(tw, y, N, transposed):
 
 
 @hot_inline
+def _solve_projection(tw, x, m, transposed):
+    """``x ← S⁻¹ x`` (``S⁻ᵀ x`` if ``transposed``), ``S = G M⁻¹ Gᵀ`` at ``q_{k+1}`` as
+    :func:`linearise` factored it: dense, or in the step's plan (symmetric: its own
+    transpose)."""
+    si = tw.ws.si
+    if si[SI_S] != SOLVE_DENSE:
+        gmg_solve(si, tw.ws.sb, x, m, tw.pivm)
+    elif transposed:
+        lu_solve_transposed(tw.S, tw.pivm, x, m)
+    else:
+        lu_solve(tw.S, tw.pivm, x, m)
+
+
+@hot_inline
 def _minus_product(out, x, A, y, n):
     """``out = x − A y`` (n,)."""
     for a in range(n):
@@ -637,7 +665,7 @@ def push(tw_):
                 for a in range(n):
                     acc += Yg[e, a] * u[a] + Hv[e, a] * dq1[a]
                 w[e] = acc
-            lu_solve(tw.S, tw.pivm, w, m)
+            _solve_projection(tw, w, m, False)
             for a in range(n):
                 acc = z[a]
                 for e in range(m):
@@ -682,7 +710,7 @@ def pull(tw_, lq, lp, lth):
             for a in range(n):
                 acc -= G[e, a] * lp[a]
             wb[e] = acc
-        lu_solve_transposed(tw.S, tw.pivm, wb, m)
+        _solve_projection(tw, wb, m, True)
         for a in range(n):  # ū = Yᵀ w̄ ; δq1 gains H_vᵀ w̄
             acc = 0.0
             acc2 = 0.0
@@ -828,8 +856,10 @@ def tangent_member(i, membersp):
     g = own(membersp)
     n, m, s, r, J = g.dims[0], g.dims[1], g.dims[2], g.dims[3], g.dims[4]
     ws = with_plan(workspace_for(g.dims), g.si, g.sb.copy(), g.structured)
-    tw = _started(tangent_work(workspace_for((n, m, s + 1, r, J)), g.rows, g.cols, g.pidx,
-                               g.DQ.shape[1], g.sp), g.DQ[i], g.DP[i], g.TH[i])
+    # the extended step with the step's plan, as make_tangent_work gives it
+    xws = with_plan(workspace_for((n, m, s + 1, r, J)), g.si, g.sb.copy(), g.structured)
+    tw = _started(tangent_work(xws, g.rows, g.cols, g.pidx, g.DQ.shape[1], g.sp), g.DQ[i],
+                  g.DP[i], g.TH[i])
     state = np.zeros((6, n))
     for a in range(n):
         state[0, a] = g.X0[i, 0, a]

@@ -43,7 +43,7 @@ import numpy as np
 import numba
 from numba.core import types
 
-from .._numba import byref, hot, hot_inline, njit, own, ptr
+from .._numba import byref, hot, hot_inline, njit, only_if, own, ptr
 from .drive import run, step_hook
 from .layout import (CHESS, CJAC, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_MJAC, F_MASSFN, F_TIME,
                      F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SI_A,
@@ -482,8 +482,6 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
                         A[nu * n + a, tcol + b] -= cl * Hs[a, b]
     sp = tw.pt.sp
     banded = sp.perm.shape[0] > 0
-    if banded:
-        _band_gather(A, rows, cols, sp.perm, tw.ab, N, sp.kl, sp.ku)
     for i in range(N):
         ri = rows[i]
         if not banded:
@@ -497,7 +495,7 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
         for b in range(n):
             Tq[N + a, b] = A[sn + a, tcol + b]
     if banded:
-        if band_factor(tw.ab, tw.piv, N, sp.kl, sp.ku) != 0:
+        if _band_factor(wx, A, rows, cols, sp, tw.ab, tw.piv, N) != 0:
             return SINGULAR
     elif lu_factor(K, tw.piv, N) != 0:
         return SINGULAR
@@ -522,7 +520,7 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
                     Yg[c, a] = G[c, a] * inv
             si = tw.ws.si
             if si[SI_S] != SOLVE_DENSE:  # the step's own plan for G M⁻¹ Gᵀ (banded.py)
-                if gmg_factor(si, tw.ws.sb, G, md.Mc, m, tw.pivm) != 0:
+                if _projection_factor(wx, G, md.Mc, m, tw.pivm) != 0:
                     return SINGULAR_CONSTRAINTS
                 return OK
             if sp.gsta.shape[0] > 0:
@@ -556,10 +554,16 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
     return OK
 
 
-@hot_inline
-def _band_gather(A, rows, cols, perm, ab, N, kl, ku):
-    """The band storage ``ab`` of ``K[perm][:, perm]``, ``K`` the step's rows and columns
-    of the extended matrix ``A``: :func:`.banded.band_pack` without forming ``K``."""
+# The structured solves below take the extended step's workspace ``ws`` only to be compiled
+# away for a small model (``_numba.only_if``: its ``structured`` field is typed None), whose
+# linearised step then carries no banded or sparse solver: a run-time branch would leave
+# them to be compiled all the same.
+@hot
+def _band_factor(ws, A, rows, cols, sp, ab, piv, N):
+    """Factor the band storage ``ab`` of ``K[perm][:, perm]`` (``sp.perm``), ``K`` the
+    step's rows and columns of the extended matrix ``A``: :func:`.banded.band_pack` without
+    forming ``K``, then :func:`.banded.band_factor`. Returns its status."""
+    kl, ku, perm = sp.kl, sp.ku, sp.perm
     kv = kl + ku
     ld = band_ld(kl, ku)
     for k in range(ld * N):
@@ -568,29 +572,54 @@ def _band_gather(A, rows, cols, perm, ab, N, kl, ku):
         cj = cols[perm[j]]
         for i in range(max(0, j - ku), min(N, j + kl + 1)):
             ab[ld * j + kv + i - j] = A[rows[perm[i]], cj]
+    return band_factor(ab, piv, N, kl, ku)
+
+
+@hot
+def _band_solve(ws, sp, ab, piv, t, y, N, transposed):
+    """``y ← K⁻¹ y`` (``K⁻ᵀ y`` if ``transposed``) with the factors of :func:`_band_factor`,
+    in the step's ordering (``K[perm][:, perm]`` factored, so both sides are permuted
+    alike); ``t`` (N,) scratch."""
+    perm = sp.perm
+    for i in range(N):
+        t[i] = y[perm[i]]
+    if transposed:
+        band_solve_transposed(ab, piv, t, N, sp.kl, sp.ku)
+    else:
+        band_solve(ab, piv, t, N, sp.kl, sp.ku)
+    for i in range(N):
+        y[perm[i]] = t[i]
+
+
+@hot
+def _projection_factor(ws, G, Mc, m, piv):
+    """``G M⁻¹ Gᵀ`` (diagonal constant M) built and factored in the step's plan
+    (:func:`.banded.gmg_factor`). Returns its status."""
+    return gmg_factor(ws.si, ws.sb, G, Mc, m, piv)
+
+
+@hot
+def _projection_solve(ws, x, m, piv):
+    """``x ← (G M⁻¹ Gᵀ)⁻¹ x`` with the factors of :func:`_projection_factor`."""
+    gmg_solve(ws.si, ws.sb, x, m, piv)
+
+
+_band_factor = only_if(_band_factor, "structured", 0)
+_band_solve = only_if(_band_solve, "structured")
+_projection_factor = only_if(_projection_factor, "structured", 0)
+_projection_solve = only_if(_projection_solve, "structured")
 
 
 @hot_inline
 def _solve(tw, y, N, transposed):
     """``y ← K⁻¹ y`` (``K⁻ᵀ y`` if ``transposed``) with the factors of :func:`linearise`:
-    dense, or banded in the step's ordering (``K[perm][:, perm]`` factored, so both sides
-    are permuted alike)."""
-    sp = tw.pt.sp
-    if sp.perm.shape[0] == 0:
-        if transposed:
-            lu_solve_transposed(tw.K, tw.piv, y, N)
-        else:
-            lu_solve(tw.K, tw.piv, y, N)
-        return
-    perm, t = sp.perm, tw.t
-    for i in range(N):
-        t[i] = y[perm[i]]
-    if transposed:
-        band_solve_transposed(tw.ab, tw.piv, t, N, sp.kl, sp.ku)
+    dense, or banded (:func:`_band_solve`)."""
+    if tw.pt.sp.perm.shape[0] > 0:
+        _band_solve(tw.ws, tw.pt.sp, tw.ab, tw.piv, tw.t, y, N, transposed)
+    elif transposed:
+        lu_solve_transposed(tw.K, tw.piv, y, N)
     else:
-        band_solve(tw.ab, tw.piv, t, N, sp.kl, sp.ku)
-    for i in range(N):
-        y[perm[i]] = t[i]
+        lu_solve(tw.K, tw.piv, y, N)
 
 
 @hot_inline
@@ -598,9 +627,8 @@ def _solve_projection(tw, x, m, transposed):
     """``x ← S⁻¹ x`` (``S⁻ᵀ x`` if ``transposed``), ``S = G M⁻¹ Gᵀ`` at ``q_{k+1}`` as
     :func:`linearise` factored it: dense, or in the step's plan (symmetric: its own
     transpose)."""
-    si = tw.ws.si
-    if si[SI_S] != SOLVE_DENSE:
-        gmg_solve(si, tw.ws.sb, x, m, tw.pivm)
+    if tw.ws.si[SI_S] != SOLVE_DENSE:
+        _projection_solve(tw.ws, x, m, tw.pivm)
     elif transposed:
         lu_solve_transposed(tw.S, tw.pivm, x, m)
     else:

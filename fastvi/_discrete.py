@@ -127,8 +127,9 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
     md = model.kernel_data(prm, t0)
     tabs = meth.kernel_tables
     ws = structure.workspace(model, meth, prm, solver)
-    sparsity = make_sparsity(step_band(ws),
-                             structure.plan(model, meth, prm, solver).patterns.get("G"))
+    patterns = structure.plan(model, meth, prm, solver).patterns
+    sparsity = make_sparsity(step_band(ws), patterns.get("G"), patterns.get("newton"), meth.s,
+                             meth.J)
     # the stages compiled for the model's sizes when integrate has compiled them: the same
     # steps bit for bit, at half the cost
     stepk, stages = step_kernel(md, tabs, opts, ws, full=True,

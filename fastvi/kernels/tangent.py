@@ -85,6 +85,10 @@ Sparsity = namedtuple("Sparsity", [
     # groups of constraints whose patterns share no coordinate (the rows of group k at
     # grow[gsta[k] …]): one constraint Hessian for a group gives each member's own rows
     "gsta", "grow",
+    # patterns of R_q, then P_q ((N + n) rows; the columns of row i at tcol[tptr[i] …]) and
+    # of P_X (n rows), supersets from the step's Newton pattern: their products then cost
+    # O(nnz), not O(N n) (banded plans only; empty: dense)
+    "tptr", "tcol", "xptr", "xcol",
 ])
 
 #: the linearised step (:func:`linearise`) and the tangent state of the directions
@@ -99,6 +103,7 @@ TangentWork = namedtuple("TangentWork", [
     "ab", "t",
     "Tq",  # (N + n, n) R_q, then P_q, at fixed increments
     "PX",  # (n, N) P_X: ∂P/∂X
+    "tval", "xval",  # R_q, P_q and P_X over the patterns of ``sp`` (where it has them)
     "pidx",  # (np,) int64: the parameters differentiated
     "Rth",  # (N + n, np) R_θ, then P_θ
     "Pth",  # (n, np) ∂p_{k+1}/∂θ of the projection at fixed q_{k+1} and P
@@ -159,15 +164,23 @@ def point_work(n, m, sp):
                      np.zeros((n, n)), np.zeros((mm, n)), np.zeros((mm, n)), sp)
 
 
-def make_sparsity(band=None, PG=None):
+def make_sparsity(band=None, PG=None, PA=None, s=0, J=0):
     """The :class:`Sparsity` of a model: ``band = (perm, kl, ku)`` the banded plan of its
-    step's Newton matrix (:func:`step_band`), ``PG`` the pattern of ``G`` (m, n) booleans
-    (:func:`fastvi.structure.plan`'s ``patterns["G"]``); None: dense. The constraint
-    groups are a greedy colouring of ``G Gᵀ``, kept when they save at least half of the
-    ``m`` constraint Hessians a point would need one by one."""
+    step's Newton matrix (:func:`step_band`), ``PG`` the pattern of ``G`` (m, n) and ``PA``
+    that of the step's Newton matrix (N, N) (booleans, :func:`fastvi.structure.plan`'s
+    ``patterns``) for a method of ``s`` and ``J``; None: dense. The constraint groups are a
+    greedy colouring of ``G Gᵀ``, kept when they save at least half of the ``m``
+    constraint Hessians a point would need one by one.
+
+    The patterns of ``R_q``, ``P_q`` and ``P_X`` follow from the block structure: every
+    coordinate block of the Newton matrix couples ``q_a`` and ``q_b`` through the mass,
+    the forces and the constraint Hessians (``B``, the union of its blocks and of
+    ``Gᵀ G``), every impulse column through ``Gᵀ``; so ``R_q`` has ``B`` in the rows of
+    the equations and ``G`` in the constraint rows, ``P_q`` has ``B``, and ``P_X`` has ``B``
+    in each position block and ``Gᵀ`` in each impulse block."""
     z = np.zeros(0, dtype=np.int64)
     perm, kl, ku = (z, 0, 0) if band is None else band
-    gptr = gcol = gsta = grow = z
+    gptr = gcol = gsta = grow = tptr = tcol = xptr = xcol = z
     if PG is not None and PG.shape[0] > 0:
         PG = np.asarray(PG, dtype=bool)
         m = PG.shape[0]
@@ -185,7 +198,32 @@ def make_sparsity(band=None, PG=None):
             gcol = np.nonzero(PG)[1].astype(np.int64)
             grow = np.argsort(colour, kind="stable").astype(np.int64)
             gsta = np.searchsorted(colour[grow], np.arange(ng + 1)).astype(np.int64)
-    return Sparsity(np.asarray(perm, dtype=np.int64), int(kl), int(ku), gptr, gcol, gsta, grow)
+    if band is not None and PA is not None and PG is not None:
+        tptr, tcol, xptr, xcol = _block_patterns(np.asarray(PA, dtype=bool),
+                                                 np.asarray(PG, dtype=bool), s, J)
+    return Sparsity(np.asarray(perm, dtype=np.int64), int(kl), int(ku), gptr, gcol, gsta, grow,
+                    tptr, tcol, xptr, xcol)
+
+
+def _block_patterns(PA, PG, s, J):
+    """``(tptr, tcol, xptr, xcol)``: the compressed rows of the patterns of ``R_q``, ``P_q``
+    ((N + n) × n) and ``P_X`` (n × N) (:func:`make_sparsity`)."""
+    m, n = PG.shape
+    sn = s * n
+    Gi = PG.astype(np.int64)
+    B = (Gi.T @ Gi) > 0
+    for nu in range(s):
+        for mu in range(s):
+            B |= PA[nu * n:(nu + 1) * n, mu * n:(mu + 1) * n]
+    T = np.vstack([np.vstack([B] * s), np.vstack([PG] * J), B])
+    X = np.hstack([np.hstack([B] * s), np.hstack([PG.T] * J)])
+
+    def rows(P):
+        return (np.concatenate(([0], np.cumsum(P.sum(axis=1)))).astype(np.int64),
+                np.nonzero(P)[1].astype(np.int64))
+
+    assert T.shape == (sn + J * m + n, n) and X.shape == (n, sn + J * m)
+    return (*rows(T), *rows(X))
 
 
 @njit
@@ -207,7 +245,8 @@ def tangent_work(xws, rows, cols, pidx, d, sp):
     return TangentWork(
         xws, point_work(n, m, sp), rows, cols, np.zeros((Nd, Nd)), np.zeros(N, dtype=np.int64),
         np.zeros(Nb), np.zeros(N),
-        np.zeros((N + n, n)), np.zeros((n, N)), pidx, np.zeros((N + n, npar)),
+        np.zeros((N + n, n)), np.zeros((n, N)), np.zeros(max(sp.tcol.shape[0], 1)),
+        np.zeros(max(sp.xcol.shape[0], 1)), pidx, np.zeros((N + n, npar)),
         np.zeros((n, npar)), np.zeros((mm, n)), np.zeros((mm, mm)), np.zeros(mm, dtype=np.int64),
         np.zeros(n, dtype=np.int64), np.zeros((d, n)), np.zeros((d, n)), np.zeros((d, npar)),
         np.zeros((d, N)), np.zeros((d, n)), np.zeros((d, n)), np.zeros(sx * n + J * m),
@@ -482,18 +521,23 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
                         A[nu * n + a, tcol + b] -= cl * Hs[a, b]
     sp = tw.pt.sp
     banded = sp.perm.shape[0] > 0
-    for i in range(N):
-        ri = rows[i]
-        if not banded:
+    if sp.tptr.shape[0] > 0:  # over the patterns: O(nnz)
+        _sparse_blocks(wx, A, rows, cols, sp, tw.tval, tw.xval, N, n, sn)
+    else:
+        for i in range(N):
+            ri = rows[i]
+            for b in range(n):
+                Tq[i, b] = A[ri, tcol + b]
+        for a in range(n):
+            for j in range(N):
+                PX[a, j] = A[sn + a, cols[j]]
+            for b in range(n):
+                Tq[N + a, b] = A[sn + a, tcol + b]
+    if not banded:
+        for i in range(N):
+            ri = rows[i]
             for j in range(N):
                 K[i, j] = A[ri, cols[j]]
-        for b in range(n):
-            Tq[i, b] = A[ri, tcol + b]
-    for a in range(n):
-        for j in range(N):
-            PX[a, j] = A[sn + a, cols[j]]
-        for b in range(n):
-            Tq[N + a, b] = A[sn + a, tcol + b]
     if banded:
         if _band_factor(wx, A, rows, cols, sp, tw.ab, tw.piv, N) != 0:
             return SINGULAR
@@ -592,6 +636,58 @@ def _band_solve(ws, sp, ab, piv, t, y, N, transposed):
 
 
 @hot
+def _sparse_blocks(ws, A, rows, cols, sp, tv, xv, N, n, sn):
+    """``tv``, ``xv`` ← ``R_q``, ``P_q`` and ``P_X`` of the extended matrix ``A`` over the
+    patterns of ``sp`` (``sn = s n``: the translation's column, and the first row of P)."""
+    for i in range(N + n):
+        ri = rows[i] if i < N else sn + i - N
+        for k in range(sp.tptr[i], sp.tptr[i + 1]):
+            tv[k] = A[ri, sn + sp.tcol[k]]
+    for a in range(n):
+        for k in range(sp.xptr[a], sp.xptr[a + 1]):
+            xv[k] = A[sn + a, cols[sp.xcol[k]]]
+
+
+@hot
+def _sparse_row(ws, sp, tv, i, x, acc):
+    """``acc + Σ_b T_q[i, b] x[b]`` over the pattern of row ``i`` (:func:`_tq_row`)."""
+    for k in range(sp.tptr[i], sp.tptr[i + 1]):
+        acc += tv[k] * x[sp.tcol[k]]
+    return acc
+
+
+@hot
+def _sparse_px_row(ws, sp, xv, a, y, acc):
+    """``acc − Σ_j P_X[a, j] y[j]`` over the pattern of row ``a``."""
+    for k in range(sp.xptr[a], sp.xptr[a + 1]):
+        acc -= xv[k] * y[sp.xcol[k]]
+    return acc
+
+
+@hot
+def _sparse_pull(ws, sp, tv, xv, zb, dq1b, yb, lq, N, n, sn, tw):
+    """The products of :func:`pull` with ``P_X``, ``R_q`` and ``P_q`` over their patterns,
+    as scatters row by row (each entry gathers its terms in the order of the dense sums),
+    around the transposed solve."""
+    for j in range(N):
+        yb[j] = 0.0
+    for a in range(n):
+        for k in range(sp.xptr[a], sp.xptr[a + 1]):
+            yb[sp.xcol[k]] -= xv[k] * zb[a]
+    for a in range(n):
+        yb[sn - n + a] -= dq1b[a]
+    _solve(tw, yb, N, True)  # B̄ = K⁻ᵀ ȳ
+    for b in range(n):
+        lq[b] = dq1b[b]
+    for a in range(n):
+        for k in range(sp.tptr[N + a], sp.tptr[N + a + 1]):
+            lq[sp.tcol[k]] += tv[k] * zb[a]
+    for i in range(N):
+        for k in range(sp.tptr[i], sp.tptr[i + 1]):
+            lq[sp.tcol[k]] += tv[k] * yb[i]
+
+
+@hot
 def _projection_factor(ws, G, Mc, m, piv):
     """``G M⁻¹ Gᵀ`` (diagonal constant M) built and factored in the step's plan
     (:func:`.banded.gmg_factor`). Returns its status."""
@@ -608,6 +704,10 @@ _band_factor = only_if(_band_factor, "structured", 0)
 _band_solve = only_if(_band_solve, "structured")
 _projection_factor = only_if(_projection_factor, "structured", 0)
 _projection_solve = only_if(_projection_solve, "structured")
+_sparse_blocks = only_if(_sparse_blocks, "structured")
+_sparse_row = only_if(_sparse_row, "structured", 0.0)
+_sparse_px_row = only_if(_sparse_px_row, "structured", 0.0)
+_sparse_pull = only_if(_sparse_pull, "structured")
 
 
 @hot_inline
@@ -636,6 +736,19 @@ def _solve_projection(tw, x, m, transposed):
 
 
 @hot_inline
+def _tq_row(tw, i, x, acc, n):
+    """``acc + Σ_b T_q[i, b] x[b]``: row ``i`` of ``R_q`` (``P_q`` for i ≥ N) times ``x``,
+    over its pattern where the model's :class:`Sparsity` has one."""
+    sp = tw.pt.sp
+    if sp.tptr.shape[0] > 0:
+        acc = _sparse_row(tw.ws, sp, tw.tval, i, x, acc)
+    else:
+        for b in range(n):
+            acc += tw.Tq[i, b] * x[b]
+    return acc
+
+
+@hot_inline
 def _minus_product(out, x, A, y, n):
     """``out = x − A y`` (n,)."""
     for a in range(n):
@@ -661,29 +774,31 @@ def push(tw_):
     n, m, s, N = _step_sizes(tw.ws)
     sn = s * n
     npar = tw.pidx.shape[0]
-    K, Tq, Rth, PX, B, dP = tw.K, tw.Tq, tw.Rth, tw.PX, tw.B, tw.dP
+    Rth, PX, B, dP = tw.Rth, tw.PX, tw.B, tw.dP
     G, He, Hv, Cq, Yg = pw.G, pw.He, pw.Hv, pw.Cq, tw.Yg
     z, u, w = tw.z, tw.u, tw.w
+    sp = pw.sp
+    sparse = sp.tptr.shape[0] > 0
     bad = False
     for c in range(tw.dq.shape[0]):
         dq, dp, th, y, dq1 = tw.dq[c], tw.dp[c], tw.th[c], B[c], tw.dq1[c]
         for i in range(N):
             acc = dp[i] if i < n else 0.0
-            for b in range(n):
-                acc += Tq[i, b] * dq[b]
+            acc = _tq_row(tw, i, dq, acc, n)
             for l in range(npar):
                 acc += Rth[i, l] * th[l]
             y[i] = acc
         _solve(tw, y, N, False)
         for a in range(n):
             dq1[a] = dq[a] - y[sn - n + a]
-            acc = 0.0
-            for b in range(n):
-                acc += Tq[N + a, b] * dq[b]
+            acc = _tq_row(tw, N + a, dq, 0.0, n)
             for l in range(npar):
                 acc += Rth[N + a, l] * th[l]
-            for j in range(N):
-                acc -= PX[a, j] * y[j]
+            if sparse:
+                acc = _sparse_px_row(tw.ws, sp, tw.xval, a, y, acc)
+            else:
+                for j in range(N):
+                    acc -= PX[a, j] * y[j]
             dP[c, a] = acc
         _minus_product(z, tw.dP[c], He, dq1, n)
         if m > 0:
@@ -764,21 +879,25 @@ def pull(tw_, lq, lp, lth):
         for a in range(n):
             acc += Rth[N + a, l] * zb[a]
         lth[l] += acc
-    for j in range(N):
-        acc = 0.0
+    sp = pw.sp
+    if sp.tptr.shape[0] > 0:
+        _sparse_pull(tw.ws, sp, tw.tval, tw.xval, zb, dq1b, yb, lq, N, n, sn, tw)
+    else:
+        for j in range(N):
+            acc = 0.0
+            for a in range(n):
+                acc -= PX[a, j] * zb[a]
+            yb[j] = acc
         for a in range(n):
-            acc -= PX[a, j] * zb[a]
-        yb[j] = acc
-    for a in range(n):
-        yb[sn - n + a] -= dq1b[a]
-    _solve(tw, yb, N, True)  # B̄ = K⁻ᵀ ȳ
-    for b in range(n):
-        acc = dq1b[b]
-        for a in range(n):
-            acc += Tq[N + a, b] * zb[a]
-        for i in range(N):
-            acc += Tq[i, b] * yb[i]
-        lq[b] = acc
+            yb[sn - n + a] -= dq1b[a]
+        _solve(tw, yb, N, True)  # B̄ = K⁻ᵀ ȳ
+        for b in range(n):
+            acc = dq1b[b]
+            for a in range(n):
+                acc += Tq[N + a, b] * zb[a]
+            for i in range(N):
+                acc += Tq[i, b] * yb[i]
+            lq[b] = acc
     for a in range(n):
         lp[a] = yb[a]
     for l in range(npar):

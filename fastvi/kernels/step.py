@@ -446,8 +446,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                         Aq[a, c] += Hc[a, c]
                 _jacobian(md, flags[F_EX_FJV], FJV, FORCE, _FD_V, qi, vi, Fv, Ma[0], fa, F, n)
             # a block of zeros (a linear potential and a force of v alone: viscous damping)
-            # adds nothing: skipping it leaves A as it was, and the force block then costs
-            # one pass over A instead of two
+            # adds nothing: skipping it leaves A as it was
             force_q = _nonzero(Aq, n)
             w = h * b[i]
             for nu in range(s):
@@ -455,18 +454,6 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                     cA = w * L[nu, i] * L[mu, i]
                     r0 = nu * n
                     c0 = (mu - 1) * n
-                    if has_force and not has_mass:
-                        cB = b[i] * L[nu, i] * Ld[mu, i]
-                        if force_q:
-                            for a in range(n):
-                                for c in range(n):
-                                    A[r0 + a, c0 + c] = (A[r0 + a, c0 + c] + cA * Aq[a, c]
-                                                         + cB * Fv[a, c])
-                        else:
-                            for a in range(n):
-                                for c in range(n):
-                                    A[r0 + a, c0 + c] += cB * Fv[a, c]
-                        continue
                     if force_q:
                         for a in range(n):
                             for c in range(n):

@@ -301,7 +301,8 @@ def point(md_, q, v, eta, pw_):
     """Fill the :class:`PointWork` at ``(q, v)`` with impulse ``eta`` (m,): ``M(q)``,
     ``G(q)``, ``Σ η_c ∇²g_c``, ``∂(G v + g_t)/∂q`` (row c: ``(∇²g_c v)ᵀ``, plus
     ``∂G_c/∂t`` for time-dependent constraints, at the time the parameter vector carries)
-    and ``∂(M v)/∂q``."""
+    and ``∂(M v)/∂q``. Where ``pw.sp`` has groups of constraints, ``H_v`` is left to
+    :func:`_grouped_hv` (the linearised step of a structured model)."""
     md, pw = own(md_), own(pw_)
     fns, flags, prm = md.fns, md.flags, md.prm
     n = q.shape[0]
@@ -325,39 +326,18 @@ def point(md_, q, v, eta, pw_):
             G[c, a] = 0.0  # a callback with a declared pattern writes only its non-zeros
     fns[CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
     _hessian(md, q, eta, pw.He, pw, n, m)
-    sp = pw.sp
-    if sp.gsta.shape[0] > 0:
-        # one Hessian a group of constraints that share no coordinate: row b of the sum is
-        # that of the one constraint whose pattern holds b, and zero is added elsewhere
-        for c in range(m):
-            for b in range(n):
-                Hv[c, b] = 0.0
-        for k in range(sp.gsta.shape[0] - 1):
-            for i in range(m):
-                e[i] = 0.0
-            for i in range(sp.gsta[k], sp.gsta[k + 1]):
-                e[sp.grow[i]] = 1.0
-            _hessian(md, q, e, Hs, pw, n, m)
-            for i in range(sp.gsta[k], sp.gsta[k + 1]):
-                c = sp.grow[i]
-                for jb in range(sp.gptr[c], sp.gptr[c + 1]):
-                    b = sp.gcol[jb]
-                    acc = 0.0
-                    for ja in range(sp.gptr[c], sp.gptr[c + 1]):
-                        a = sp.gcol[ja]
-                        acc += Hs[b, a] * v[a]
-                    Hv[c, b] = acc
-    else:
-        for c in range(m):
-            for i in range(m):
-                e[i] = 0.0
-            e[c] = 1.0
-            _hessian(md, q, e, Hs, pw, n, m)
-            for b in range(n):
-                acc = 0.0
-                for a in range(n):
-                    acc += Hs[b, a] * v[a]
-                Hv[c, b] = acc
+    if pw.sp.gsta.shape[0] > 0:
+        return  # H_v by groups: the caller's _grouped_hv
+    for c in range(m):
+        for i in range(m):
+            e[i] = 0.0
+        e[c] = 1.0
+        _hessian(md, q, e, Hs, pw, n, m)
+        for b in range(n):
+            acc = 0.0
+            for a in range(n):
+                acc += Hs[b, a] * v[a]
+            Hv[c, b] = acc
     if flags[F_TIME] != 0:
         # the rheonomic hidden constraint G v + g_t = 0: ∂g_t/∂q = ∂G/∂t
         jacobian_rate(md, q, prm[flags[F_TSLOT]], pw.Gp, pw.Gm)
@@ -550,6 +530,8 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
     if md.flags[F_TIME] != 0:
         md.prm[md.flags[F_TSLOT]] = time[1]  # the projection's time, as the step had it
     point(md_, q1, v1, eta, byref(pw))
+    if m > 0 and pw.sp.gsta.shape[0] > 0:
+        _grouped_hv(wx, md, q1, v1, pw, n, m)
     if m > 0:
         M, G, Yg, S = pw.M, pw.G, tw.Yg, tw.S
         if md.flags[F_DIAG] != 0 and md.flags[F_MASSFN] == 0 and md.flags[F_AUGMENT] == 0:
@@ -568,15 +550,7 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
                     return SINGULAR_CONSTRAINTS
                 return OK
             if sp.gsta.shape[0] > 0:
-                # Y = G M⁻¹ has the pattern of G: S = Y Gᵀ over it, O(nnz(G) m)
-                for c in range(m):
-                    for e in range(m):
-                        S[c, e] = 0.0
-                    for ja in range(sp.gptr[c], sp.gptr[c + 1]):
-                        a = sp.gcol[ja]
-                        y = Yg[c, a]
-                        for e in range(m):
-                            S[c, e] += y * G[e, a]
+                _sparse_gmg(wx, sp, Yg, G, S, m)
                 if lu_factor(S, tw.pivm, m) != 0:
                     return SINGULAR_CONSTRAINTS
                 return OK
@@ -688,6 +662,52 @@ def _sparse_pull(ws, sp, tv, xv, zb, dq1b, yb, lq, N, n, sn, tw):
 
 
 @hot
+def _grouped_hv(ws, md, q, v, pw, n, m):
+    """``pw.Hv = ∂(G v)/∂q`` at ``q`` (row c: ``(∇²g_c v)ᵀ``, plus ``∂G_c/∂t`` for
+    time-dependent constraints) by one constraint Hessian a group of ``pw.sp``: row b of a
+    group's sum is that of the one constraint whose pattern holds b, and the others add
+    zeros there. The rows of :func:`point` for ``m`` Hessians in O(n²) each."""
+    sp, Hv, Hs, e = pw.sp, pw.Hv, pw.Hs, pw.e
+    for c in range(m):
+        for b in range(n):
+            Hv[c, b] = 0.0
+    for k in range(sp.gsta.shape[0] - 1):
+        for i in range(m):
+            e[i] = 0.0
+        for i in range(sp.gsta[k], sp.gsta[k + 1]):
+            e[sp.grow[i]] = 1.0
+        _hessian(md, q, e, Hs, pw, n, m)
+        for i in range(sp.gsta[k], sp.gsta[k + 1]):
+            c = sp.grow[i]
+            for jb in range(sp.gptr[c], sp.gptr[c + 1]):
+                b = sp.gcol[jb]
+                acc = 0.0
+                for ja in range(sp.gptr[c], sp.gptr[c + 1]):
+                    a = sp.gcol[ja]
+                    acc += Hs[b, a] * v[a]
+                Hv[c, b] = acc
+    if md.flags[F_TIME] != 0:
+        jacobian_rate(md, q, md.prm[md.flags[F_TSLOT]], pw.Gp, pw.Gm)
+        for c in range(m):
+            for b in range(n):
+                Hv[c, b] += pw.Gp[c, b]
+
+
+@hot
+def _sparse_gmg(ws, sp, Yg, G, S, m):
+    """``S = Y Gᵀ`` over the pattern of G, which ``Y = G M⁻¹`` has for a diagonal M:
+    O(nnz(G) m) instead of O(m² n)."""
+    for c in range(m):
+        for e in range(m):
+            S[c, e] = 0.0
+        for ja in range(sp.gptr[c], sp.gptr[c + 1]):
+            a = sp.gcol[ja]
+            y = Yg[c, a]
+            for e in range(m):
+                S[c, e] += y * G[e, a]
+
+
+@hot
 def _projection_factor(ws, G, Mc, m, piv):
     """``G M⁻¹ Gᵀ`` (diagonal constant M) built and factored in the step's plan
     (:func:`.banded.gmg_factor`). Returns its status."""
@@ -705,6 +725,8 @@ _band_solve = only_if(_band_solve, "structured")
 _projection_factor = only_if(_projection_factor, "structured", 0)
 _projection_solve = only_if(_projection_solve, "structured")
 _sparse_blocks = only_if(_sparse_blocks, "structured")
+_grouped_hv = only_if(_grouped_hv, "structured")
+_sparse_gmg = only_if(_sparse_gmg, "structured")
 _sparse_row = only_if(_sparse_row, "structured", 0.0)
 _sparse_px_row = only_if(_sparse_px_row, "structured", 0.0)
 _sparse_pull = only_if(_sparse_pull, "structured")

@@ -3,7 +3,8 @@ for the exact Newton matrix, groups of constraints that share no coordinate for 
 projection's second derivatives, and the pattern of G for ``G M⁻¹ Gᵀ``. References: the
 same derivatives with every system dense (``solver="dense"``, whose linearised step the
 other tests check against differences of whole runs), the adjoint identity, and the
-definition of the groups."""
+definition of the groups. The derivatives' tests compile the linearised step for a
+structured model (minutes): they run in ``make test-slow``."""
 
 import numpy as np
 import pytest
@@ -53,6 +54,7 @@ def test_chain_is_linearised_with_its_structure(chain):
     assert dense.perm.size == 0 and dense.gsta.size == 0
 
 
+@pytest.mark.slow  # compiles the linearised step for a structured model: minutes
 def test_structured_derivatives_equal_the_dense_ones(chain):
     q0, v0 = _chain_start(LINKS)
     rng = np.random.default_rng(3)
@@ -68,6 +70,7 @@ def test_structured_derivatives_equal_the_dense_ones(chain):
     assert np.abs(S.dv - R.dv).max() < 1e-10 * np.abs(R.dv).max()
 
 
+@pytest.mark.slow
 def test_structured_adjoint_is_the_transpose_of_the_structured_forward(chain):
     q0, v0 = _chain_start(LINKS)
     rng = np.random.default_rng(4)

@@ -3,8 +3,8 @@ for the exact Newton matrix, groups of constraints that share no coordinate for 
 projection's second derivatives, and the pattern of G for ``G M⁻¹ Gᵀ``. References: the
 same derivatives with every system dense (``solver="dense"``, whose linearised step the
 other tests check against differences of whole runs), the adjoint identity, and the
-definition of the groups. The derivatives' tests compile the linearised step for a
-structured model (minutes): they run in ``make test-slow``."""
+definition of the groups. They compile the step and the linearised step for a structured
+model (minutes): they run in ``make test-slow``."""
 
 import numpy as np
 import pytest
@@ -32,6 +32,7 @@ def chain():
     return fastvi.scenes.chain(LINKS, damping=0.2)
 
 
+@pytest.mark.slow  # compiles the step of a structured model
 def test_chain_is_linearised_with_its_structure(chain):
     q0, _ = _chain_start(LINKS)
     run = fastvi._discrete.prepare(chain, q0, np.zeros_like(q0), h=0.01, t_end=None, n_steps=1,

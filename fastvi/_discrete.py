@@ -127,7 +127,9 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
     md = model.kernel_data(prm, t0)
     tabs = meth.kernel_tables
     ws = structure.workspace(model, meth, prm, solver)
-    patterns = structure.plan(model, meth, prm, solver).patterns
+    # the structured paths of the linearised step are compiled for structured workspaces
+    # only (_numba.only_if): a model whose plan keeps every solve dense gets none of them
+    patterns = structure.plan(model, meth, prm, solver).patterns if ws.structured else {}
     sparsity = make_sparsity(step_band(ws), patterns.get("G"), patterns.get("newton"), meth.s,
                              meth.J)
     # the stages compiled for the model's sizes when integrate has compiled them: the same

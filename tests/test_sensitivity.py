@@ -250,3 +250,16 @@ def test_errors_name_what_is_not_defined(double_pendulum, dp_start):
         fastvi.adjoint(double_pendulum, q0, v0, lambda r: (np.ones((2, 4)), None), h=0.01,
                        n_steps=5)
 
+
+def test_a_plan_kept_dense_gives_the_dense_linearised_step():
+    # a chain of 4 links with P3L-Q4G: its plan is analysed (patterns detected) but keeps
+    # every solve dense, so its workspace is not structured and the linearised step must
+    # not take the structured paths (they are compiled for structured workspaces only)
+    chain4 = fastvi.scenes.chain(4)
+    q0 = np.concatenate([[np.sin(0.4 * (i + 1)), -np.cos(0.4 * (i + 1))] for i in range(4)])
+    q0 = np.cumsum(q0.reshape(4, 2), axis=0).ravel()
+    v0 = np.zeros(8)
+    run = dict(h=0.02, n_steps=20, save_every=10, method="P3L-Q4G", wrt=("q0",))
+    S = fastvi.sensitivity(chain4, q0, v0, **run)
+    R = fastvi.sensitivity(chain4, q0, v0, solver="dense", **run)
+    assert np.array_equal(S.dq, R.dq) and np.array_equal(S.dv, R.dv)

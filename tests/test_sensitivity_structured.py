@@ -97,3 +97,4 @@ def test_structured_ensemble_members_are_the_single_runs(chain):
     for i in range(2):
         S = fastvi.sensitivity(chain, Q0[i], V0[i], **run)
         assert np.array_equal(E.dq[i], S.dq) and np.array_equal(E.dv[i], S.dv)
+

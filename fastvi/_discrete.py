@@ -130,8 +130,8 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
     # the structured paths of the linearised step are compiled for structured workspaces
     # only (_numba.only_if): a model whose plan keeps every solve dense gets none of them
     patterns = structure.plan(model, meth, prm, solver).patterns if ws.structured else {}
-    sparsity = make_sparsity(step_band(ws), patterns.get("G"), patterns.get("newton"), meth.s,
-                             meth.J)
+    sparsity = make_sparsity(step_band(ws), structure.linearisation_patterns(
+        patterns["G"], patterns["newton"], meth.s, meth.J) if patterns else None)
     # the stages compiled for the model's sizes when integrate has compiled them: the same
     # steps bit for bit, at half the cost
     stepk, stages = step_kernel(md, tabs, opts, ws, full=True,

@@ -180,6 +180,68 @@ def _system(P, PS, J, solver, system):
     return _System(lay.SOLVE_DENSE, (kl, ku), perm_b, 0, None, None, costs)
 
 
+def _greedy_colours(neighbours):
+    """Greedy colouring in vertex order: vertex ``i`` takes the smallest colour none of
+    ``neighbours[i]`` (indices) already has. Returns the colours (int64)."""
+    colour = np.full(len(neighbours), -1, dtype=np.int64)
+    for i, nb in enumerate(neighbours):
+        used = {int(colour[c]) for c in nb if colour[c] >= 0}
+        k = 0
+        while k in used:
+            k += 1
+        colour[i] = k
+    return colour
+
+
+def compressed_rows(P):
+    """``(ptr, cols)`` of the boolean pattern ``P`` by rows: the columns of row i at
+    ``cols[ptr[i] … ptr[i + 1]]``, ascending."""
+    P = np.asarray(P, dtype=bool)
+    return (np.concatenate(([0], np.cumsum(P.sum(axis=1)))).astype(np.int64),
+            np.nonzero(P)[1].astype(np.int64))
+
+
+def linearisation_patterns(PG, PA, s: int, J: int):
+    """What the linearised step of a structured model uses of its patterns (``PG`` of G,
+    (m, n), ``PA`` of the step's Newton matrix, (N, N)), for a method of ``s`` and ``J``:
+    a dict of int64 arrays for :func:`fastvi.kernels.tangent.make_sparsity`.
+
+    - ``gptr``, ``gcol``: G by rows; ``gsta``, ``grow``: groups of constraints whose
+      patterns share no coordinate (a greedy colouring of ``G Gᵀ``; group k's rows at
+      ``grow[gsta[k] …]``), empty unless they save at least half of the ``m`` constraint
+      Hessians a point would need one by one.
+    - ``tptr``, ``tcol``, ``xptr``, ``xcol``: the patterns of ``R_q``, ``P_q`` ((N + n) ×
+      n) and ``P_X`` (n × N), from the block structure: every coordinate block of the
+      Newton matrix couples ``q_a`` and ``q_b`` through the mass, the forces and the
+      constraint Hessians (``B``, the union of its blocks and of ``Gᵀ G``), every impulse
+      column through ``Gᵀ``; so ``R_q`` has ``B`` in the rows of the equations and ``G`` in
+      the constraint rows, ``P_q`` has ``B``, and ``P_X`` has ``B`` in each position block
+      and ``Gᵀ`` in each impulse block (supersets)."""
+    PG, PA = np.asarray(PG, dtype=bool), np.asarray(PA, dtype=bool)
+    m, n = PG.shape
+    z = np.zeros(0, dtype=np.int64)
+    out = dict(gptr=z, gcol=z, gsta=z, grow=z)
+    Gi = PG.astype(np.int64)
+    if m:
+        share = (Gi @ Gi.T) > 0
+        colour = _greedy_colours([np.nonzero(share[c])[0] for c in range(m)])
+        ng = int(colour.max()) + 1
+        if 2 * ng <= m:
+            out["gptr"], out["gcol"] = compressed_rows(PG)
+            out["grow"] = np.argsort(colour, kind="stable").astype(np.int64)
+            out["gsta"] = np.searchsorted(colour[out["grow"]], np.arange(ng + 1)).astype(np.int64)
+    B = (Gi.T @ Gi) > 0
+    for nu in range(s):
+        for mu in range(s):
+            B |= PA[nu * n:(nu + 1) * n, mu * n:(mu + 1) * n]
+    T = np.vstack([B] * s + [PG] * J + [B])
+    X = np.hstack([B] * s + [PG.T] * J)
+    assert T.shape == (s * n + J * m + n, n) and X.shape == (n, s * n + J * m)
+    out["tptr"], out["tcol"] = compressed_rows(T)
+    out["xptr"], out["xcol"] = compressed_rows(X)
+    return out
+
+
 def _column_groups(PG):
     """Curtis–Powell–Reid groups of the columns of the constraint Hessian ``Σ η_i ∇²g_i``,
     whose pattern is that of ``Gᵀ G`` (entry (a, b) only where a constraint involves both):
@@ -191,13 +253,7 @@ def _column_groups(PG):
     H = ((Gs.T @ Gs) > 0).tocsc()
     n = H.shape[0]
     C = ((H.T @ H) > 0).tolil()  # columns that share a row of H
-    colour = np.full(n, -1, dtype=np.int64)
-    for b in range(n):
-        used = {colour[c] for c in C.rows[b] if colour[c] >= 0}
-        k = 0
-        while k in used:
-            k += 1
-        colour[b] = k
+    colour = _greedy_colours(C.rows)
     ng = int(colour.max()) + 1 if n else 0
     if 2 * ng > n:
         return None
@@ -279,8 +335,9 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
     def put_g_pattern():
         if not si[lay.SI_GPTR]:
             PG = pats["G"]
-            si[lay.SI_GPTR] = put(np.concatenate(([0], np.cumsum(PG.sum(axis=1)))))
-            si[lay.SI_GCOL] = put(np.nonzero(PG)[1])
+            gptr, gcol = compressed_rows(PG)
+            si[lay.SI_GPTR] = put(gptr)
+            si[lay.SI_GCOL] = put(gcol)
 
     if m and flags[lay.F_DIAG] and not flags[lay.F_AUGMENT]:  # M⁻¹ elementwise
         PG = pats["G"]

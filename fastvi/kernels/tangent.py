@@ -164,66 +164,19 @@ def point_work(n, m, sp):
                      np.zeros((n, n)), np.zeros((mm, n)), np.zeros((mm, n)), sp)
 
 
-def make_sparsity(band=None, PG=None, PA=None, s=0, J=0):
+def make_sparsity(band=None, patterns=None):
     """The :class:`Sparsity` of a model: ``band = (perm, kl, ku)`` the banded plan of its
-    step's Newton matrix (:func:`step_band`), ``PG`` the pattern of ``G`` (m, n) and ``PA``
-    that of the step's Newton matrix (N, N) (booleans, :func:`fastvi.structure.plan`'s
-    ``patterns``) for a method of ``s`` and ``J``; None: dense. The constraint groups are a
-    greedy colouring of ``G Gᵀ``, kept when they save at least half of the ``m``
-    constraint Hessians a point would need one by one.
-
-    The patterns of ``R_q``, ``P_q`` and ``P_X`` follow from the block structure: every
-    coordinate block of the Newton matrix couples ``q_a`` and ``q_b`` through the mass,
-    the forces and the constraint Hessians (``B``, the union of its blocks and of
-    ``Gᵀ G``), every impulse column through ``Gᵀ``; so ``R_q`` has ``B`` in the rows of
-    the equations and ``G`` in the constraint rows, ``P_q`` has ``B``, and ``P_X`` has ``B``
-    in each position block and ``Gᵀ`` in each impulse block."""
+    step's Newton matrix (:func:`step_band`), ``patterns`` the arrays of
+    :func:`fastvi.structure.linearisation_patterns`; None: dense."""
     z = np.zeros(0, dtype=np.int64)
     perm, kl, ku = (z, 0, 0) if band is None else band
-    gptr = gcol = gsta = grow = tptr = tcol = xptr = xcol = z
-    if PG is not None and PG.shape[0] > 0:
-        PG = np.asarray(PG, dtype=bool)
-        m = PG.shape[0]
-        share = (PG.astype(np.int64) @ PG.T.astype(np.int64)) > 0
-        colour = np.full(m, -1, dtype=np.int64)
-        for c in range(m):
-            used = set(colour[np.nonzero(share[c])[0]].tolist())
-            k = 0
-            while k in used:
-                k += 1
-            colour[c] = k
-        ng = int(colour.max()) + 1
-        if 2 * ng <= m:
-            gptr = np.concatenate(([0], np.cumsum(PG.sum(axis=1)))).astype(np.int64)
-            gcol = np.nonzero(PG)[1].astype(np.int64)
-            grow = np.argsort(colour, kind="stable").astype(np.int64)
-            gsta = np.searchsorted(colour[grow], np.arange(ng + 1)).astype(np.int64)
-    if band is not None and PA is not None and PG is not None:
-        tptr, tcol, xptr, xcol = _block_patterns(np.asarray(PA, dtype=bool),
-                                                 np.asarray(PG, dtype=bool), s, J)
-    return Sparsity(np.asarray(perm, dtype=np.int64), int(kl), int(ku), gptr, gcol, gsta, grow,
-                    tptr, tcol, xptr, xcol)
-
-
-def _block_patterns(PA, PG, s, J):
-    """``(tptr, tcol, xptr, xcol)``: the compressed rows of the patterns of ``R_q``, ``P_q``
-    ((N + n) × n) and ``P_X`` (n × N) (:func:`make_sparsity`)."""
-    m, n = PG.shape
-    sn = s * n
-    Gi = PG.astype(np.int64)
-    B = (Gi.T @ Gi) > 0
-    for nu in range(s):
-        for mu in range(s):
-            B |= PA[nu * n:(nu + 1) * n, mu * n:(mu + 1) * n]
-    T = np.vstack([np.vstack([B] * s), np.vstack([PG] * J), B])
-    X = np.hstack([np.hstack([B] * s), np.hstack([PG.T] * J)])
-
-    def rows(P):
-        return (np.concatenate(([0], np.cumsum(P.sum(axis=1)))).astype(np.int64),
-                np.nonzero(P)[1].astype(np.int64))
-
-    assert T.shape == (sn + J * m + n, n) and X.shape == (n, sn + J * m)
-    return (*rows(T), *rows(X))
+    p = patterns or {}
+    if band is None:  # the patterns of R_q, P_q, P_X serve the banded factorisation only
+        p = {k: v for k, v in p.items() if k[0] == "g"}
+    get = lambda k: p.get(k, z)  # noqa: E731
+    return Sparsity(np.asarray(perm, dtype=np.int64), int(kl), int(ku), get("gptr"),
+                    get("gcol"), get("gsta"), get("grow"), get("tptr"), get("tcol"),
+                    get("xptr"), get("xcol"))
 
 
 @njit

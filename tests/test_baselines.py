@@ -20,6 +20,9 @@ from . import models
 REF_TOL = 1e-13
 # the package exports the function `rk4`, which shadows the submodule of the same name
 rk4_module = importlib.import_module("fastvi.baselines.rk4")
+# the tests that run the RK4 kernel: its first compile takes longer than the rest of this
+# file, for a yardstick of the benchmarks rather than the product (`make test-slow`)
+rk4_kernel = pytest.mark.slow
 
 # ---------------------------------------------------------------- unconstrained test models
 # Plane pendulum in its angle (n = 1, m = 0, constant mass): params = (m, l, g).
@@ -78,6 +81,7 @@ def _final_error(model, q0, v0, rhs, T, hs):
 HS = np.array([0.04, 0.02, 0.01, 0.005])
 
 
+@rk4_kernel
 def test_rk4_order_is_4_on_unconstrained_angle_pendulum(angle_pendulum):
     errs = _final_error(angle_pendulum, np.array([2.0]), np.array([0.0]), _pend_rhs, 2.0, HS)
     order, used = observed_order(HS, errs)
@@ -86,6 +90,7 @@ def test_rk4_order_is_4_on_unconstrained_angle_pendulum(angle_pendulum):
     assert abs(order - 4.0) < 0.15  # measured 3.91
 
 
+@rk4_kernel
 def test_rk4_order_is_4_with_configuration_dependent_mass(spring_pendulum):
     q0, v0 = np.array([1.2, 1.0]), np.array([0.3, -0.5])
     errs = _final_error(spring_pendulum, q0, v0, _sp_rhs, 2.0, HS)
@@ -95,6 +100,7 @@ def test_rk4_order_is_4_with_configuration_dependent_mass(spring_pendulum):
     assert errs[-1] < 1e-7  # measured 4.5e-8
 
 
+@rk4_kernel
 def test_rk4_order_is_4_on_constrained_double_pendulum(double_pendulum, dp_start):
     q0, v0 = dp_start
     T = 1.0
@@ -110,18 +116,21 @@ def test_rk4_order_is_4_on_constrained_double_pendulum(double_pendulum, dp_start
     assert abs(order - 4.0) < 0.2  # measured 3.99
 
 
+@rk4_kernel
 def test_rk4_without_projection_drifts_off_the_constraints(double_pendulum, dp_start):
     res = rk4(double_pendulum, *dp_start, h=0.01, n_steps=10_000)
     assert res.constraint_residual[-1] > 1e-6  # measured 0.17
     assert np.max(res.velocity_residual) > 1e-6  # measured 4.3e-3
 
 
+@rk4_kernel
 def test_rk4_with_projection_keeps_constraints_at_roundoff(double_pendulum, dp_start):
     res = rk4(double_pendulum, *dp_start, h=0.01, n_steps=10_000, project=True)
     assert np.max(res.constraint_residual) < 1e-14  # measured 7.8e-16
     assert np.max(res.velocity_residual) < 1e-13  # measured 1.9e-15
 
 
+@rk4_kernel
 def test_variational_energy_error_stays_bounded_while_rk4_grows(double_pendulum, dp_start):
     """Over 10^4 steps (h = 0.01, T = 100 s) on paper B's chaotic double pendulum, and the
     variational integrator alone over 10^5 steps."""
@@ -153,6 +162,7 @@ def test_variational_energy_error_stays_bounded_while_rk4_grows(double_pendulum,
     assert rk_win.max() > 1000 * vi_win.max()  # measured 7.8e4
 
 
+@rk4_kernel
 def test_rk4_and_variational_agree_with_each_other_on_the_slider():
     """Same physics: at small h both reach the same state (the slider's mass depends on q)."""
     model = fastvi.scenes.rotary_rod_slider()
@@ -173,6 +183,7 @@ def test_scipy_wrapper_matches_minimal_coordinate_reference(double_pendulum, dp_
     assert np.max(np.abs(res.energy_error)) < 1e-9  # measured 3.0e-11
 
 
+@rk4_kernel
 def test_rk4_kernels_compile_once_for_different_models(double_pendulum, dp_start, angle_pendulum):
     rk4(double_pendulum, *dp_start, h=0.01, n_steps=3, project=True)
     rk4(angle_pendulum, [1.0], [0.0], h=0.01, n_steps=3)
@@ -182,6 +193,7 @@ def test_rk4_kernels_compile_once_for_different_models(double_pendulum, dp_start
     assert len(rk4_module.observe.signatures) == 1  # the other entry point called from Python
 
 
+@rk4_kernel
 def test_rk4_result_records_every_step_and_stats(double_pendulum, dp_start):
     res = rk4(double_pendulum, *dp_start, h=0.01, n_steps=10, save_every=3)
     np.testing.assert_allclose(res.t, [0.0, 0.03, 0.06, 0.09, 0.10], rtol=0, atol=1e-15)
@@ -208,6 +220,7 @@ def test_scipy_wrapper_rejects_unknown_method(double_pendulum, dp_start):
         solve_ivp(double_pendulum, *dp_start, t_end=1.0, method="Euler")
 
 
+@rk4_kernel
 @pytest.mark.parametrize("project", [False, True])
 @pytest.mark.parametrize("scene", ["chain", "tree"])
 def test_rk4_of_a_large_model_solves_over_the_pattern_of_G(scene, project):

@@ -170,7 +170,9 @@ def _assert_clean_errors(results):
 
 
 def test_size_mistakes_raise_a_clear_error_in_a_fresh_process():
-    jobs = [(case, route) for case in CASES for route in ("integrate", "check")]
+    """Through ``integrate``; through ``Model.check`` in ``test_size_mistakes_raise_every_time``
+    (``make test-slow``: one process a case and route is a second each)."""
+    jobs = [(case, "integrate") for case in CASES]
     jobs.append(("correct", "integrate"))  # the control: the same script runs when nothing is wrong
     results = _run_all(jobs)
     control = results.pop()

@@ -212,6 +212,7 @@ def test_rejects_nonpositive_parameters(bad):
         fastvi.scenes.rotary_rod_slider(**bad)
 
 
+@pytest.mark.slow  # the RK4 kernel's compile (tests/test_baselines.py)
 def test_rk4_matches_reference_on_both_codings(slider, cartesian_slider):
     """The RK4 baseline's q-dependent-mass path (slider) and its finite-difference ∇²g path
     (the Cartesian variant gives no constraint Hessian) reach the same reference."""

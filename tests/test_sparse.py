@@ -8,7 +8,7 @@ import fastvi
 from fastvi import structure
 from fastvi.kernels import layout as lay
 from fastvi.kernels.banded import band_factor, band_ld, band_solve
-from fastvi.kernels.step import assemble
+from fastvi.kernels.step import assemble, fd_constraint_hessian, fd_constraint_hessian_grouped
 from fastvi.scenes import chain, double_pendulum
 from fastvi.scenes.chain import (constraint as _g, constraint_hessian as _ddg,
                                  constraint_jacobian as _G, pattern, potential as _V,
@@ -220,29 +220,30 @@ def _chain_without_constraint_hessian(N):
 
 
 def test_grouped_differences_of_the_constraint_hessian_are_the_column_by_column_ones():
+    """The two difference kernels of the Newton matrix, called as the step calls them (its
+    trajectory with them: the test below)."""
     N = 24
+    n, m = 2 * N, N
     model = _chain_without_constraint_hessian(N)
     ws = structure.workspace(model, P2)
     ng = ws.si[lay.SI_HC_NG]
     assert 0 < ng <= 6  # a chain: 6 groups whatever N (distance-2 colouring of its bodies)
-    plain = ws._replace(si=ws.si.copy(), sb=ws.sb.copy())
-    plain.si[lay.SI_HC_NG] = 0  # one column at a time: n = 48 pairs of Jacobian calls
     rng = np.random.default_rng(5)
     md = model.kernel_data()
-    q = rng.standard_normal(2 * N)
-    p = rng.standard_normal(2 * N)
-    X = 0.1 * rng.standard_normal(ws.X.size)
-    exact = structure.workspace(chain(N), P2)
-    for w, mdl in ((ws, md), (plain, md), (exact, chain(N).kernel_data())):
-        w.X[:] = X
-        w.G[0, :N] = model.constraint_jacobian_value(q)
-        assemble(mdl, P2.kernel_tables, 0.01, q, p, w, True)
+    fjac = md.fns[lay.CJAC]
+    q = rng.standard_normal(n)
+    eta = rng.standard_normal(m)
+    grouped, plain, exact = np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n))
+    qa, d, Gp, Gm = np.zeros(n), np.zeros(n), np.zeros((m, n)), np.zeros((m, n))
+    fd_constraint_hessian_grouped(fjac, q, eta, md.prm, grouped, qa, d, Gp, Gm, ws.si, n, m)
+    fd_constraint_hessian(fjac, q, eta, md.prm, plain, qa, Gp, Gm, n, m)  # n pairs of calls
+    _ddg(q, eta, md.prm, exact)
     # the same floating-point operations: equal bit for bit
-    assert np.array_equal(ws.A, plain.A)
+    assert np.array_equal(grouped, plain)
     # and the Hessian they difference is the exact one (the chain's), to the differences'
-    # error (measured 7e-15 of max|A|: differences of quadratic constraints)
-    assert np.abs(ws.A - exact.A).max() < 1e-8 * np.abs(exact.A).max()
-    assert np.abs(ws.A - exact.A).max() > 0.0  # differences, not the exact Hessian
+    # error (measured 2e-11 of max|H| at this random state)
+    assert np.abs(grouped - exact).max() < 1e-8 * np.abs(exact).max()
+    assert np.abs(grouped - exact).max() > 0.0  # differences, not the exact Hessian
 
 
 def test_grouped_differences_give_the_exact_hessians_trajectory():

@@ -196,14 +196,24 @@ def test_size_mistakes_raise_with_check_false_too():
 def test_event_mistakes_raise_a_clear_error_in_a_fresh_process():
     """Before the event guard an event reading v[n] returned invented crossings (exit 0), one
     writing into v corrupted the recorded velocities silently, and SciPy's ev(t, y) got
-    numba's generic typing advice. One fresh process each, with and without the model
-    check; the correct event is the control."""
-    import re
-
-    jobs = [(case, route) for case in EVENT_CASES for route in ("check", "nocheck")]
+    numba's generic typing advice. One fresh process each, without the model check (the
+    guard's own work; with it too: ``test_event_mistakes_raise_with_the_check_too``); the
+    correct event is the control."""
+    jobs = [(case, "nocheck") for case in EVENT_CASES]
     results = _run_all(jobs + [("correct", "check")], script=EVENT_SCRIPT)
     control = results.pop()
     assert control[1] == 0 and "integrated True" in control[2], control
+    _assert_event_errors(results)
+
+
+@pytest.mark.slow
+def test_event_mistakes_raise_with_the_check_too():
+    _assert_event_errors(_run_all([(case, "check") for case in EVENT_CASES], script=EVENT_SCRIPT))
+
+
+def _assert_event_errors(results):
+    import re
+
     for job, code, out, err in results:
         where = f"{job}: exit code {code}\nstdout: {out}\nstderr (end): {err[-2000:]}"
         assert code >= 0, "killed by a signal: " + where

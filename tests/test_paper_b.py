@@ -56,6 +56,7 @@ def test_growth_is_one_for_bounded_and_ten_for_linear_drift():
     assert paper_b._growth(1e-3 * t * np.abs(np.sin(7 * t))) == pytest.approx(10.0, rel=0.05)  # 10.3
 
 
+@pytest.mark.slow  # its RK4 rows compile the RK4 kernel (tests/test_baselines.py)
 def test_quick_study_writes_tables_figures_and_page(tmp_path, capsys):
     assert paper_b.main(["--quick", "--quiet", "--out", str(tmp_path)]) == 0
     page = (tmp_path / "paper-b.md").read_text(encoding="utf-8")

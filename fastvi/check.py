@@ -369,7 +369,7 @@ class _Callbacks:
     def __init__(self, model: Model, params: np.ndarray, report: "CheckReport", t: float = 0.0):
         cfs = model.kernel_arguments()[0]
         self.fn = dict(zip(SLOTS, cfs))
-        self.present = set(model._functions)
+        self.present = model.callbacks
         # the kernels' parameter vector: a time-aware model reads t from a hidden last entry
         self.p = model.kernel_params(params, t)
         self.t = float(t)
@@ -823,7 +823,7 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
     report.evaluations = cb.count
     report.wall_time = time.perf_counter() - t0
     if report.ok:
-        model._checked = True
+        model.checked = True
     elif raise_on_error:
         raise ModelCheckError(report)
     return report

@@ -105,7 +105,7 @@ def consistent_state(model: Model, q, v, *, fixed=(), t: float = 0.0, params=Non
     free = np.array([i for i in range(n) if i not in set(fix)], dtype=np.int64)
     if m == 0:
         return q, v
-    if not model._checked:  # our evaluations below use the plain (unguarded) buffers
+    if not model.checked:  # our evaluations below use the plain (unguarded) buffers
         from .check import check_sizes
 
         check_sizes(model, q, v, params=prm, t=t)

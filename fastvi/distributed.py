@@ -114,7 +114,7 @@ def integrate_ensemble(
             raise ValueError("the Dask cluster of `client` has no workers")
         chunk_size = math.ceil(N / (CHUNKS_PER_WORKER_THREAD * workers))
     chunk_size = _ens.check.count(chunk_size, "chunk_size", 1)
-    if check and not getattr(model, "_checked", True):  # on the client, once, not once per chunk
+    if check and not getattr(model, "checked", True):  # on the client, once, not once per chunk
         model.check(Q0[0], V0[0], params=P[0], n_random=1, t=opts["t0"])
 
     t_start = time.perf_counter()

@@ -598,14 +598,14 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
               events=None) -> EnsembleResult:
     t_setup = time.perf_counter()
     Q0, V0, P = _members(model, Q0, V0, params)
-    compile_time = timed(model._compile)
+    compile_time = timed(model.kernel_arguments)
     t_events = time.perf_counter()
     guards.signatures(events)  # SciPy's ev(t, y) named before numba's typing error
     ev = events_.prepare(model, opts["method"], events, 0, 1)  # compiles the event functions
     compile_time += time.perf_counter() - t_events
     check_time = 0.0
     t0 = opts.get("t0", 0.0)
-    if run_check and not getattr(model, "_checked", True):  # as integrate: before the projection
+    if run_check and not getattr(model, "checked", True):  # as integrate: before the projection
         check_time = timed(lambda: model.check(Q0[0], V0[0], params=P[0], n_random=1, t=t0))
     else:  # the sizes always (check=False skips the derivatives only)
         check_time = timed(lambda: guards.sizes(model, Q0[0], V0[0], P[0], t0))

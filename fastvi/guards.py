@@ -22,6 +22,7 @@ them and a kernel:
 from __future__ import annotations
 
 import inspect
+import weakref
 
 import numpy as np
 
@@ -33,6 +34,10 @@ __all__ = ["sizes", "events", "EventFunctionError"]
 
 #: the signature every event function has (SciPy's ``(t, y)`` does not fit: ``y`` is split)
 EVENT_SIGNATURE = "event(t, q, v, params) -> float"
+
+
+#: the models whose callbacks passed the size check in this process
+_SIZED: "weakref.WeakSet" = weakref.WeakSet()
 
 
 class EventFunctionError(ValueError):
@@ -50,10 +55,10 @@ def sizes(model, q, v, params, t: float) -> None:
         A callback writes outside its declared output or into an input, or leaves an entry
         of its output unset.
     """
-    if getattr(model, "_checked", False) or getattr(model, "_sized", False):
+    if model.checked or model in _SIZED:
         return
     check_.check_sizes(model, q, v, params=params, t=t)
-    model._sized = True  # an instance attribute: a pickled model is checked again where it lands
+    _SIZED.add(model)  # by object: a pickled model is checked again where it lands
 
 
 def _positional_count(fn):

@@ -380,9 +380,9 @@ def integrate(
     if recover and (dense_output or events is not None):
         raise ValueError("`recover` cannot be combined with `dense_output`, `t_eval` or `events` (a "
                          "recovered step has no single polynomial); use a smaller `h` instead")
-    compile_time = timed(model._compile)
+    compile_time = timed(model.kernel_arguments)
     check_time = 0.0
-    if check and not model._checked:  # before the projection, which trusts G(q)
+    if check and not model.checked:  # before the projection, which trusts G(q)
         check_time = timed(lambda: model.check(q0, v0, params=prm, n_random=1, t=t0))
     else:  # check=False skips the derivatives, never the sizes (a size mistake corrupts memory)
         check_time = timed(lambda: guards.sizes(model, q0, v0, prm, t0))
@@ -585,13 +585,11 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
 
 def _nonfinite_callback(model, prm, state, ws):
     """Name the callback that returns NaN/inf at the failing step's start or last iterate."""
-    n, m = model.n, model.m
-    shapes = {"potential": (), "potential_grad": (n,), "mass": (n, n), "kinetic_grad": (n,),
-              "constraint": (m,), "constraint_jacobian": (m, n)}
     for q, v in ((state[0], state[2]), (ws.qi, ws.vi)):
-        for slot, shape in shapes.items():
-            if slot in model._functions:
-                val = model._eval(slot, q, v, params=prm, shape=shape, t=float(ws.time[0]))
+        for slot in ("potential", "potential_grad", "mass", "kinetic_grad", "constraint",
+                     "constraint_jacobian"):
+            if slot in model.callbacks:
+                val = model.callback_value(slot, q, v, params=prm, t=float(ws.time[0]))
                 if not np.all(np.isfinite(val)):
                     return f"callback `{slot}` returned {val} at q = {np.array2string(np.asarray(q), precision=6)}"
     return None

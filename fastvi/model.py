@@ -432,6 +432,13 @@ class Model:
     drawing : fastvi.drawing.Drawing or None
         How to draw a configuration, for :meth:`fastvi.Result.animate` (None unless set;
         every scene has one). Not pickled: a scene model is rebuilt with its drawing.
+    checked : bool
+        True once :meth:`check` (or the automatic check of the first integration) passed;
+        :func:`fastvi.integrate` then skips its check. Models built by the library
+        (:mod:`fastvi.bodies`) start checked. A model unpickled elsewhere starts unchecked.
+    recipe : tuple or None
+        ``(scene, kwargs)`` for a model built by a function of :mod:`fastvi.scenes`: how it
+        is rebuilt when pickled (None for a model built from user functions).
 
     Notes
     -----
@@ -473,7 +480,7 @@ class Model:
         self.m = _as_int(m, "m", 0)
         self.params = _as_params(params)
         self.name = name or "model"
-        self._recipe = None  # set by scenes / pickling support
+        self.recipe = None  # set by the scenes: pickled as this recipe
         self.drawing = None  # a fastvi.drawing.Drawing (the scenes set one)
         #: ∇²V = 0 was declared (``potential_hessian=0``): ∇V is evaluated once a trajectory
         self.linear_potential = _is_zero(potential_hessian)
@@ -547,15 +554,15 @@ class Model:
         self.constraint_jacobian_pattern = _as_pattern(constraint_jacobian_pattern, self.m, self.n)
         self._compiled = None
         self._mass_arg = mass
-        self._checked = False  # set by fastvi.check once the derivatives passed (integrate skips it then)
+        self.checked = False
 
     # ------------------------------------------------------------------ pickling as a recipe
     def __reduce__(self):
         # Compiled cfuncs cannot travel between processes; a model travels as the recipe
         # that rebuilds it (scene name and arguments, or importable user functions) and is
         # recompiled on arrival (the kernels themselves come from the on-disk cache).
-        if self._recipe is not None:
-            scene, kwargs = self._recipe
+        if self.recipe is not None:
+            scene, kwargs = self.recipe
             return (_scene_from_recipe, (scene, kwargs, self.params))
         in_main = []
         for key, fn in self._functions.items():
@@ -665,7 +672,41 @@ class Model:
         return {s: s in self._functions or (s == "potential_hessian" and self.linear_potential)
                 for s in _SECOND}
 
+    @property
+    def callbacks(self) -> frozenset:
+        """The names (:data:`SLOTS`) of the callbacks this model was given; the kernels
+        difference or skip the others."""
+        return frozenset(self._functions)
+
     # ------------------------------------------------------------------ evaluation from Python
+    def callback_value(self, slot: str, q, v=None, params=None, t: float = 0.0):
+        """The callback ``slot`` (a name of :data:`SLOTS`) at ``(t, q, v)``, as the kernels
+        call it: a float for ``potential``, else an array of the slot's output shape
+        ((n,), (m,), (m, n) or (n, n)). ``v`` is the callback's second input (the velocity,
+        or ``η`` for ``constraint_hessian``; default ``q``); ``t`` matters only for a
+        ``time_dependent`` model or a force.
+
+        Raises
+        ------
+        ValueError
+            ``slot`` is not a name of :data:`SLOTS`, or the model was not given that
+            callback (:attr:`callbacks`; the kernels difference or skip it). A declared
+            ``potential_hessian=0`` gives zeros.
+        """
+        if slot not in SLOTS:
+            raise ValueError(f"`slot` must be one of {', '.join(SLOTS)}, got {slot!r}")
+        if slot == "potential_hessian" and self.linear_potential:
+            return np.zeros((self.n, self.n))  # declared: ∇V does not depend on q
+        if slot not in self._functions:
+            hint = " (its mass is constant: see `mass_matrix`)" if slot == "mass" else ""
+            raise ValueError(f"the model has no `{slot}` callback{hint}; it has "
+                             f"{', '.join(s for s in SLOTS if s in self._functions)}")
+        n, m = self.n, self.m
+        shape = {"potential": (), "kinetic_grad": (n,), "potential_grad": (n,), "force": (n,),
+                 "constraint": (m,), "constraint_time_derivative": (m,),
+                 "constraint_jacobian": (m, n)}.get(slot, (n, n))
+        return self._eval(slot, q, v, params=params, shape=shape, t=t)
+
     def _eval(self, slot: str, q, v=None, params=None, shape=(), t: float = 0.0):
         direct = self.__dict__.get("_direct")
         if direct is None:

@@ -48,6 +48,7 @@ non-zero written outside it and a derivative finite differences find where it sa
 
 from __future__ import annotations
 
+import weakref
 from collections import namedtuple
 
 import numpy as np
@@ -83,7 +84,9 @@ people, ``solvers`` / ``bandwidths`` ({"newton", "schur", "projection"} →
 "dense"/"banded"/"sparse", (kl, ku) after RCM) and the detected ``patterns`` ({"G",
 "newton"} → boolean arrays)."""
 
-_PLANS_ATTR = "_structure_plans"
+#: the plans memoised per model (a model's plan depends on its callbacks, fixed at
+#: construction): dropped with the model
+_PLANS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 def detect_pattern(model, meth, prm=None, n_states: int = PATTERN_STATES, seed: int = 12):
@@ -286,7 +289,7 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
     if solver not in SOLVERS:
         raise ValueError(f"`solver` must be one of {', '.join(map(repr, SOLVERS))}, got {solver!r}")
     prm = model.params if prm is None else np.ascontiguousarray(prm, dtype=np.float64)
-    cache = model.__dict__.setdefault(_PLANS_ATTR, {})
+    cache = _PLANS.setdefault(model, {})
     key = (None if meth is None else meth.name, prm.tobytes(), solver)
     if key in cache:
         return cache[key]

@@ -21,9 +21,9 @@ def residual(model, meth, h, qk, pk, X, params=None):
     for i in range(meth.r):
         qi = ell[:, i] @ Q
         vi = dell[:, i] @ Q / h
-        F = -model._eval("potential_grad", qi, params=prm, shape=(n,))
+        F = -model.callback_value("potential_grad", qi, params=prm)
         if model.mass_matrix_constant is None:
-            F = F + model._eval("kinetic_grad", qi, vi, params=prm, shape=(n,))
+            F = F + model.callback_value("kinetic_grad", qi, vi, params=prm)
         Mv = model.mass_matrix(qi, prm) @ vi
         for nu in range(s + 1):
             D[nu] += h * b[i] * (ell[nu, i] * F + dell[nu, i] * Mv / h)

@@ -221,7 +221,7 @@ def test_correct_cart_model_passes_every_derivative_check():
                               "kinetic_hessian", "potential_hessian"]
     worst = max(r.relative_error for r in report.rows)
     assert worst < 1e-10  # measured 7e-13: Richardson-extrapolated differences are this accurate
-    assert len(report.states) == 4 and model._checked
+    assert len(report.states) == 4 and model.checked
 
 
 def test_correct_constrained_model_passes_every_derivative_check():
@@ -279,7 +279,7 @@ def test_check_names_the_one_wrong_derivative(build, slot, bad):
     assert err.value.callbacks == [slot]  # second derivatives of a wrong first one are skipped
     report = err.value.report
     assert report.worst(slot).relative_error > 1e-2  # measured: 0.5 to 2 (a genuine mistake is O(1))
-    assert not model._checked
+    assert not model.checked
     second = {"kinetic_grad": "kinetic_hessian", "potential_grad": "potential_hessian",
               "constraint_jacobian": "constraint_hessian"}.get(slot)
     if second:  # compared with FD of a wrong function: skipped, not blamed
@@ -308,7 +308,7 @@ def test_random_nearby_states_catch_a_mistake_invisible_at_the_given_state():
     model = cart(potential_grad=bad_potential_grad_spring_sign, potential_hessian=None)
     q0 = np.array([0.0, 1.1])  # x = 0: the wrong spring sign gives the right value here
     assert model.check(q0, CART_V, n_random=0).ok
-    model._checked = False
+    model.checked = False
     with pytest.raises(fastvi.ModelCheckError, match="potential_grad"):
         model.check(q0, CART_V, n_random=1)
 
@@ -357,13 +357,13 @@ def test_integrate_checks_a_model_only_once(monkeypatch, pendulum):
     calls = []
     original = fastvi.check.check_model
     monkeypatch.setattr(fastvi.check, "check_model", lambda *a, **k: calls.append(1) or original(*a, **k))
-    monkeypatch.setattr(pendulum, "_checked", False)  # the session fixture may have been checked
+    monkeypatch.setattr(pendulum, "checked", False)  # the session fixture may have been checked
     q0, v0 = pendulum.initial_state(0.5)
     fastvi.integrate(pendulum, q0, v0, h=0.01, n_steps=5, check=False)
-    assert calls == [] and not pendulum._checked
+    assert calls == [] and not pendulum.checked
     fastvi.integrate(pendulum, q0, v0, h=0.01, n_steps=5)
     fastvi.integrate(pendulum, q0, v0, h=0.01, n_steps=5)
-    assert len(calls) == 1 and pendulum._checked
+    assert len(calls) == 1 and pendulum.checked
 
 
 def test_automatic_check_costs_a_fraction_of_the_model_setup(monkeypatch):
@@ -426,3 +426,26 @@ def test_an_unwritten_constraint_entry_is_blamed_on_the_constraint(q):
     with pytest.raises(fastvi.ModelCheckError, match=r"`constraint` never wrote entry \[1\]") as err:
         model.check(q)
     assert err.value.callback == "constraint" and err.value.callbacks == ["constraint"]
+
+
+def test_callback_value_evaluates_each_slot_as_the_kernels_call_it(double_pendulum):
+    """Each callback by name, with its output shape; the derivatives against central
+    differences of the values (an independent computation)."""
+    model = double_pendulum
+    assert {"potential", "potential_grad", "constraint", "constraint_jacobian"} <= model.callbacks
+    assert "force" not in model.callbacks
+    q = np.array([0.6, -0.8, 1.1, -0.3])
+    eps = 1e-6
+    basis = np.eye(4) * eps
+    grad = model.callback_value("potential_grad", q)
+    fd = [(model.callback_value("potential", q + e) - model.callback_value("potential", q - e)) / (2 * eps)
+          for e in basis]
+    assert grad.shape == (4,) and np.allclose(grad, fd, rtol=0, atol=1e-7)
+    G = model.callback_value("constraint_jacobian", q)
+    fdG = np.array([(model.callback_value("constraint", q + e) - model.callback_value("constraint", q - e))
+                    / (2 * eps) for e in basis]).T
+    assert G.shape == (2, 4) and np.allclose(G, fdG, rtol=0, atol=1e-8)
+    with pytest.raises(ValueError, match="no `mass` callback.*constant: see `mass_matrix`"):
+        model.callback_value("mass", q)
+    with pytest.raises(ValueError, match="`slot` must be one of mass, kinetic_grad"):
+        model.callback_value("gradient", q)

@@ -306,7 +306,7 @@ def test_unset_matrix_entries_are_named_and_the_error_comes_before_any_derivativ
 def test_a_correct_model_passes_the_size_check_and_its_cost_is_small():
     model = _model()
     model.check(Q, VEL, n_random=1)  # compiles the callbacks and the guarded evaluator
-    model._checked = False
+    model.checked = False
     report = model.check(Q, VEL, n_random=1)  # what integrate runs
-    assert report.ok and model._checked
+    assert report.ok and model.checked
     assert report.wall_time < 0.05, report.wall_time  # measured 2-5 ms on a busy 2-core machine

@@ -433,7 +433,7 @@ class Mechanism:
         # load kind (tests/test_bodies.py); the automatic check of the first integration costs
         # O(m n²) (116 s for 64 bodies), so a built model counts as checked. Model.check(q, v)
         # still runs it on demand.
-        model._checked = True
+        model.checked = True
         from .kinematics import initial_state
 
         def _initial_state(values=None, rates=None, t=t0):

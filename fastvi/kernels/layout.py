@@ -72,7 +72,7 @@ FD_T = 7.4009597974140505e-04
 FD_T_POINTS = ((2.0, -1.0), (1.0, 8.0), (-1.0, -8.0), (-2.0, 1.0))
 
 # ----------------------------------------------------------------------------- flags vector
-# int64 vector built by Model._compile: sizes, which callbacks exist, structure of M
+# int64 vector built by Model.kernel_arguments: sizes, which callbacks exist, structure of M
 F_N = 0  # n
 F_M = 1  # m
 F_MASSFN = 2  # M is a function of q (else the constant Mc)

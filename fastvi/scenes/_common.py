@@ -16,7 +16,7 @@ def check_positive(**values: float) -> None:
 
 def attach(model, scene: str, kwargs: dict, drawing=None, **helpers):
     """Record how to rebuild the scene (pickling) and attach its drawing and helpers."""
-    model._recipe = (scene, dict(kwargs))
+    model.recipe = (scene, dict(kwargs))
     if drawing is not None:
         model.drawing = for_scene(drawing, scene, kwargs)
     for name, fn in helpers.items():

@@ -394,7 +394,11 @@ def integrate(
     state = np.zeros((6, n))
     state[0], state[1], state[2] = q0, M0 @ v0, v0
     ws = structure.workspace(model, meth, prm, solver)
-    sized = structure.sizing(specialize, n, total)
+    # an adaptive run has no step count (total is a cap): its steps are ε / ρ with a density
+    # ρ ≥ 1 (fastvi.kernels.adapt), about span / ε of them at least, what its stages are
+    # sized by
+    sized = structure.sizing(specialize, n, total if adaptive is None
+                             else math.ceil((float(t_end) - t0) / h))
     chunk = total if not progress else max(1, total // _PROGRESS_CHUNKS)
     if adaptive is not None:  # steps not known: chunks of steps, sample buffers grown
         chunk = _adaptive_chunk(float(t_end) - t0, h, every, n, progress)

@@ -105,3 +105,17 @@ def test_none_takes_the_sized_stages_once_they_are_compiled_after_a_miss(monkeyp
     _, stages = step_mod.step_kernel(dp.kernel_data(), meth.kernel_tables, opts,
                                      structure.workspace(dp, meth), sized="cached")
     assert isinstance(stages.newton_mech, step_mod._SizedStage)
+
+
+def test_an_adaptive_run_is_sized_by_its_span_not_by_its_step_cap(monkeypatch):
+    """An adaptive run has no step count; its stages are sized by the steps of ε over its span
+    (a short adaptive run of a new model compiled ≈ 10 s of sized stages before)."""
+    from fastvi import structure
+
+    asked = []
+    sizing = structure.sizing
+    monkeypatch.setattr(structure, "sizing", lambda sp, n, steps: asked.append(steps) or sizing(sp, n, steps))
+    dp = fastvi.scenes.double_pendulum()
+    q0, v0 = dp.initial_state(0.5, 0.5)
+    fastvi.integrate(dp, q0, v0, h=0.05, t_end=2.0, adaptive=2.0)
+    assert asked == [40] and sizing(None, dp.n, asked[0]) == "cached"

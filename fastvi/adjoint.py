@@ -21,7 +21,8 @@ from ._numba import quiet
 from .kernels.adjoint import (make_checkpoints, make_records, recorder, run_adjoint,
                               run_checkpointed)
 from .kernels.tangent import make_tangent_work, point_terms
-from .results import Result
+from .results import (Result, ResultBase, SavedResult, matching_model, result_arrays,
+                      result_from, run_items, run_text, stats_arrays, stats_from, timing)
 
 __all__ = ["adjoint", "AdjointResult"]
 
@@ -34,9 +35,12 @@ _FORWARD = Launcher(run_checkpointed)
 _BACKWARD = Launcher(run_adjoint)
 
 
-@dataclass
-class AdjointResult:
+@dataclass(repr=False)
+class AdjointResult(SavedResult, ResultBase):
     """The trajectory of :func:`adjoint` and the gradient of the cost.
+
+    :meth:`save` writes it to one ``.npz`` file and :meth:`load` reads it back, bit for bit;
+    :meth:`summary` gives one line of what to check first.
 
     Attributes
     ----------
@@ -52,6 +56,8 @@ class AdjointResult:
         The adjoint at ``t0``: ``∂J/∂(q0, p0)`` of the consistent initial state.
     stats : dict
         ``checkpoints`` kept, ``segment`` (steps between them), ``backward_time`` (s).
+    status : Status
+        The run's (``result.status``); ``success`` and ``message`` as :class:`fastvi.Result`.
     """
 
     result: Result
@@ -62,6 +68,49 @@ class AdjointResult:
     lam_q: np.ndarray
     lam_p: np.ndarray
     stats: dict
+
+    @property
+    def status(self):
+        """The status of the run (:attr:`fastvi.Result.status` of :attr:`result`)."""
+        return self.result.status
+
+    @property
+    def gradient(self) -> np.ndarray:
+        """``(grad_q0, grad_v0, grad_params)`` in one vector (2n + len(param_index),)."""
+        return np.concatenate([self.grad_q0, self.grad_v0, self.grad_params])
+
+    def _repr_items(self) -> list[str]:
+        return [*run_items(self.result), f"samples={self.result.t.shape[0]}",
+                f"parameters={len(self.param_index)}",
+                f"|grad|={np.linalg.norm(self.gradient):.3g}", f"status={self._status_text()}"]
+
+    def summary(self) -> str:
+        """One line with the figures a user checks first: the run, the number of samples
+        and of parameters, the norm of the gradient (and of its parts by ``q0``, ``v0`` and
+        the parameters), the status, and the times of the forward run and backward sweep."""
+        norm = np.linalg.norm
+        st = self.stats
+        return (f"{self.result.model_name}: adjoint, {run_text(self.result)}, "
+                f"{self.result.t.shape[0]} samples, {len(self.param_index)} parameters, "
+                f"|∇J| = {norm(self.gradient):.3e} (q0 {norm(self.grad_q0):.3e}, "
+                f"v0 {norm(self.grad_v0):.3e}, params {norm(self.grad_params):.3e}), "
+                f"status {self._status_text()}, forward: {timing(self.result.stats)}, "
+                f"backward {st.get('backward_time', float('nan')):.3g} s (checkpoints: "
+                f"{st.get('checkpoints', '?')}, every {st.get('segment', '?')} steps)")
+
+    def _arrays(self) -> dict:
+        return dict(grad_q0=self.grad_q0, grad_v0=self.grad_v0, grad_params=self.grad_params,
+                    param_index=np.asarray(self.param_index, dtype=np.int64), lam_q=self.lam_q,
+                    lam_p=self.lam_p, **stats_arrays(self.stats),
+                    **result_arrays(self.result, "result_"))
+
+    @classmethod
+    def _from_stored(cls, data, model) -> "AdjointResult":
+        result = result_from(data, "result_")
+        matching_model(model, result, cls.__name__)  # checked, not kept: no method needs it
+        return cls(result, data["grad_q0"], data["grad_v0"], data["grad_params"],
+                   [int(x) for x in data["param_index"]], data["lam_q"], data["lam_p"],
+                   stats_from(data))
 
 
 def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,

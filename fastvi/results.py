@@ -5,11 +5,21 @@
 short ``repr``); :class:`TrajectoryResult` adds what the two single-trajectory results share
 (energy error, residual summary, plot). The progress bar of :func:`fastvi.integrate` lives
 here too, since it formats what a result later reports.
+
+The storage of results is here as well: :func:`save_npz` and :func:`open_npz` write and
+read a compressed ``.npz`` tagged with the class that wrote it, and :func:`result_arrays` /
+:func:`result_from` turn a :class:`Result` into arrays under a key prefix and back, so that
+the derivative results (:class:`fastvi.SensitivityResult`, :class:`fastvi.AdjointResult`,
+:class:`fastvi.EnsembleSensitivityResult`) store their trajectory in their own file the way
+:meth:`Result.save` does.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
+import os
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,11 +37,43 @@ def _seconds(x) -> str:
     return f"{x:.3g} s" if x == x else "n/a"
 
 
+def timing(stats: dict) -> str:
+    """``integration 0.07 s, setup 0.8 s (compile 0.7 s)``, from what ``stats`` holds.
+
+    Results built before the split (or by the baselines) only have ``wall_time``.
+    """
+    if "integration_time" not in stats:
+        wall = stats.get("wall_time", float("nan"))
+        return f"wall time {_seconds(wall)}" if wall == wall else "time not measured"
+    text = f"integration {_seconds(stats['integration_time'])}"
+    setup = stats.get("setup_time", float("nan"))
+    if setup == setup:
+        compile_ = stats.get("compile_time", 0.0)
+        text += f", setup {_seconds(setup)}"
+        if compile_ == compile_ and compile_ > 0.01:  # below: a cache hit, not news
+            text += f" (compile {_seconds(compile_)})"
+    return text
+
+
+def run_text(result) -> str:
+    """``method P2L-Q3G-NL-CN, h = 0.01, steps = 300``: the run of a result that holds one
+    trajectory, for a one-line summary."""
+    return f"method {result._label()}, h = {result.h:g}, steps = {result.stats.get('steps', '?')}"
+
+
+def run_items(result) -> list[str]:
+    """``model='…', method='…', h=…, steps=…``: the start of the ``repr`` of a result that
+    holds one trajectory (its own or nested)."""
+    return [f"model={result.model_name!r}", f"method={result._label()!r}", f"h={result.h:g}",
+            f"steps={result.stats.get('steps', '?')}"]
+
+
 class ResultBase:
     """Shared behaviour of every fastvi result (a mixin for dataclasses).
 
-    Subclasses have the fields ``status``, ``stats``, ``h`` and ``model_name`` and define
-    :meth:`_label` (the method's name) and :meth:`_repr_items`.
+    Subclasses have a ``status`` (a field or a property) and define :meth:`_repr_items`;
+    :meth:`_timing` reads their ``stats``. The trajectories also have ``h`` and
+    ``model_name`` and define :meth:`_label` (the method's name).
     """
 
     @property
@@ -53,22 +95,8 @@ class ResultBase:
         raise NotImplementedError
 
     def _timing(self) -> str:
-        """``integration 0.07 s, setup 0.8 s (compile 0.7 s)``, from what ``stats`` holds.
-
-        Results built before the split (or by the baselines) only have ``wall_time``.
-        """
-        st = self.stats
-        if "integration_time" not in st:
-            wall = st.get("wall_time", float("nan"))
-            return f"wall time {_seconds(wall)}" if wall == wall else "time not measured"
-        text = f"integration {_seconds(st['integration_time'])}"
-        setup = st.get("setup_time", float("nan"))
-        if setup == setup:
-            compile_ = st.get("compile_time", 0.0)
-            text += f", setup {_seconds(setup)}"
-            if compile_ == compile_ and compile_ > 0.01:  # below: a cache hit, not news
-                text += f" (compile {_seconds(compile_)})"
-        return text
+        """:func:`timing` of :attr:`stats`."""
+        return timing(self.stats)
 
     def _status_text(self) -> str:
         status = np.asarray(self.status)
@@ -120,8 +148,7 @@ class TrajectoryResult(ResultBase):
         err = (np.abs(self.energy_balance) if getattr(self, "work", None) is not None
                else np.abs(self.energy_error)) if self.energy.size else np.zeros(1)
         name = "max|ΔH|" if getattr(self, "work", None) is None else "max|ΔH−W|"
-        return [f"model={self.model_name!r}", f"method={self._label()!r}", f"h={self.h:g}",
-                f"steps={self.stats.get('steps', '?')}", f"t={span}", f"status={self._status_text()}",
+        return [*run_items(self), f"t={span}", f"status={self._status_text()}",
                 f"{name}={np.max(err):.2g}"]
 
     def summary(self) -> str:
@@ -391,21 +418,9 @@ class Result(TrajectoryResult):
         return super().summary().replace(f": {self._label()},", f": method {self._label()},", 1)
 
     def save(self, path) -> None:
-        """Write the arrays, stats and method to a ``.npz`` file (read back by :meth:`load`),
-        and a scene's drawing as the scene's name and arguments."""
-        stats = dict(self.stats)
-        rec = stats.pop("recovered_steps", [])
-        np.savez_compressed(
-            path, t=self.t, q=self.q, v=self.v, p=self.p, energy=self.energy,
-            constraint_residual=self.constraint_residual, velocity_residual=self.velocity_residual,
-            newton_iterations=self.newton_iterations, h=self.h, method=self.method.name,
-            status=int(self.status), model_name=self.model_name,
-            failed_step=-1 if self.failed_step is None else int(self.failed_step),
-            stats_recovered_steps=np.asarray(rec, dtype=np.int64).reshape(-1, 2),
-            **({} if self.work is None else {"work": self.work}),
-            **({} if self.work_forces is None else {"work_forces": self.work_forces}),
-            **{f"stats_{k}": v for k, v in stats.items()}, **_drawing.saved(self.drawing),
-        )
+        """Write the arrays, stats and method to a compressed ``.npz`` file (read back by
+        :meth:`load`), and a scene's drawing as the scene's name and arguments."""
+        save_npz(path, "Result", result_arrays(self))
 
     @classmethod
     def load(cls, path) -> "Result":
@@ -420,26 +435,211 @@ class Result(TrajectoryResult):
         Returns
         -------
         Result
+
+        Raises
+        ------
+        ValueError
+            ``path`` was written by another class's ``save`` (the message names it).
         """
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in ("t", "q", "v", "p", "energy", "constraint_residual",
-                                           "velocity_residual", "newton_iterations")}
-            stats = {}
-            for key in data.files:
-                if key.startswith("stats_"):
-                    value = data[key]
-                    stats[key[6:]] = value.item() if value.ndim == 0 else value
-            rec = stats.get("recovered_steps")
-            stats["recovered_steps"] = ([] if rec is None or np.size(rec) == 0
-                                        else [tuple(int(x) for x in row) for row in np.reshape(rec, (-1, 2))])
-            failed = int(data["failed_step"]) if "failed_step" in data.files else -1
-            name = str(data["model_name"]) if "model_name" in data.files else "model"
-            work = data["work"] if "work" in data.files else None
-            forces = data["work_forces"] if "work_forces" in data.files else None
-            return cls(**arrays, stats=stats, status=Status(int(data["status"])),
-                       method=_method(str(data["method"])), h=float(data["h"]),
-                       failed_step=None if failed < 0 else failed, model_name=name, work=work,
-                       work_forces=forces, drawing=_drawing.loaded(data))
+        with open_npz(path, "Result") as stored:
+            return result_from(stored, cls=cls)
+
+
+# ---------------------------------------------------------------------------- storage
+#: the key of the name of the class whose ``save`` wrote a file (files that
+#: :meth:`Result.save` wrote before there was one hold a Result)
+KIND = "fastvi_kind"
+
+
+class Stored:
+    """The arrays of an open ``.npz`` file under a key prefix, read like the file itself.
+
+    ``files`` lists the keys that start with the prefix, without it, and ``stored[key]``
+    reads ``prefix + key``: a result nested in another's file reads as a file of its own
+    (:func:`fastvi.drawing.loaded` takes one).
+    """
+
+    def __init__(self, data, prefix: str = "", files=None):
+        self._data, self._prefix = data, prefix
+        self.files = list(data.files) if files is None else files
+        self._order = {k: i for i, k in enumerate(self.files)}
+        self._sorted = None
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        return self._data[self._prefix + key]
+
+    def __contains__(self, key: str) -> bool:
+        return key in self._order
+
+    def under(self, prefix: str) -> "Stored":
+        """The arrays whose keys start with ``prefix`` (after this view's own)."""
+        # the keys with a prefix are a range of the sorted keys: an ensemble's file of N
+        # members is read in O(N log N), not by N scans of all its keys
+        if self._sorted is None:
+            self._sorted = sorted(self.files)
+        first = bisect.bisect_left(self._sorted, prefix)
+        last = first
+        while last < len(self._sorted) and self._sorted[last].startswith(prefix):
+            last += 1
+        keys = sorted(self._sorted[first:last], key=self._order.__getitem__)
+        return Stored(self._data, self._prefix + prefix, [k[len(prefix):] for k in keys])
+
+
+class SavedResult:
+    """:meth:`save` and :meth:`load` of the derivative results (a mixin): one compressed
+    ``.npz`` file, the trajectory :class:`Result` inside, read back without pickle.
+
+    Subclasses define ``_arrays()`` (the arrays to write) and the classmethod
+    ``_from_stored(stored, model)`` (the result from a :class:`Stored`).
+    """
+
+    def save(self, path) -> None:
+        """Write the result to one compressed ``.npz`` file, its trajectory inside (read
+        back by :meth:`load`, without pickle).
+
+        The model is not written (its callbacks are compiled functions): :meth:`load`
+        takes it where a method needs it.
+
+        Parameters
+        ----------
+        path : str or path-like
+            The file (NumPy adds ``.npz`` to a name without it).
+        """
+        save_npz(path, type(self).__name__, self._arrays())
+
+    @classmethod
+    def load(cls, path, model=None):
+        """Read a result of this class written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : str or path-like
+            A ``.npz`` file from this class's :meth:`save`.
+        model : fastvi.Model, optional
+            The model of the run (its name and ``n`` are checked against the file's), for
+            the methods that need it: :meth:`fastvi.SensitivityResult.tangent_residual`,
+            of an ensemble's members too. Without it everything else works.
+
+        Returns
+        -------
+        SensitivityResult, AdjointResult or EnsembleSensitivityResult
+            Of the class ``load`` is called on, equal to the one saved bit for bit (its
+            trajectory :class:`Result` too).
+
+        Raises
+        ------
+        ValueError
+            ``path`` was written by another class's ``save`` (the message names it and
+            the ``load`` to use), or ``model`` is not the run's.
+        TypeError
+            ``model`` is not a :class:`fastvi.Model`.
+        """
+        with open_npz(path, cls.__name__) as stored:
+            return cls._from_stored(stored, model)
+
+
+def save_npz(path, kind: str, arrays: dict) -> None:
+    """Write ``arrays`` to a compressed ``.npz``, tagged with ``kind`` (the class that
+    writes them, which :func:`open_npz` checks)."""
+    np.savez_compressed(path, **{KIND: np.array(kind)}, **arrays)
+
+
+@contextmanager
+def open_npz(path, kind: str):
+    """The arrays of a file that ``kind.save`` wrote, as a :class:`Stored` (no pickle).
+
+    Raises
+    ------
+    ValueError
+        ``path`` holds another class's result (the message names the class that wrote it
+        and its ``load``), or arrays no fastvi result wrote.
+    """
+    data = np.load(path, allow_pickle=False)
+    if not hasattr(data, "files"):
+        raise ValueError(f"`path` {os.fspath(path)!r} holds one bare array (a .npy file), not a "
+                         f"{kind}: {kind}.load reads the .npz files that {kind}.save writes")
+    with data:
+        found = (str(data[KIND]) if KIND in data.files
+                 else "Result" if {"t", "method"} <= set(data.files) else None)
+        if found is None:
+            raise ValueError(f"`path` {os.fspath(path)!r} is a .npz file that no fastvi result "
+                             f"wrote: {kind}.load reads the files that {kind}.save writes")
+        if found != kind:
+            raise ValueError(f"`path` {os.fspath(path)!r} was written by {found}.save, not by "
+                             f"{kind}.save: read it with fastvi.{found}.load")
+        yield Stored(data)
+
+
+def stats_arrays(stats: dict) -> dict:
+    """A dict of scalars (or arrays) as the arrays ``stats_{key}``."""
+    return {f"stats_{k}": v for k, v in stats.items()}
+
+
+def stats_from(stored: Stored) -> dict:
+    """The dict :func:`stats_arrays` wrote: scalars back as Python numbers and strings."""
+    stats = {}
+    for key in stored.files:
+        if key.startswith("stats_"):
+            value = stored[key]
+            stats[key[6:]] = value.item() if value.ndim == 0 else value
+    return stats
+
+
+def result_arrays(result: Result, prefix: str = "") -> dict:
+    """The arrays :meth:`Result.save` writes for ``result``, each key after ``prefix``
+    (the trajectory nested in another result's file)."""
+    stats = dict(result.stats)
+    rec = stats.pop("recovered_steps", [])
+    arrays = dict(
+        t=result.t, q=result.q, v=result.v, p=result.p, energy=result.energy,
+        constraint_residual=result.constraint_residual, velocity_residual=result.velocity_residual,
+        newton_iterations=result.newton_iterations, h=result.h, method=result.method.name,
+        status=int(result.status), model_name=result.model_name,
+        failed_step=-1 if result.failed_step is None else int(result.failed_step),
+        stats_recovered_steps=np.asarray(rec, dtype=np.int64).reshape(-1, 2),
+        **({} if result.work is None else {"work": result.work}),
+        **({} if result.work_forces is None else {"work_forces": result.work_forces}),
+        **stats_arrays(stats), **_drawing.saved(result.drawing),
+    )
+    return {prefix + k: v for k, v in arrays.items()}
+
+
+def matching_model(model, result: Result, kind: str):
+    """``model``, given to ``kind.load`` for ``result`` read from a file: None, or the
+    :class:`fastvi.Model` of the run (its name and size checked against the trajectory's)."""
+    if model is None:
+        return None
+    from .model import Model  # the model imports the kernels, which a result does not need
+
+    if not isinstance(model, Model):
+        raise TypeError(f"`model` of {kind}.load must be the fastvi.Model of the run (or None), "
+                        f"got {type(model).__name__}")
+    n = result.q.shape[1]
+    if model.name != result.model_name or model.n != n:
+        raise ValueError(f"`model` of {kind}.load is {model.name!r} with n = {model.n}, but the "
+                         f"file holds a run of {result.model_name!r} with n = {n}: pass the model "
+                         f"that the run used")
+    return model
+
+
+def result_from(stored: Stored, prefix: str = "", *, cls=Result) -> Result:
+    """The :class:`Result` (or ``cls``) whose arrays :func:`result_arrays` wrote under
+    ``prefix``."""
+    data = stored.under(prefix) if prefix else stored
+    arrays = {k: data[k] for k in ("t", "q", "v", "p", "energy", "constraint_residual",
+                                   "velocity_residual", "newton_iterations")}
+    stats = stats_from(data)
+    rec = stats.get("recovered_steps")
+    stats["recovered_steps"] = ([] if rec is None or np.size(rec) == 0 else
+                                [tuple(int(x) for x in row) for row in np.reshape(rec, (-1, 2))])
+    failed = int(data["failed_step"]) if "failed_step" in data else -1
+    name = str(data["model_name"]) if "model_name" in data else "model"
+    work = data["work"] if "work" in data else None
+    forces = data["work_forces"] if "work_forces" in data else None
+    return cls(**arrays, stats=stats, status=Status(int(data["status"])),
+               method=_method(str(data["method"])), h=float(data["h"]),
+               failed_step=None if failed < 0 else failed, model_name=name, work=work,
+               work_forces=forces, drawing=_drawing.loaded(data))
 
 
 # ---------------------------------------------------------------------------- plotting helpers

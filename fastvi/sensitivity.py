@@ -9,6 +9,7 @@ equations: exact up to round-off for the trajectory :func:`fastvi.integrate` ret
 from __future__ import annotations
 
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,7 +19,8 @@ from . import _validate as valid
 from .kernels.tangent import differentiator, make_tangent_work, point_terms, run_tangent
 from ._launch import Launcher
 from ._numba import quiet
-from .results import Result
+from .results import (Result, ResultBase, SavedResult, matching_model, result_arrays,
+                      result_from, run_items, run_text, timing)
 
 __all__ = ["sensitivity", "SensitivityResult", "tangent_space"]
 
@@ -26,9 +28,13 @@ __all__ = ["sensitivity", "SensitivityResult", "tangent_space"]
 _RUN_TANGENT = Launcher(run_tangent)
 
 
-@dataclass
-class SensitivityResult:
+@dataclass(repr=False)
+class SensitivityResult(SavedResult, ResultBase):
     """The trajectory of :func:`sensitivity` and its derivatives at the saved steps.
+
+    :meth:`save` writes it to one ``.npz`` file and :meth:`load` reads it back, bit for bit
+    (``load(path, model=model)`` for :meth:`tangent_residual`); :meth:`summary` gives one
+    line of what to check first.
 
     Attributes
     ----------
@@ -47,6 +53,8 @@ class SensitivityResult:
         ``"direction[j]"``.
     params : ndarray (k,)
         The parameters of the run.
+    status : Status
+        The run's (``result.status``); ``success`` and ``message`` as :class:`fastvi.Result`.
     """
 
     result: Result
@@ -60,12 +68,48 @@ class SensitivityResult:
     _pidx: list = field(repr=False, default_factory=list)
     _model: object = field(repr=False, default=None)
 
+    @property
+    def status(self):
+        """The status of the run (:attr:`fastvi.Result.status` of :attr:`result`)."""
+        return self.result.status
+
+    def _repr_items(self) -> list[str]:
+        return [*run_items(self.result), f"samples={self.t.shape[0]}",
+                f"directions={len(self.labels)}", f"status={self._status_text()}"]
+
+    def summary(self) -> str:
+        """One line with the figures a user checks first: the run, the number of samples and
+        of directions (by what they perturb), the status, the time, and the largest entry of
+        the last sample's Jacobian ``∂q(t_K)/∂(directions)``."""
+        return (f"{self.result.model_name}: sensitivity, {run_text(self.result)}, "
+                f"{self.t.shape[0]} samples × {directions_text(self.labels)}, "
+                f"status {self._status_text()}, {timing(self.result.stats)}, "
+                f"max |∂q(t_end)| = {largest_last(self.dq):.3e}")
+
+    def _arrays(self) -> dict:
+        return sensitivity_arrays(self)
+
+    @classmethod
+    def _from_stored(cls, stored, model) -> "SensitivityResult":
+        return sensitivity_from(stored, model=model, cls=cls)
+
     def tangent_residual(self):
         r"""How far each sample's derivatives are from the tangent space of the constraints:
         ``(g, gv)`` (K,), the max-norms over the directions of the linearised constraint
         ``G δq + g_θ δθ`` and of the linearised hidden constraint
         ``H_v δq + G M⁻¹ (δp − C_q δq) + (∂(G M⁻¹ p)/∂θ) δθ``. At round-off for a
-        consistent start: the linearised step maps tangent vectors to tangent vectors."""
+        consistent start: the linearised step maps tangent vectors to tangent vectors.
+
+        Raises
+        ------
+        ValueError
+            The result was read by :meth:`load` without ``model=``: it needs the model's
+            constraints.
+        """
+        if self._model is None:
+            raise ValueError("`tangent_residual()` needs the model of the run, which a file does "
+                             "not hold: read the result with `SensitivityResult.load(path, "
+                             "model=model)`, the model built as for the run")
         model, prm = self._model, self.params
         K = self.t.shape[0]
         g, gv = np.zeros(K), np.zeros(K)
@@ -216,6 +260,40 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     dp = np.ascontiguousarray(dP[:K].transpose(0, 2, 1))
     dv = disc.velocity_derivatives(run, result, dq, dp, pidx, dth)
     return SensitivityResult(result, result.t, dq, dv, dp, labels, run.prm, dth, pidx, model)
+
+
+def directions_text(labels) -> str:
+    """``14 directions (4 q0, 4 v0, 6 params)``: the directions by what they perturb."""
+    kinds = Counter(label.split("[")[0] for label in labels)
+    return f"{len(labels)} directions ({', '.join(f'{c} {k}' for k, c in kinds.items())})"
+
+
+def largest_last(a) -> float:
+    """``max |a[…, -1, :, :]|`` of derivatives (K, n, d) or (N, K, n, d): 0 if empty."""
+    last = a[..., -1, :, :]
+    return float(np.abs(last).max()) if last.size else 0.0
+
+
+def sensitivity_arrays(sens: SensitivityResult, prefix: str = "") -> dict:
+    """The arrays :meth:`SensitivityResult.save` writes, each key after ``prefix`` (a member
+    of an ensemble's file); the model is left out."""
+    arrays = dict(dq=sens.dq, dv=sens.dv, dp=sens.dp, labels=np.array(sens.labels, dtype=str),
+                  params=sens.params, pidx=np.asarray(sens._pidx, dtype=np.int64))
+    if sens._dth is not None:
+        arrays["dth"] = sens._dth
+    return {**{prefix + k: v for k, v in arrays.items()},
+            **result_arrays(sens.result, prefix + "result_")}
+
+
+def sensitivity_from(stored, prefix: str = "", *, model=None, cls=SensitivityResult):
+    """The :class:`SensitivityResult` whose arrays :func:`sensitivity_arrays` wrote under
+    ``prefix`` in an open file (:func:`fastvi.results.open_npz`), with ``model``."""
+    data = stored.under(prefix)
+    result = result_from(data, "result_")
+    return cls(result, result.t, data["dq"], data["dv"], data["dp"],
+               [str(x) for x in data["labels"]], data["params"],
+               data["dth"] if "dth" in data else None, [int(x) for x in data["pidx"]],
+               matching_model(model, result, cls.__name__))
 
 
 

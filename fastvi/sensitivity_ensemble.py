@@ -27,7 +27,10 @@ from .kernels.drive import member_function, run_members
 from .kernels.tangent import (Members, differentiator, index_maps, make_tangent_work,
                              tangent_member)
 from .model import Model
-from .sensitivity import SensitivityResult
+from .results import (ResultBase, SavedResult, run_items, run_text, stats_arrays,
+                      stats_from, timing)
+from .sensitivity import (SensitivityResult, directions_text, largest_last,
+                          sensitivity_arrays, sensitivity_from)
 
 __all__ = ["sensitivity_ensemble", "EnsembleSensitivityResult"]
 
@@ -35,9 +38,12 @@ __all__ = ["sensitivity_ensemble", "EnsembleSensitivityResult"]
 _RUN = Launcher(run_members)
 
 
-@dataclass
-class EnsembleSensitivityResult:
+@dataclass(repr=False)
+class EnsembleSensitivityResult(SavedResult, ResultBase):
     """The members of :func:`sensitivity_ensemble`: trajectories and their derivatives.
+
+    :meth:`save` writes it to one ``.npz`` file (each member once) and :meth:`load` reads it
+    back, bit for bit; :meth:`summary` gives one line of what to check first.
 
     Attributes
     ----------
@@ -57,6 +63,9 @@ class EnsembleSensitivityResult:
     stats : dict
         ``members``, ``threads``, ``integration_time`` (the parallel loop),
         ``setup_time``, ``compile_time`` and ``wall_time`` in seconds.
+    status : ndarray (N,) of int
+        Each member's :attr:`fastvi.Result.status`; ``success`` (N,) and ``message`` (of
+        the worst member) as :class:`fastvi.EnsembleResult`.
     """
 
     t: np.ndarray
@@ -73,6 +82,41 @@ class EnsembleSensitivityResult:
 
     def __len__(self) -> int:
         return len(self.members)
+
+    @property
+    def status(self) -> np.ndarray:
+        """Each member's status (N,)."""
+        return np.array([int(s.result.status) for s in self.members], dtype=np.int64)
+
+    def _repr_items(self) -> list[str]:
+        model, *run = run_items(self.members[0].result)
+        return [model, f"members={len(self)}", *run, f"samples={self.t.shape[0]}",
+                f"directions={len(self.labels)}", f"status={self._status_text()}"]
+
+    def summary(self) -> str:
+        """One line with the figures a user checks first: the number of members, the run,
+        the number of samples and of directions (by what they perturb), the status, the
+        time, and the largest entry of the members' last Jacobians ``∂q(t_K)/∂(directions)``."""
+        run = self.members[0].result
+        return (f"{run.model_name}: sensitivity ensemble of {len(self)} members, {run_text(run)}, "
+                f"{self.t.shape[0]} samples × {directions_text(self.labels)}, "
+                f"status {self._status_text()}, {self.stats.get('threads', '?')} threads, "
+                f"{timing(self.stats)}, max |∂q(t_end)| = {largest_last(self.dq):.3e}")
+
+    def _arrays(self) -> dict:
+        # each member once: the stacked arrays (q, dq, …) are stacked again on load
+        arrays = dict(members=len(self), labels=np.array(self.labels, dtype=str),
+                      params=self.params, **stats_arrays(self.stats))
+        for i, member in enumerate(self.members):
+            arrays.update(sensitivity_arrays(member, f"member{i}_"))
+        return arrays
+
+    @classmethod
+    def _from_stored(cls, data, model) -> "EnsembleSensitivityResult":
+        members = [sensitivity_from(data, f"member{i}_", model=model)
+                   for i in range(int(data["members"]))]
+        return _gathered(members, [str(x) for x in data["labels"]], data["params"],
+                         stats_from(data), cls)
 
     def jacobian(self, j: int = -1) -> np.ndarray:
         r"""Each member's Jacobian of the state at sample ``j`` (default the last) by the
@@ -220,10 +264,20 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
         names = ", ".join(str(j) for j, _ in failed)
         raise IntegrationError(err.status, err.step, err.time, err.residual, err.result,
                                f"{err.detail}; members that failed: {names} of {N}")
-    stack = lambda name: np.stack([getattr(s, name) for s in members])  # noqa: E731
-    res = lambda name: np.stack([getattr(s.result, name) for s in members])  # noqa: E731
     wall = time.perf_counter() - started
     stats = dict(members=N, threads=used, integration_time=loop_time, compile_time=compile_time,
                  setup_time=wall - loop_time, wall_time=wall)
-    return EnsembleSensitivityResult(members[0].t, res("q"), res("v"), res("p"), stack("dq"),
-                                     stack("dv"), stack("dp"), labels, P, members, stats)
+    return _gathered(members, labels, P, stats)
+
+
+def _gathered(members, labels, params, stats, cls=EnsembleSensitivityResult):
+    """The ensemble of ``members`` (:class:`fastvi.SensitivityResult`): their trajectories
+    and derivatives stacked, member first."""
+    runs = [s.result for s in members]
+
+    def stack(objs, name):
+        return np.stack([getattr(o, name) for o in objs])
+
+    return cls(members[0].t, stack(runs, "q"), stack(runs, "v"), stack(runs, "p"),
+               stack(members, "dq"), stack(members, "dv"), stack(members, "dp"), labels, params,
+               members, stats)

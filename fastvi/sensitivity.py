@@ -296,8 +296,6 @@ def sensitivity_from(stored, prefix: str = "", *, model=None, cls=SensitivityRes
                matching_model(model, result, cls.__name__))
 
 
-
-
 def tangent_space(model, q, v, *, params=None, t: float = 0.0) -> np.ndarray:
     r"""An orthonormal basis of the tangent space of the constrained phase space.
 
@@ -331,7 +329,6 @@ def tangent_space(model, q, v, *, params=None, t: float = 0.0) -> np.ndarray:
     q = valid.vector(q, "q", n)
     v = valid.vector(v, "v", n)
     prm = valid.params(params, model)
-    model._compile()
     if m == 0:
         return np.eye(2 * n)
     M, G, _, Hv, Cq = point_terms(model.kernel_data(prm, float(t)), q, v, np.zeros(m))

@@ -294,7 +294,8 @@ def integrate(
         specialize``), then cached on disk like the generic kernels. ``None`` chooses: the
         sized stages are used whenever they are compiled already (in this process or on
         disk), and compiled for a run of at least ``fastvi.structure.SIZED_MIN_STEPS``
-        steps of a model of at most ``SIZED_MAX_N`` coordinates, where the compile pays.
+        steps (an adaptive run: steps of ``ε`` over its span) of a model of at most
+        ``SIZED_MAX_N`` coordinates, where the compile pays.
         ``True`` always compiles them, ``False`` never uses them.
         :func:`fastvi.integrate_ensemble` takes the same option.
     adaptive : float, optional

@@ -80,7 +80,8 @@ _NOT_DIFFERENTIATED = {
                     "`save_every`",
     "t_eval": "derivatives are given at the saved steps; choose them with `save_every`",
     "specialize": "the derivatives run with the generic compiled stages",
-    "progress": "no progress display yet; split a long run and chain the derivatives",
+    "progress": "it shows no progress yet (`fastvi.sensitivity` does); split a long run and "
+                "chain the derivatives",
 }
 
 

@@ -24,14 +24,13 @@ from .kernels import layout as lay
 from .kernels.layout import Samples
 from .kernels.step import step_kernel
 from .model import Model
-from .progress import ProgressBar
+from .progress import UPDATES, ProgressBar
 from .results import NoDenseOutput, Result
 from .status import MESSAGES, Status
 from .tables import Method
 
 __all__ = ["integrate", "Result", "IntegrationError"]
 
-_PROGRESS_CHUNKS = 50  # progress updates per run when progress=True
 _ADAPTIVE_CHUNK = 1 << 10  # least steps a kernel call of an adaptive run takes
 _ADAPTIVE_BUFFER = 1 << 28  # bytes of samples an adaptive run allocates before it must grow
 _ADAPTIVE_CAP = 1 << 62  # no step count: an adaptive run ends at t_end
@@ -79,7 +78,7 @@ def _adaptive_chunk(span: float, eps: float, every: int, n: int, progress: bool)
     est = 3 * math.ceil(span / eps) + 2
     per_sample = 8 * (3 * n + 6)
     chunk = max(_ADAPTIVE_CHUNK, min(est, _ADAPTIVE_BUFFER // per_sample * every))
-    return max(1, chunk // _PROGRESS_CHUNKS) if progress else chunk
+    return max(1, chunk // UPDATES) if progress else chunk
 
 
 def _samples_after_chunk(slot: int, chunk: int, every: int) -> int:
@@ -400,7 +399,7 @@ def integrate(
     # sized by
     sized = structure.sizing(specialize, n, total if adaptive is None
                              else math.ceil((float(t_end) - t0) / h))
-    chunk = total if not progress else max(1, total // _PROGRESS_CHUNKS)
+    chunk = total if not progress else max(1, total // UPDATES)
     if adaptive is not None:  # steps not known: chunks of steps, sample buffers grown
         chunk = _adaptive_chunk(float(t_end) - t0, h, every, n, progress)
         K = _samples_after_chunk(1, chunk, every)

@@ -1,7 +1,7 @@
 """A progress line for long runs: a tqdm bar on a terminal, plain lines in logs.
 
-Used by :func:`fastvi.integrate`, :func:`fastvi.integrate_ensemble` and
-:meth:`fastvi.Result.animate` (``progress=True``).
+Used by :func:`fastvi.integrate`, :func:`fastvi.integrate_ensemble`,
+:func:`fastvi.sensitivity` and :meth:`fastvi.Result.animate` (``progress=True``).
 """
 
 from __future__ import annotations
@@ -10,7 +10,11 @@ import math
 import sys
 import time
 
-__all__ = ["ProgressBar"]
+__all__ = ["ProgressBar", "UPDATES"]
+
+#: progress updates of a run with ``progress=True``: its steps go through the kernel in this
+#: many chunks (a kernel call cannot report from inside its loop)
+UPDATES = 50
 
 
 class ProgressBar:

@@ -19,6 +19,8 @@ from . import _validate as valid
 from .kernels.tangent import differentiator, make_tangent_work, point_terms, run_tangent
 from ._launch import Launcher
 from ._numba import quiet
+from .kernels import layout as lay
+from .progress import UPDATES, ProgressBar
 from .results import (Result, ResultBase, SavedResult, matching_model, result_arrays,
                       result_from, run_items, run_text, timing)
 
@@ -141,7 +143,7 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
                 params=None, save_every: int = 1, tol: float = valid.DEFAULT_TOL,
                 max_iter: int = valid.DEFAULT_MAX_ITER, newton: str = "auto",
                 solver: str = "auto", check: bool = True, monitor: bool = True,
-                **unsupported) -> SensitivityResult:
+                progress: bool = False, **unsupported) -> SensitivityResult:
     r"""Integrate like :func:`fastvi.integrate` and propagate derivatives along the run.
 
     Each step solves ``R(X; q_k, p_k, θ) = 0`` for its unknowns ``X`` and reads off
@@ -175,11 +177,11 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
 
     Parameters
     ----------
-    model, q0, v0, h, t_end, n_steps, t0, t_span, method, params, save_every, tol, max_iter, newton, solver, check, monitor :
+    model, q0, v0, h, t_end, n_steps, t0, t_span, method, params, save_every, tol, max_iter, newton, solver, check, monitor, progress :
         As :func:`fastvi.integrate`. The run must be a whole number of steps of ``h``.
     **unsupported :
         ``events``, ``adaptive``, ``recover``, ``on_failure``, ``dense_output``,
-        ``t_eval``, ``specialize`` and ``progress`` of :func:`fastvi.integrate` raise
+        ``t_eval`` and ``specialize`` of :func:`fastvi.integrate` raise
         ``TypeError`` saying why (an event makes the flow non-smooth; a recovered step
         changes the map; the step-size controller is not differentiated).
     wrt : sequence of {"q0", "v0", "params"}, or array (2n + k, d), default ("q0", "v0")
@@ -229,6 +231,7 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     (101, 4, 8)
     """
     disc.refuse(unsupported, "fastvi.sensitivity")
+    progress = valid.flag(progress, "progress")
     run = disc.prepare(model, q0, v0, h=h, t_end=t_end, n_steps=n_steps, t0=t0, t_span=t_span,
                        method=method, save_every=save_every, tol=tol, max_iter=max_iter,
                        newton=newton, params=params, solver=solver, check=check,
@@ -246,13 +249,21 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     dQ = np.zeros((run.K, d, n))
     dP = np.zeros((run.K, d, n))
     dQ[0], dP[0] = dq0, dp0
+    each = differentiator(run.model_data, run.state, run.ws, run.info, run.tx, tw, dQ)
+    total = run.total
+    bar = ProgressBar(total, label="fastvi sensitivity") if progress else None
+    chunk = total if bar is None else max(1, total // UPDATES)
     t_loop = time.perf_counter()
-    with quiet():
-        status = _RUN_TANGENT(run.model_data, run.tabs, run.tx, run.opts, run.h, run.state, run.ws,
-                              run.total, run.every, run.smp, run.info, run.sout, run.ev,
-                              run.stepk, run.stages, tw, dQ, dP,
-                              differentiator(run.model_data, run.state, run.ws, run.info,
-                                             run.tx, tw, dQ))
+    while True:
+        with quiet():
+            status = _RUN_TANGENT(run.model_data, run.tabs, run.tx, run.opts, run.h, run.state,
+                                  run.ws, chunk, total, run.every, run.smp, run.info, run.sout,
+                                  run.ev, run.stepk, run.stages, tw, dQ, dP, each)
+        done = int(run.info[lay.I_STEPS])
+        if bar is not None:
+            bar.update(done, f"t = {run.t0 + done * run.h:.6g}", final=status != 0 or done >= total)
+        if status != 0 or done >= total:
+            break
     loop_time = time.perf_counter() - t_loop
     result = disc.finish(run, int(status), loop_time, 0.0, "the sensitivity")
     K = result.t.shape[0]

@@ -494,3 +494,18 @@ def test_a_result_file_without_its_class_name_is_a_result(sens, tmp_path):
     _same_result(sens.result, Result.load(tmp_path / "old.npz"))
     with pytest.raises(ValueError, match=r"written by Result.save.*fastvi.Result.load"):
         SensitivityResult.load(tmp_path / "old.npz")
+
+
+def test_progress_reports_the_steps_and_changes_no_bit(damped, start, capsys):
+    quiet_run = fastvi.sensitivity(damped, *start, h=H, n_steps=120, save_every=7, wrt=WRT)
+    shown = fastvi.sensitivity(damped, *start, h=H, n_steps=120, save_every=7, wrt=WRT,
+                               progress=True)
+    err = capsys.readouterr().err
+    assert "fastvi sensitivity: 120/120 steps (100%)" in err and "t = 2.4" in err, err
+    for name in ("dq", "dv", "dp"):
+        assert np.array_equal(getattr(quiet_run, name), getattr(shown, name)), name
+    assert np.array_equal(quiet_run.result.q, shown.result.q)
+    with pytest.raises(TypeError, match="`progress` must be True or False"):
+        fastvi.sensitivity(damped, *start, h=H, n_steps=3, progress="yes")
+    with pytest.raises(TypeError, match="does not take `progress`: it shows no progress yet"):
+        fastvi.adjoint(damped, *start, lambda r: (r.q, None), h=H, n_steps=3, progress=True)

@@ -928,16 +928,18 @@ def differentiator(md, state, ws, info, tx, tw, dQ):
 
 
 @hot
-def run_tangent(md, tabs, tx, opts, h, state, ws, n_total, save_every, smp, info, sout, ev,
-                stepk, stages, tw, dQ, dPs, each):
+def run_tangent(md, tabs, tx, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, sout,
+                ev, stepk, stages, tw, dQ, dPs, each):
     """:func:`.drive.run` with each step differentiated after it by ``each``
     (:func:`differentiator`): the samples of the trajectory into ``smp`` (the same steps as
     ``integrate``'s, bit for bit), and the directions at each sample into ``dQ``, ``dPs``
-    (K, d, n). Returns a status code; ``info[I_FAILED]`` is the failed step."""
-    for a in range(state.shape[1]):
+    (K, d, n). At most ``n_chunk`` steps a call, as ``run``: a call continues where the last
+    one stopped (a progress display between them). Returns a status code;
+    ``info[I_FAILED]`` is the failed step."""
+    for a in range(state.shape[1]):  # the start of the next step (the hook keeps it too)
         tw.qk[a] = state[0, a]
         tw.pk[a] = state[1, a]
-    return run(md, tabs, opts, h, state, ws, n_total, n_total, save_every, smp, info, sout, ev,
+    return run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, sout, ev,
                stepk, stages, None, each, TangentRun(byref(tx), byref(tw), dQ, dPs))
 
 
@@ -992,6 +994,6 @@ def tangent_member(i, membersp):
     a = g.smp
     smp = Samples(a.t[i], a.q[i], a.v[i], a.p[i], a.energy[i], a.g[i], a.gv[i], a.iters[i],
                   a.work[i], a.work_forces[i])
-    return run_tangent(md, g.tabs, g.tx, g.opts, g.h, state, ws, g.n_total, g.save_every, smp,
-                       g.infos[i], np.zeros(STEP_OUT_SIZE), g.ev, g.stepk, g.stages, tw,
-                       g.dQ[i], g.dP[i], g.each)
+    return run_tangent(md, g.tabs, g.tx, g.opts, g.h, state, ws, g.n_total, g.n_total,
+                       g.save_every, smp, g.infos[i], np.zeros(STEP_OUT_SIZE), g.ev, g.stepk,
+                       g.stages, tw, g.dQ[i], g.dP[i], g.each)

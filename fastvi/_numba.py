@@ -188,6 +188,35 @@ def byref(typingctx, x):
 
 
 @intrinsic
+def erased(typingctx, p):
+    """The pointer ``p`` (a :func:`byref` pointer) as an untyped ``void*``: what a time loop
+    hands its per-step hook, so that the loop is compiled once whatever the hook's data
+    (:func:`.kernels.drive.step_hook`, which types the hook to take it back)."""
+    if not isinstance(p, types.CPointer):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], context.get_value_type(types.voidptr))
+
+    return types.voidptr(p), codegen
+
+
+class CalledAs(types.WrapperAddressProtocol):
+    """A compiled C function ``cf`` that numba types with the signature ``sig``, one its
+    machine code takes the same way (pointers of other types, a generic stage's arguments):
+    a compiled caller that holds it is not compiled again for ``cf``'s own types."""
+
+    def __init__(self, cf, sig):
+        self.cf, self.sig = cf, sig
+
+    def __wrapper_address__(self):
+        return self.cf.address
+
+    def signature(self):
+        return self.sig
+
+
+@intrinsic
 def own(typingctx, x):
     """The value behind a :func:`byref` pointer, or ``x`` itself when it is a value: kernels
     take either (tests call them with the named tuples themselves). An intrinsic, so that

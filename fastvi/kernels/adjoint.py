@@ -23,7 +23,7 @@ import numpy as np
 import numba
 from numba.core import types
 
-from .._numba import byref, hot, own
+from .._numba import byref, erased, hot, own
 from .drive import run, step_hook
 from .layout import H_SIZE, I_FAILED, I_FIRST, I_STEPS, OK, sizes
 from .tangent import linearise, pull
@@ -104,7 +104,7 @@ def _segment(md, tabs, opts, h, state, ws, cnt, n_total, every, smp, info, sout,
         rec.qk[0, a] = state[0, a]
         rec.pk[0, a] = state[1, a]
     return run(md, tabs, opts, h, state, ws, cnt, n_total, every, smp, info, sout, ev, stepk,
-               stages, None, each, Recording(rec, int(info[I_STEPS])))
+               stages, None, each, erased(byref(Recording(rec, int(info[I_STEPS])))))
 
 
 @hot

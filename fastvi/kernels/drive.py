@@ -16,7 +16,7 @@ import numpy as np
 from numba import prange
 from numba.core import types
 
-from .._numba import byref, hot, hot_inline, njit, own, ptr
+from .._numba import CalledAs, byref, hot, hot_inline, njit, own, ptr
 from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, EVENT_SLOTS, EVENT_TERMINAL,
                      EVENTS_FULL, F_DH, F_G, F_GV, F_ITERS, F_MAXRES, F_RES, F_TSLOT, I_DH,
                      I_DRIFT, I_FAILED, I_FIRST, I_FULL, I_H0, I_ITERS, I_KR, I_MAXRES, I_RES,
@@ -163,8 +163,10 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
     :func:`fastvi.integrate`, whose compiled loop it shares.
 
     ``each``: None, or a C function ``each(mdp, h, k, statep, wsp, infop, slot, datap)``
-    called after every accepted step ``k`` with pointers to ``md``, ``state`` (rows 0–2 and
-    3–5 both hold the new state), ``ws`` (the step's unknowns), ``info`` and ``each_data``;
+    (:func:`step_hook`) called after every accepted step ``k`` with pointers to ``md``,
+    ``state`` (rows 0–2 and 3–5 both hold the new state), ``ws`` (the step's unknowns),
+    ``info``, and ``each_data``, the hook's own data as an untyped pointer
+    (:func:`fastvi._numba.erased`: one compiled loop serves every hook);
     ``slot`` is ``info[I_SLOT]`` before the step, so a sample was saved if it grew. It returns
     a status code; a non-zero one ends the run with ``info[I_FAILED] = k``. The linearised
     flow differentiates each step this way (:mod:`.tangent`), in this one time loop: its
@@ -182,7 +184,7 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
     mdp, tabp, optp, wsp = byref(md), byref(tabs), byref(opts), byref(ws)
     statep, soutp, stagesp = byref(state), byref(sout), byref(stages)
     if each is not None:
-        infop, datap = byref(info), byref(each_data)
+        infop, datap = byref(info), each_data
     hk = h
     for _ in range(n_chunk):
         k = int(info[I_STEPS])
@@ -241,14 +243,20 @@ def step_hook(fn, md, state, ws, info, data, data_type):
     of :func:`run`. A C function rather than a compiled Python function passed as an
     argument: numba cannot cache a loop compiled for a function argument, while this one is
     typed by its signature alone. Found again by the arguments' type fingerprints
-    (:func:`fastvi._launch._key`): building numba's types costs milliseconds a call."""
+    (:func:`fastvi._launch._key`): building numba's types costs milliseconds a call.
+
+    :func:`run` types the hook with ``datap`` an untyped pointer (``void*``, what the
+    caller passes: :func:`fastvi._numba.erased`), the same machine word: one compiled time
+    loop then serves every hook (the sensitivities' and the adjoint's), where a loop typed
+    by each hook's data took 7–8 s of compiling each."""
     key = (fn,) + tuple(_key(x) for x in (md, state, ws, info, *data))
     hook = _HOOKS.get(key)
     if hook is None:
         P, typeof = types.CPointer, numba.typeof
-        sig = types.int64(P(typeof(md)), types.float64, types.int64, P(typeof(state)),
-                          P(typeof(ws)), P(typeof(info)), types.int64, P(data_type()))
-        hook = _HOOKS[key] = cached_cfunc(fn, sig)
+        head = (P(typeof(md)), types.float64, types.int64, P(typeof(state)), P(typeof(ws)),
+                P(typeof(info)), types.int64)
+        cf = cached_cfunc(fn, types.int64(*head, P(data_type())))
+        hook = _HOOKS[key] = CalledAs(cf, types.int64(*head, types.voidptr))
     return hook
 
 

@@ -37,7 +37,7 @@ from numba.core import sigutils, types
 from numba.core.ccallback import CFunc
 
 from .._launch import _key
-from .._numba import byref, hot, hot_inline, own, ptr, quiet
+from .._numba import CalledAs, byref, hot, hot_inline, own, ptr, quiet
 from .banded import (gt_times, mech_impulses_structured, mech_rows_sparse, newton_banded,
                      project_structured, schur_structured)
 from .layout import (FD_T, FD_T_POINTS, CHESS, CJAC, CON, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_FJQ,
@@ -1581,7 +1581,7 @@ def cached_cfunc(fn, sig, compile=True, allocates=False):
     return cf
 
 
-class _SizedStage(types.WrapperAddressProtocol):
+class _SizedStage(CalledAs):
     """A stage compiled for the size-specialized twin of a workspace (:func:`.layout.specialize`),
     called through the generic stage's signature.
 
@@ -1590,15 +1590,6 @@ class _SizedStage(types.WrapperAddressProtocol):
     have the same layout but for their last field, the sizes, which the sized code takes
     from its type and never reads from memory, so a pointer to the generic workspace serves
     the sized code as it is."""
-
-    def __init__(self, cf, sig):
-        self.cf, self.sig = cf, sig
-
-    def __wrapper_address__(self):
-        return self.cf.address
-
-    def signature(self):
-        return self.sig
 
 
 #: the stages compiled for a workspace's sizes where :func:`step_kernel` is asked to

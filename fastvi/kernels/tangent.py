@@ -43,7 +43,7 @@ import numpy as np
 import numba
 from numba.core import types
 
-from .._numba import byref, hot, hot_inline, njit, only_if, own, ptr
+from .._numba import byref, erased, hot, hot_inline, njit, only_if, own, ptr
 from .drive import run, step_hook
 from .layout import (CHESS, CJAC, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_MJAC, F_MASSFN, F_TIME,
                      F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SI_A,
@@ -940,7 +940,7 @@ def run_tangent(md, tabs, tx, opts, h, state, ws, n_chunk, n_total, save_every, 
         tw.qk[a] = state[0, a]
         tw.pk[a] = state[1, a]
     return run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, sout, ev,
-               stepk, stages, None, each, TangentRun(byref(tx), byref(tw), dQ, dPs))
+               stepk, stages, None, each, erased(byref(TangentRun(byref(tx), byref(tw), dQ, dPs))))
 
 
 @njit

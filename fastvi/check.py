@@ -384,11 +384,7 @@ class _Callbacks:
         if model.constraint_jacobian_pattern is not None:
             self.pattern["constraint_jacobian"] = model.constraint_jacobian_pattern.ravel()
         n, m = self.n, self.m
-        self.shape = dict(mass=(n, n), kinetic_grad=(n,), potential=(), potential_grad=(n,),
-                          constraint=(m,), constraint_jacobian=(m, n), potential_hessian=(n, n),
-                          constraint_hessian=(n, n), kinetic_hessian=(n, n),
-                          momentum_jacobian=(n, n), force=(n,), force_jacobian_q=(n, n),
-                          force_jacobian_v=(n, n), constraint_time_derivative=(m,))
+        self.shape = {slot: model.output_shape(slot) for slot in SLOTS}
         self.pad = n * n + 2 * n + GUARD_MARGIN
         self.layout, self.buf, self.size = {}, {}, {}
         for slot, shape in self.shape.items():

@@ -701,11 +701,16 @@ class Model:
             hint = " (its mass is constant: see `mass_matrix`)" if slot == "mass" else ""
             raise ValueError(f"the model has no `{slot}` callback{hint}; it has "
                              f"{', '.join(s for s in SLOTS if s in self._functions)}")
+        return self._eval(slot, q, v, params=params, shape=self.output_shape(slot), t=t)
+
+    def output_shape(self, slot: str) -> tuple:
+        """The shape of the output the callback ``slot`` (a name of :data:`SLOTS`) writes:
+        ``()`` for ``potential``, else (n,), (m,), (m, n) or (n, n) (the table at the top of
+        :mod:`fastvi.model`)."""
         n, m = self.n, self.m
-        shape = {"potential": (), "kinetic_grad": (n,), "potential_grad": (n,), "force": (n,),
-                 "constraint": (m,), "constraint_time_derivative": (m,),
-                 "constraint_jacobian": (m, n)}.get(slot, (n, n))
-        return self._eval(slot, q, v, params=params, shape=shape, t=t)
+        return {"potential": (), "kinetic_grad": (n,), "potential_grad": (n,), "force": (n,),
+                "constraint": (m,), "constraint_time_derivative": (m,),
+                "constraint_jacobian": (m, n)}.get(slot, (n, n))
 
     def _eval(self, slot: str, q, v=None, params=None, shape=(), t: float = 0.0):
         direct = self.__dict__.get("_direct")

@@ -63,6 +63,21 @@ SECOND = SLOTS[PHESS:FORCE]
 #: the optional derivatives of forces and time (finite differences when absent)
 TIME_DERIVATIVES = ("force_jacobian_q", "force_jacobian_v", "constraint_time_derivative")
 
+# ----------------------------------------------------------------------------- by the parameters
+#: the callbacks whose output can depend on the parameters θ, in the order of the optional
+#: derivatives by θ a model may give (``Model(param_derivatives=...)``): each writes
+#: ``out[l] = ∂f/∂θ_l``, shape ``(k,) + shape of f``. A constant mass matrix is data, not a
+#: function of θ; the Hessians enter only the Newton matrix and have none.
+PARAM_SLOTS = ("mass", "kinetic_grad", "potential_grad", "constraint", "constraint_jacobian",
+               "force")
+(P_MASS, P_KGRAD, P_PGRAD, P_CON, P_CJAC, P_FORCE) = range(len(PARAM_SLOTS))
+#: a model's derivatives by θ as the linearised step reads them: ``fns`` the compiled
+#: callbacks in :data:`PARAM_SLOTS` order (a no-op where the model has none or declared
+#: zero), ``given`` (int64, one per slot) 1 where ``fns`` holds a derivative, and ``exact``
+#: 1 when they cover every callback of the model that θ can enter — else the kernels take
+#: five-point differences in θ of the whole step
+ParamData = namedtuple("ParamData", ["fns", "given", "exact"])
+
 # ----------------------------------------------------------------------------- differences in time
 #: eps^(1/5): the relative step of the five-point difference in time (error ~ eps^(4/5)) by
 #: which the kernels and :class:`fastvi.Model` take ∂g/∂t and ∂V/∂t where no callback gives

@@ -22,13 +22,14 @@ from . import structure
 from .integrate import IntegrationError, _buffers, _filled
 from .kernels import layout as lay
 from .kernels.step import linear_force, step_kernel
-from .kernels.tangent import extended_tables, make_sparsity, point_terms, step_band
+from .kernels.tangent import (extended_tables, make_sparsity, make_tangent_work, point_terms,
+                             step_band)
 from .model import Model
 from .results import Result
 from .status import Status
 from .tables import Method
 
-__all__ = ["Run", "refuse", "prepare", "directions", "param_indices", "linear_part",
+__all__ = ["Run", "refuse", "prepare", "directions", "param_indices", "tangent_work",
            "initial_tangent", "theta_derivative", "velocity_derivatives", "finish"]
 
 
@@ -149,7 +150,19 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
                valid.flag(monitor, "monitor"), sparsity)
 
 
-def linear_part(run: Run, tw) -> None:
+def tangent_work(run: Run, d: int, pidx):
+    """The linearised step's work of ``run`` for ``d`` directions by the parameters
+    ``pidx``, with the model's derivatives by θ where it gives them
+    (:meth:`fastvi.Model.param_derivative_data`), and its constant −∇V set."""
+    meth = run.meth
+    tw = make_tangent_work(run.model.n, run.model.m, meth.s, meth.r, meth.J, d, pidx,
+                           run.model.param_derivative_data(), len(run.prm), run.sparsity,
+                           run.ws)
+    _linear_part(run, tw)
+    return tw
+
+
+def _linear_part(run: Run, tw) -> None:
     """Set the extended step's constant −∇V of a linear potential (the step sets its own at
     a trajectory's first step)."""
     linear_force(run.model_data, tw.ws, run.q0)

@@ -20,7 +20,7 @@ from ._launch import Launcher
 from ._numba import quiet
 from .kernels.adjoint import (make_checkpoints, make_records, recorder, run_adjoint,
                               run_checkpointed)
-from .kernels.tangent import make_tangent_work, point_terms
+from .kernels.tangent import point_terms
 from .results import (Result, ResultBase, SavedResult, matching_model, result_arrays,
                       result_from, run_items, run_text, stats_arrays, stats_from, timing)
 
@@ -200,8 +200,7 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     result = disc.finish(run, int(status), loop_time, 0.0, "the adjoint")
     pidx = list(range(k)) if param_index is None else disc.param_indices(param_index, k)
     Lq, Lp, direct = _cotangents(run, result, cotangent, pidx)
-    tw = make_tangent_work(n, m, meth.s, meth.r, meth.J, 1, pidx, run.sparsity, run.ws)
-    disc.linear_part(run, tw)
+    tw = disc.tangent_work(run, 1, pidx)
     lq, lp, lth = np.zeros(n), np.zeros(n), np.zeros(max(len(pidx), 1))
     t_back = time.perf_counter()
     info[:] = run.info

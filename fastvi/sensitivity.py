@@ -16,7 +16,7 @@ import numpy as np
 
 from . import _discrete as disc
 from . import _validate as valid
-from .kernels.tangent import differentiator, make_tangent_work, point_terms, run_tangent
+from .kernels.tangent import differentiator, point_terms, run_tangent
 from ._launch import Launcher
 from ._numba import quiet
 from .kernels import layout as lay
@@ -241,11 +241,9 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     dq0, dp0, pidx, dth = disc.initial_tangent(run, D, initial_state)
     meth = run.meth
     d = D.shape[0]
-    tw = make_tangent_work(n, model.m, meth.s, meth.r, meth.J, d, pidx, run.sparsity,
-                           run.ws)
+    tw = disc.tangent_work(run, d, pidx)
     tw.dq[:], tw.dp[:] = dq0, dp0
     tw.th[:, :len(pidx)] = dth
-    disc.linear_part(run, tw)
     dQ = np.zeros((run.K, d, n))
     dP = np.zeros((run.K, d, n))
     dQ[0], dP[0] = dq0, dp0

@@ -24,8 +24,7 @@ from .ensemble import parallel_section
 from .integrate import IntegrationError
 from .kernels.layout import Samples
 from .kernels.drive import member_function, run_members
-from .kernels.tangent import (Members, differentiator, index_maps, make_tangent_work,
-                             tangent_member)
+from .kernels.tangent import Members, differentiator, index_maps, tangent_member
 from .model import Model
 from .results import (ResultBase, SavedResult, run_items, run_text, stats_arrays,
                       stats_from, timing)
@@ -227,12 +226,12 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
     rows, cols = index_maps(n, m, meth.s, meth.J)
     # the hook for a member's argument types, which are those of a single run's
     each = differentiator(md, first.state, ws, first.info, first.tx,
-                          make_tangent_work(n, m, meth.s, meth.r, meth.J, d, pidx,
-                                            first.sparsity, ws), dQ[0])
+                          disc.tangent_work(first, d, pidx), dQ[0])
     group = Members(md.fns, md.flags, md.Mc, KP, first.tabs, first.tx, first.opts, first.h,
                     ws.dims, ws.si, ws.sb, ws.structured, X0, first.total, first.every, smp,
                     infos, ev, first.stepk, first.stages, rows, cols,
-                    np.asarray(pidx, dtype=np.int64), first.sparsity, DQ, DP, TH, dQ, dP, each)
+                    np.asarray(pidx, dtype=np.int64), first.sparsity,
+                    model.param_derivative_data(), DQ, DP, TH, dQ, dP, each)
     with quiet():
         t_compile = time.perf_counter()
         member = member_function(tangent_member, group)

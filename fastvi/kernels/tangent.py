@@ -48,8 +48,9 @@ from .drive import run, step_hook
 from .layout import (CHESS, CJAC, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_MJAC, F_MASSFN, F_TIME,
                      F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SI_A,
                      SI_A_KL, SI_A_KU, SI_A_PERM, SI_S, SINGULAR, SOLVE_BANDED, SOLVE_DENSE,
-                     SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, ModelData,
-                     Samples, make_workspace, sizes, with_plan, workspace_for)
+                     SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, P_CJAC, P_CON,
+                     P_FORCE, P_KGRAD, P_MASS, P_PGRAD, ModelData, Samples, is_timed,
+                     make_workspace, sizes, with_plan, workspace_for)
 from .banded import (band_factor, band_ld, band_solve, band_solve_transposed, gmg_factor,
                      gmg_solve)
 from .linalg import lu_factor, lu_solve
@@ -122,6 +123,10 @@ TangentWork = namedtuple("TangentWork", [
     "yb",  # (N,) scratch of the transposed solve
     "qk", "pk",  # (n,) the step's start
     "out",  # (STEP_OUT_SIZE,) scratch of the projection
+    "pd",  # the model's derivatives by θ (.layout.ParamData)
+    "Rk",  # (np, N') R_θ of the extended step by the model's derivatives by θ
+    "tho",  # (k · max(n², m n),) a derivative callback's output, flat
+    "thF", "thP",  # (k, n) ∂F/∂θ and ∂(M v)/∂θ at a quadrature point
 ])
 
 
@@ -180,11 +185,12 @@ def make_sparsity(band=None, patterns=None):
 
 
 @njit
-def tangent_work(xws, rows, cols, pidx, d, sp):
+def tangent_work(xws, rows, cols, pidx, d, sp, pd, k):
     """A :class:`TangentWork` for ``d`` directions around the extended step's workspace
     ``xws`` (sizes ``n, m, s + 1, r, J``), differentiating by the parameters ``pidx``
-    (int64); ``rows``, ``cols`` from :func:`index_maps`; ``sp`` the model's
-    :class:`Sparsity`."""
+    (int64) of the ``k`` of a model whose derivatives by them are ``pd``
+    (:class:`.layout.ParamData`); ``rows``, ``cols`` from :func:`index_maps`; ``sp`` the
+    model's :class:`Sparsity`."""
     n, m, sx, J = xws.dims[0], xws.dims[1], xws.dims[2], xws.dims[4]
     s = sx - 1
     N = s * n + J * m
@@ -204,7 +210,9 @@ def tangent_work(xws, rows, cols, pidx, d, sp):
         np.zeros(n, dtype=np.int64), np.zeros((d, n)), np.zeros((d, n)), np.zeros((d, npar)),
         np.zeros((d, N)), np.zeros((d, n)), np.zeros((d, n)), np.zeros(sx * n + J * m),
         np.zeros(n), np.zeros(n), np.zeros((mm, n)), np.zeros(mm), np.zeros(mm), np.zeros(n),
-        np.zeros(n), np.zeros(n), np.zeros(N), np.zeros(n), np.zeros(n), np.zeros(STEP_OUT_SIZE))
+        np.zeros(n), np.zeros(n), np.zeros(N), np.zeros(n), np.zeros(n), np.zeros(STEP_OUT_SIZE),
+        pd, np.zeros((npar, sx * n + J * m)), np.zeros(max(k, 1) * n * max(n, m)),
+        np.zeros((max(k, 1), n)), np.zeros((max(k, 1), n)))
 
 
 def make_point_work(n, m):
@@ -212,9 +220,10 @@ def make_point_work(n, m):
     return point_work.py_func(int(n), int(m), make_sparsity())
 
 
-def make_tangent_work(n, m, s, r, J, d, pidx, sp=None, step_ws=None):
+def make_tangent_work(n, m, s, r, J, d, pidx, pd, k, sp=None, step_ws=None):
     """A :class:`TangentWork` for ``d`` directions, differentiating by the parameters
-    ``pidx``, for a model of :class:`Sparsity` ``sp`` (None: dense) whose step has the
+    ``pidx`` of the ``k`` of a model whose derivatives by them are ``pd``
+    (:meth:`fastvi.Model.param_derivative_data`), of :class:`Sparsity` ``sp`` (None: dense) whose step has the
     workspace ``step_ws`` (its structured-solve plan, if any, serves the extended step:
     grouped differences of the constraint Hessian, the projection's banded or sparse
     ``G M⁻¹ Gᵀ``): :func:`tangent_work` run by Python (compiling it costs 2.4 s; the
@@ -224,7 +233,7 @@ def make_tangent_work(n, m, s, r, J, d, pidx, sp=None, step_ws=None):
     if step_ws is not None and step_ws.structured:
         xws = xws._replace(si=step_ws.si, sb=step_ws.sb.copy(), structured=True)
     return tangent_work.py_func(xws, rows, cols, np.asarray(pidx, dtype=np.int64), int(d),
-                                make_sparsity() if sp is None else sp)
+                                make_sparsity() if sp is None else sp, pd, int(k))
 
 
 def step_band(ws):
@@ -409,6 +418,198 @@ def _theta_differences(md_, tx_, h, q1, P, tw_):
     return OK
 
 
+@hot_inline
+def _at_point(md, wx, h, x):
+    """The time the callbacks read set to ``t_k + x h``, as the step sets it."""
+    if is_timed(md):
+        md.prm[md.flags[F_TSLOT]] = wx.time[1] if x == 1.0 else wx.time[0] + x * h
+
+
+@hot_inline
+def _point_of(qk, X, Lt, i, sx, n, out):
+    """``out = q_k + Σ_{ν=1}^{s+1} Lt[ν, i] ΔQ^ν``: the extended step's point ``i``."""
+    for a in range(n):
+        out[a] = qk[a]
+    for nu in range(1, sx + 1):
+        cl = Lt[nu, i]
+        if cl != 0.0:
+            off = (nu - 1) * n
+            for a in range(n):
+                out[a] += cl * X[off + a]
+
+
+@hot
+def _theta_exact(md_, tx_, h, tw_):
+    """``tw.Rth`` (the rows of R, then of P) from the model's derivatives by θ (``tw.pd``)
+    at the extended step's unknowns: at fixed ``X`` the residual is linear in the values
+    of the callbacks at its quadrature and constraint points (:func:`.step.residual`), so
+    ``R_θ`` is the same sums with each value replaced by its derivative by θ — one call of
+    each derivative a point for all ``k`` parameters, no residual evaluated again."""
+    md, tx, tw = own(md_), own(tx_), own(tw_)
+    wx, pd = tw.ws, tw.pd
+    n, m, s, N = _step_sizes(wx)
+    sx = s + 1
+    J = sizes(wx)[4]
+    fns, given, prm = pd.fns, pd.given, md.prm
+    X, qi, vi, qk = wx.X, wx.qi, wx.vi, tw.qk
+    Rk, o, thF, thP, pidx = tw.Rk, tw.tho, tw.thF, tw.thP, tw.pidx
+    npar = pidx.shape[0]
+    b, L, Ld, Lc = tx.b, tx.L, tx.Ld, tx.Lc
+    for ii in range(npar):
+        for kk in range(Rk.shape[1]):
+            Rk[ii, kk] = 0.0
+    need_v = given[P_KGRAD] != 0 or given[P_FORCE] != 0 or given[P_MASS] != 0
+    if need_v or given[P_PGRAD] != 0:
+        inv_h = 1.0 / h
+        for i in range(b.shape[0]):
+            _at_point(md, wx, h, tx.c[i])
+            _point_of(qk, X, L, i, sx, n, qi)
+            if need_v:
+                for a in range(n):
+                    vi[a] = 0.0
+                for nu in range(1, sx + 1):
+                    cd = Ld[nu, i] * inv_h
+                    off = (nu - 1) * n
+                    for a in range(n):
+                        vi[a] += cd * X[off + a]
+            for ii in range(npar):
+                l = pidx[ii]
+                for a in range(n):
+                    thF[l, a] = 0.0
+                    thP[l, a] = 0.0
+            # F = ∂T/∂q − ∇V + F_nc and the momentum M(q) v, each by θ
+            if given[P_PGRAD] != 0:
+                fns[P_PGRAD](ptr(qi), ptr(qi), ptr(prm), ptr(o))
+                for ii in range(npar):
+                    l = pidx[ii]
+                    for a in range(n):
+                        thF[l, a] -= o[l * n + a]
+            if given[P_KGRAD] != 0:
+                fns[P_KGRAD](ptr(qi), ptr(vi), ptr(prm), ptr(o))
+                for ii in range(npar):
+                    l = pidx[ii]
+                    for a in range(n):
+                        thF[l, a] += o[l * n + a]
+            if given[P_FORCE] != 0:
+                fns[P_FORCE](ptr(qi), ptr(vi), ptr(prm), ptr(o))
+                for ii in range(npar):
+                    l = pidx[ii]
+                    for a in range(n):
+                        thF[l, a] += o[l * n + a]
+            if given[P_MASS] != 0:
+                fns[P_MASS](ptr(qi), ptr(qi), ptr(prm), ptr(o))
+                for ii in range(npar):
+                    l = pidx[ii]
+                    for a in range(n):
+                        acc = 0.0
+                        for c in range(n):
+                            acc += o[(l * n + a) * n + c] * vi[c]
+                        thP[l, a] = acc
+            w = h * b[i]
+            for nu in range(sx):
+                cl = w * L[nu, i]
+                cd = b[i] * Ld[nu, i]
+                row = nu * n
+                for ii in range(npar):
+                    l = pidx[ii]
+                    for a in range(n):
+                        Rk[ii, row + a] += cl * thF[l, a] + cd * thP[l, a]
+    if m > 0 and given[P_CON] != 0:
+        for j in range(1, J + 1):
+            _at_point(md, wx, h, tx.d[j])
+            _point_of(qk, X, Lc, j, sx, n, qi)
+            fns[P_CON](ptr(qi), ptr(qi), ptr(prm), ptr(o))
+            row = sx * n + (j - 1) * m
+            for ii in range(npar):
+                l = pidx[ii]
+                for c in range(m):
+                    Rk[ii, row + c] += o[l * m + c]
+    if m > 0 and given[P_CJAC] != 0:
+        # −Σ_j ℓ_ν(d_j) (∂G_j/∂θ)ᵀ η_j, with G_0 = G(q_k) at t_k
+        km = (prm.shape[0] - 1) * m * n
+        for j in range(J):
+            _at_point(md, wx, h, tx.d[j])
+            _point_of(qk, X, Lc, j, sx, n, qi)
+            for kk in range(km):
+                o[kk] = 0.0  # a derivative of a patterned Jacobian may write its non-zeros only
+            fns[P_CJAC](ptr(qi), ptr(qi), ptr(prm), ptr(o))
+            col = sx * n + j * m
+            for ii in range(npar):
+                l = pidx[ii]
+                for a in range(n):
+                    acc = 0.0
+                    for c in range(m):
+                        acc += o[(l * m + c) * n + a] * X[col + c]
+                    for nu in range(sx):
+                        cl = Lc[nu, j]
+                        if cl != 0.0:
+                            Rk[ii, nu * n + a] -= cl * acc
+    rows, Rth = tw.rows, tw.Rth
+    for ii in range(npar):
+        for kk in range(N):
+            Rth[kk, ii] = Rk[ii, rows[kk]]
+        for a in range(n):
+            Rth[N + a, ii] = Rk[ii, s * n + a]
+
+
+@hot
+def _theta_projection(md_, tw_, q1, v1, eta):
+    """``tw.Pth``: the derivative by θ of the projection ``p = P − Gᵀ η``,
+    ``G M⁻¹ p = 0`` at fixed ``q_{k+1}`` and ``P``, from the model's derivatives by θ,
+    with ``G``, ``Y = G M⁻¹`` and the factored ``S = G M⁻¹ Gᵀ`` of :func:`linearise`:
+
+        S δη = G_θ v − Y M_θ v − Y G_θᵀ η,     p_θ = −G_θᵀ η − Gᵀ δη."""
+    md, tw = own(md_), own(tw_)
+    pd, pidx, Pth = tw.pd, tw.pidx, tw.Pth
+    n, m = q1.shape[0], eta.shape[0]
+    fns, given, prm = pd.fns, pd.given, md.prm
+    o, thP, u, w = tw.tho, tw.thP, tw.u, tw.w
+    G, Yg = tw.pt.G, tw.Yg
+    npar = pidx.shape[0]
+    for ii in range(npar):
+        for a in range(n):
+            Pth[a, ii] = 0.0
+    if m == 0:
+        return
+    for ii in range(npar):
+        l = pidx[ii]
+        for a in range(n):
+            thP[l, a] = 0.0
+    if given[P_MASS] != 0:
+        fns[P_MASS](ptr(q1), ptr(q1), ptr(prm), ptr(o))
+        for ii in range(npar):
+            l = pidx[ii]
+            for a in range(n):
+                acc = 0.0
+                for c in range(n):
+                    acc += o[(l * n + a) * n + c] * v1[c]
+                thP[l, a] = acc
+    km = (prm.shape[0] - 1) * m * n
+    for kk in range(km):
+        o[kk] = 0.0
+    if given[P_CJAC] != 0:
+        fns[P_CJAC](ptr(q1), ptr(q1), ptr(prm), ptr(o))
+    for ii in range(npar):
+        l = pidx[ii]
+        base = l * m * n
+        for a in range(n):
+            acc = 0.0
+            for c in range(m):
+                acc += o[base + c * n + a] * eta[c]
+            u[a] = acc
+        for c in range(m):
+            acc = 0.0
+            for a in range(n):
+                acc += o[base + c * n + a] * v1[a] - Yg[c, a] * (thP[l, a] + u[a])
+            w[c] = acc
+        _solve_projection(tw, w, m, False)
+        for a in range(n):
+            acc = -u[a]
+            for c in range(m):
+                acc -= G[c, a] * w[c]
+            Pth[a, ii] = acc
+
+
 @hot
 def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
     """The blocks of the step's derivative (module docstring) at its converged unknowns
@@ -476,15 +677,36 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
             return SINGULAR
     elif lu_factor(K, tw.piv, N) != 0:
         return SINGULAR
+    exact = _exact_in_theta(md, tw)
     if tw.pidx.shape[0] > 0:
-        st = _theta_differences(md_, tx_, h, q1, P, tw_)
-        if st != OK:
-            return st
+        if exact:
+            _theta_exact(md_, tx_, h, tw_)
+        else:
+            st = _theta_differences(md_, tx_, h, q1, P, tw_)
+            if st != OK:
+                return st
     if md.flags[F_TIME] != 0:
         md.prm[md.flags[F_TSLOT]] = time[1]  # the projection's time, as the step had it
     point(md_, q1, v1, eta, byref(pw))
     if m > 0 and pw.sp.gsta.shape[0] > 0:
         _grouped_hv(wx, md, q1, v1, pw, n, m)
+    st = _factor_projection(md, tw, wx, pw, sp, n, m)
+    if st == OK and exact and tw.pidx.shape[0] > 0:
+        _theta_projection(md_, tw_, q1, v1, eta)
+    return st
+
+
+@hot_inline
+def _exact_in_theta(md, tw):
+    """Whether the model's derivatives by θ give the step's: they cover every callback θ
+    enters, and the projection is the plain one (not that of a singular constant mass)."""
+    return tw.pd.exact != 0 and md.flags[F_AUGMENT] == 0
+
+
+@hot_inline
+def _factor_projection(md, tw, wx, pw, sp, n, m):
+    """Factor ``M(q_{k+1})`` as needed and ``S = G M⁻¹ Gᵀ``, with ``Y = G M⁻¹`` into
+    ``tw.Yg``. Returns a status code."""
     if m > 0:
         M, G, Yg, S = pw.M, pw.G, tw.Yg, tw.S
         if md.flags[F_DIAG] != 0 and md.flags[F_MASSFN] == 0 and md.flags[F_AUGMENT] == 0:
@@ -964,13 +1186,13 @@ def _started(tw, dq, dp, th):
 #: by member first, slot 0 filled), counters ``infos`` (N, INFO_SIZE), the events of a run
 #: without events ``ev`` (read only), the step and its stages, ``rows``, ``cols`` of
 #: :func:`index_maps`, the parameters differentiated ``pidx``, the model's
-#: :class:`Sparsity` ``sp``, the initial tangent states
+#: :class:`Sparsity` ``sp`` and derivatives by θ ``pd``, the initial tangent states
 #: ``DQ``, ``DP`` (N, d, n) and parameter parts ``TH`` (N, d, np), the directions' samples
 #: ``dQ``, ``dP`` (N, K, d, n), and the :func:`differentiator` ``each``
 Members = namedtuple("Members", [
     "fns", "flags", "Mc", "P", "tabs", "tx", "opts", "h", "dims", "si", "sb", "structured",
     "X0", "n_total", "save_every", "smp", "infos", "ev", "stepk", "stages", "rows", "cols",
-    "pidx", "sp", "DQ", "DP", "TH", "dQ", "dP", "each"])
+    "pidx", "sp", "pd", "DQ", "DP", "TH", "dQ", "dP", "each"])
 
 
 def tangent_member(i, membersp):
@@ -982,7 +1204,8 @@ def tangent_member(i, membersp):
     ws = with_plan(workspace_for(g.dims), g.si, g.sb.copy(), g.structured)
     # the extended step with the step's plan, as make_tangent_work gives it
     xws = with_plan(workspace_for((n, m, s + 1, r, J)), g.si, g.sb.copy(), g.structured)
-    tw = _started(tangent_work(xws, g.rows, g.cols, g.pidx, g.DQ.shape[1], g.sp), g.DQ[i],
+    tw = _started(tangent_work(xws, g.rows, g.cols, g.pidx, g.DQ.shape[1], g.sp, g.pd,
+                               g.P.shape[1] - 1), g.DQ[i],
                   g.DP[i], g.TH[i])
     state = np.zeros((6, n))
     for a in range(n):

@@ -318,10 +318,10 @@ def model_from_lagrangian(q, T, V=0, constraints=(), *, v=None, params=None, nam
     ``kinetic_grad_i = ∂T/∂q_i``, ``kinetic_hessian_ij = ∂²T/∂q_i∂q_j``,
     ``momentum_jacobian_ab = ∂(M v)_a/∂q_b``, ``potential_grad = ∇V``,
     ``potential_hessian = ∇²V``, ``constraint_jacobian_ai = ∂g_a/∂q_i`` and
-    ``constraint_hessian = Σ_a η_a ∇²g_a``; ``<slot>_by_params`` writes ``out[l, …] = ∂f/∂θ_l``
-for each of these first-order callbacks ``f`` (and ``M``). Each callback's expressions go through one
-    ``sympy.cse`` call, so shared subexpressions (``sin θ``, ``cos θ``, …) are computed
-    once per call.
+    ``constraint_hessian = Σ_a η_a ∇²g_a``; ``<slot>_by_params`` writes
+    ``out[l, …] = ∂f/∂θ_l`` for each first-order callback ``f`` and ``M``. Each
+    callback's expressions go through one ``sympy.cse`` call, so shared subexpressions
+    (``sin θ``, ``cos θ``, …) are computed once per call.
 
     Examples
     --------

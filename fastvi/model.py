@@ -55,6 +55,25 @@ With ``time_dependent=True`` the potential and constraint callbacks of the first
 compiled signature stays the one above: the time travels in a hidden entry ``params[k]``
 after the user's ``k`` parameters, written by the kernels before each evaluation and read by
 the wrappers (:meth:`Model.kernel_params`); the other callbacks never look at it.
+
+Derivatives by the parameters θ = ``params`` (optional; ``Model(param_derivatives={slot: fn
+or 0})``, for the sensitivities and the adjoint):
+
+===========================  ==============================================  ================
+slot (:data:`PARAM_SLOTS`)   function: the arguments of that callback        ``out`` shape
+===========================  ==============================================  ================
+``mass``                     ``(q, params, out)``: ``out[l] = ∂M/∂θ_l``      (k, n, n)
+``kinetic_grad``             ``(q, v, params, out)``: ``∂(∂T/∂q)/∂θ_l``      (k, n)
+``potential_grad``           ``(q, params, out)``: ``∂(∇V)/∂θ_l``            (k, n)
+``constraint``               ``(q, params, out)``: ``∂g/∂θ_l``               (k, m)
+``constraint_jacobian``      ``(q, params, out)``: ``∂G/∂θ_l``               (k, m, n)
+``force``                    ``(t, q, v, params, out)``: ``∂F/∂θ_l``         (k, n)
+===========================  ==============================================  ================
+
+``0`` declares a callback independent of θ. When they cover every callback θ enters
+(:attr:`Model.param_derivatives_exact`), the linearised step uses them instead of
+five-point differences of the whole step in each θ_l; they are compiled on first use
+(:meth:`Model.param_derivative_data`), never by a plain integration.
 """
 
 from __future__ import annotations

@@ -356,6 +356,15 @@ def _wrap(kind: str, fn: Callable, n: int, m: int, k: int):
     return cached
 
 
+def _wrap_all(slots, functions: dict, kind: Callable, n: int, m: int, k: int) -> tuple:
+    """The cfuncs of ``slots`` in order: ``functions[slot]`` wrapped as the template
+    ``kind(slot)``, the no-op :func:`_absent` where ``functions`` has none."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", nb.NumbaExperimentalFeatureWarning)
+        return tuple(_wrap(kind(slot), functions[slot], n, m, k) if slot in functions else _absent
+                     for slot in slots)
+
+
 def _compile_callback(kind: str, fn: Callable, n: int, m: int, k: int):
     tag = _fingerprint(fn)
     jf = fn if isinstance(fn, nb.core.dispatcher.Dispatcher) else nb.njit(fn)
@@ -743,14 +752,7 @@ class Model:
     def _compile(self):
         if self._compiled is None:
             k = self.params.shape[0]
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", nb.NumbaExperimentalFeatureWarning)
-                cfs = tuple(
-                    _wrap(self._kind(slot), self._functions[slot], self.n, self.m, k)
-                    if slot in self._functions
-                    else _absent
-                    for slot in SLOTS
-                )
+            cfs = _wrap_all(SLOTS, self._functions, self._kind, self.n, self.m, k)
             flags = np.zeros(lay.FLAGS_SIZE, dtype=np.int64)
             flags[lay.F_N] = self.n
             flags[lay.F_M] = self.m
@@ -827,14 +829,7 @@ class Model:
         """
         if self._param_data is None:
             k = self.params.shape[0]
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", nb.NumbaExperimentalFeatureWarning)
-                fns = tuple(
-                    _wrap(self._param_kind(slot), self._param_functions[slot], self.n, self.m, k)
-                    if slot in self._param_functions
-                    else _absent
-                    for slot in PARAM_SLOTS
-                )
+            fns = _wrap_all(PARAM_SLOTS, self._param_functions, self._param_kind, self.n, self.m, k)
             given = np.array([int(slot in self._param_functions) for slot in PARAM_SLOTS],
                              dtype=np.int64)
             self._param_data = lay.ParamData(fns, given, int(self.param_derivatives_exact))

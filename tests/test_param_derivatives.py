@@ -75,15 +75,13 @@ def test_scene_derivatives_by_the_parameters_match_differences_and_are_exact(nam
 
 # ----------------------------------------------------------------------------- symbolic models
 @pytest.fixture(scope="module")
-def cart():
-    """Cart–pendulum: a q-dependent mass, the parameters in M, ∂T/∂q and ∇V."""
-    x, th = sp.symbols("x theta")
-    vx, vth = velocities([x, th])
-    M, m, l, g, k = sp.symbols("M m l g k", positive=True)
-    T = (M + m) * vx**2 / 2 + m * l * sp.cos(th) * vx * vth + m * l**2 * vth**2 / 2
-    V = -m * g * l * sp.cos(th) + k * x**2 / 2
-    return model_from_lagrangian([x, th], T, V, v=[vx, vth],
-                                 params={M: 2.0, m: 0.7, l: 1.3, g: 9.81, k: 3.0}, name="cart")
+def spring_pendulum():
+    """An elastic pendulum in polar coordinates: M = diag(m, m r²) depends on q and θ."""
+    r, phi = sp.symbols("r phi")
+    m, k, l, g = sp.symbols("m k l g", positive=True)
+    return model_from_lagrangian([r, phi], sp.diag(m, m * r**2),
+                                 k * (r - l) ** 2 / 2 - m * g * r * sp.cos(phi),
+                                 params={m: 0.7, k: 30.0, l: 1.3, g: 9.81}, name="spring_pendulum")
 
 
 @pytest.fixture(scope="module")
@@ -96,14 +94,15 @@ def curve():
                                  params={mass: 1.5, l: 1.2, c: 0.4, g: 9.81}, name="curve")
 
 
-def test_symbolic_cart_generates_every_derivative_by_the_parameters(cart):
-    assert "def mass_by_params" in cart.source and "def kinetic_grad_by_params" in cart.source
-    q, v = np.array([0.3, 0.7]), np.array([0.2, -0.4])
-    assert assert_matches_differences(cart, q, v) == {"mass", "kinetic_grad", "potential_grad"}
-    data = cart.param_derivative_data()
+def test_symbolic_q_dependent_mass_generates_every_derivative_by_the_parameters(spring_pendulum):
+    model = spring_pendulum
+    assert "def mass_by_params" in model.source and "def kinetic_grad_by_params" in model.source
+    q, v = np.array([1.1, 0.7]), np.array([0.2, -0.4])
+    assert assert_matches_differences(model, q, v) == {"mass", "kinetic_grad", "potential_grad"}
+    data = model.param_derivative_data()
     assert data.exact == 1 and data.given.tolist() == [1, 1, 1, 0, 0, 0]
-    # ∂M/∂M_cart is the unit entry [0, 0]: the mass matrix is linear in it
-    assert np.array_equal(cart.param_derivative_value("mass", q)[0], [[1.0, 0.0], [0.0, 0.0]])
+    # M is linear in m: ∂M/∂m = diag(1, r²)
+    assert np.array_equal(model.param_derivative_value("mass", q)[0], np.diag([1.0, 1.1**2]))
 
 
 def test_symbolic_constrained_model_generates_constraint_derivatives(curve):
@@ -257,9 +256,9 @@ def test_check_names_a_wrong_derivative_by_the_parameters():
 
 
 # ----------------------------------------------------------------------------- pickling
-def test_models_pickle_with_their_derivatives_by_the_parameters(cart):
+def test_models_pickle_with_their_derivatives_by_the_parameters(spring_pendulum):
     q, v = np.array([0.4, -0.3]), np.array([0.5, 0.2])
-    for model in (time_dependent_model(), cart, double_pendulum(damping=0.3)):
+    for model in (time_dependent_model(), spring_pendulum, double_pendulum(damping=0.3)):
         q0 = np.resize(q, model.n)
         v0 = np.resize(v, model.n)
         back = pickle.loads(pickle.dumps(model))

@@ -40,7 +40,10 @@ callback                    compared with finite differences of
                             for ``η = e_1 … e_m`` and a random ``η``
 ==========================  ================================================
 
-and checks that a ``mass`` callback returns a symmetric matrix. The checks run in dependency
+and checks that a ``mass`` callback returns a symmetric matrix. A model's derivatives by the
+parameters (``Model(param_derivatives=...)``, rows ``<slot>/θ``) are compared with the same
+differences of the callback ``<slot>`` in each parameter ``θ_l`` (a declared ``0`` with
+differences that must vanish), after their own size check. The checks run in dependency
 order: first derivatives (against the functions they differentiate) at every state, then
 second derivatives, each only if the first derivative it is compared with passed at every
 state (otherwise it is reported as *skipped*, "not checked: depends on …"), so the callback
@@ -75,7 +78,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ._numba import njit, ptr, quiet
-from .model import SLOTS, Model, call_callback
+from .model import PARAM_SLOTS, SLOTS, Model, call_callback
 
 __all__ = ["check_model", "CheckReport", "CheckRow", "ModelCheckError", "DEFAULT_RTOL"]
 
@@ -109,6 +112,7 @@ _REFERENCE = {
     "force_jacobian_q": "FD in q of force",
     "force_jacobian_v": "FD in v of force",
     "constraint_time_derivative": "FD in t of constraint",
+    **{f"{slot}/θ": f"FD in θ of {slot}" for slot in PARAM_SLOTS},  # names of _theta
 }
 _PARENT = {
     "kinetic_hessian": "kinetic_grad",
@@ -219,7 +223,7 @@ class CheckReport:
         head = (f"derivative check of {self.model_name!r}: {n_states} state(s) (the given one and "
                 f"{n_states - 1} random nearby), rtol = {self.rtol:.0e}, {self.evaluations} "
                 f"callback evaluations, {self.wall_time * 1e3:.1f} ms")
-        lines = [head, f"{'callback':<20} {'compared with':<32} {'max rel. error':>14} "
+        lines = [head, f"{'callback':<21} {'compared with':<32} {'max rel. error':>14} "
                        f"{'allowed':>9}  result"]
         for cb in dict.fromkeys(r.callback for r in self.rows):
             w = self.worst(cb)
@@ -230,7 +234,7 @@ class CheckReport:
                 res += f" (at {where}, entry {list(w.index)}{'; ' + w.note if w.note else ''})"
             elif w.status == "skipped":
                 res += f" ({w.note})"
-            lines.append(f"{cb:<20} {w.reference:<32} {w.relative_error:>14.2e} {allowed:>9.1e}  {res}")
+            lines.append(f"{cb:<21} {w.reference:<32} {w.relative_error:>14.2e} {allowed:>9.1e}  {res}")
         if not self.rows:
             lines.append("(no derivative callbacks to check)")
         return "\n".join(lines)
@@ -285,6 +289,11 @@ class ModelCheckError(ValueError):
         )
 
 
+def _theta(slot: str) -> str:
+    """The name of the derivative by the parameters of the callback ``slot`` in reports."""
+    return f"{slot}/θ"
+
+
 def _badness(row: CheckRow) -> float:
     if row.status == "skipped":
         return -1.0
@@ -316,6 +325,7 @@ _DIMS = dict(mass=("n", "n"), kinetic_grad=("n",), potential=(), potential_grad=
              constraint_hessian=("n", "n"), kinetic_hessian=("n", "n"), momentum_jacobian=("n", "n"),
              force=("n",), force_jacobian_q=("n", "n"), force_jacobian_v=("n", "n"),
              constraint_time_derivative=("m",))
+_DIMS.update({_theta(slot): ("k",) + _DIMS[slot] for slot in PARAM_SLOTS})
 _MEANING = dict(constraint_jacobian="out[a, b] = ∂g_a/∂q_b", momentum_jacobian="out[a, b] = ∂(M v)_a/∂q_b")
 _SIZE_REFERENCE = "declared output shape"
 
@@ -366,10 +376,20 @@ class _Callbacks:
     and raises :class:`ModelCheckError` saying what was written.
     """
 
-    def __init__(self, model: Model, params: np.ndarray, report: "CheckReport", t: float = 0.0):
+    def __init__(self, model: Model, params: np.ndarray, report: "CheckReport", t: float = 0.0,
+                 by_params: bool = False):
         cfs = model.kernel_arguments()[0]
         self.fn = dict(zip(SLOTS, cfs))
-        self.present = model.callbacks
+        self.present = set(model.callbacks)
+        self.shape = {slot: model.output_shape(slot) for slot in SLOTS}
+        if by_params and model.param_derivatives:
+            # the derivatives by θ given as functions, under their report names (`<slot>/θ`)
+            k = model.params.shape[0]
+            for slot, fn, given in zip(PARAM_SLOTS, *model.param_derivative_data()[:2]):
+                self.fn[_theta(slot)] = fn
+                self.shape[_theta(slot)] = (k,) + model.output_shape(slot)
+                if given:
+                    self.present.add(_theta(slot))
         # the kernels' parameter vector: a time-aware model reads t from a hidden last entry
         self.p = model.kernel_params(params, t)
         self.t = float(t)
@@ -384,7 +404,6 @@ class _Callbacks:
         if model.constraint_jacobian_pattern is not None:
             self.pattern["constraint_jacobian"] = model.constraint_jacobian_pattern.ravel()
         n, m = self.n, self.m
-        self.shape = {slot: model.output_shape(slot) for slot in SLOTS}
         self.pad = n * n + 2 * n + GUARD_MARGIN
         self.layout, self.buf, self.size = {}, {}, {}
         for slot, shape in self.shape.items():
@@ -444,6 +463,18 @@ class _Callbacks:
             return self(slot, q, v)
         finally:
             self.p[-1] = self.t
+
+    def with_params(self, slot: str, params: np.ndarray, q: np.ndarray,
+                    v: np.ndarray | None = None) -> np.ndarray:
+        """``self(slot, q, v)`` with the parameters ``params`` (the check's own are restored
+        after)."""
+        k = params.shape[0]
+        kept = self.p[:k].copy()
+        self.p[:k] = params
+        try:
+            return self(slot, q, v)
+        finally:
+            self.p[:k] = kept
 
     def __call__(self, slot: str, q: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
         if slot in self.sized and self.n > GUARD_ALL_CALLS_UP_TO_N:
@@ -541,7 +572,8 @@ class _Callbacks:
 
     def _declares(self, slot: str) -> str:
         dims = dict.fromkeys(_DIMS[slot])
-        return ", ".join(f"{d} = {self.n if d == 'n' else self.m}" for d in dims)
+        size = dict(n=self.n, m=self.m, k=self.k - 1)  # self.k counts the hidden time entry
+        return ", ".join(f"{d} = {size[d]}" for d in dims)
 
     def _index(self, slot: str, flat: int) -> list:
         shape = self.shape[slot]
@@ -555,10 +587,12 @@ class _Callbacks:
             dim = _DIMS[slot][0] if _DIMS[slot] else "n"
             return (f"`{slot}` wrote {count} entries but the model declares {decl} (out shape "
                     f"{shape or (1,)}); check `{dim}` or the function", int(past[0]))
-        rows, cols = shape
         msg = (f"`{slot}` wrote past the end of its output: up to flat index {count - 1} ({count} "
-               f"entries) but the model declares {decl} (out shape {shape}, {rows * cols} entries, "
-               "C order); wrong shape or transposed?")
+               f"entries) but the model declares {decl} (out shape {shape}, {int(np.prod(shape))} "
+               "entries, C order); wrong shape or transposed?")
+        if len(shape) > 2:  # a derivative by θ of a matrix: (k, rows, cols)
+            return msg, int(past[0])
+        rows, cols = shape
         # the pattern of an (cols, rows) array written as out[b, a] into the (rows, cols) buffer
         transposed = np.zeros(written.shape, dtype=bool)
         transposed[(np.arange(cols)[:, None] * cols + np.arange(rows)[None, :]).ravel()] = True
@@ -576,7 +610,7 @@ class _Callbacks:
             dim = _DIMS[slot][0]
             hint = f"check `{dim}` or the function"
         else:
-            hint = "start with `out[:, :] = 0.0` if most entries vanish"
+            hint = f"start with `out[{', '.join(':' * len(shape))}] = 0.0` if most entries vanish"
         return (f"`{slot}` never wrote entr{'y' if unset.size == 1 else 'ies'} "
                 f"{', '.join(map(str, idx))}{more} of its output (out shape {shape}, the model declares "
                 f"{self._declares(slot)}), or only updated it (`out[i] += …`); `out` is not zeroed "
@@ -655,8 +689,8 @@ def _compare(callback: str, state: int, exact: np.ndarray, fd, rtol: float, note
 
 def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
                 n_random: int = DEFAULT_RANDOM_STATES, radius: float = DEFAULT_RADIUS,
-                rtol: float = DEFAULT_RTOL, seed: int = 0,
-                raise_on_error: bool = True) -> CheckReport:
+                rtol: float = DEFAULT_RTOL, seed: int = 0, raise_on_error: bool = True,
+                param_derivatives: bool = True) -> CheckReport:
     r"""Compare every derivative callback of ``model`` with finite differences.
 
     Parameters
@@ -683,6 +717,12 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
     raise_on_error : bool, default True
         Raise :class:`ModelCheckError` when a callback disagrees; otherwise only return the
         report (``report.ok`` is False).
+    param_derivatives : bool, default True
+        Also compare the model's derivatives by the parameters (``Model(param_derivatives=
+        ...)``, compiled here if they were not yet) with central differences of their
+        callbacks in each parameter. The automatic check of :func:`fastvi.integrate` leaves
+        them out (a plain run never compiles them); a model that passed with them has
+        ``model.param_derivatives_checked`` set.
 
     Returns
     -------
@@ -747,13 +787,14 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
     report = CheckReport(model.name, states=states, rtol=float(rtol))
     if isinstance(t, bool) or not isinstance(t, (int, float, np.integer, np.floating)) or not np.isfinite(t):
         raise ValueError(f"`t` must be a finite float, got {t!r}")
-    cb = _Callbacks(model, prm, report, float(t))
+    by_params = bool(param_derivatives) and bool(model.param_derivatives)
+    cb = _Callbacks(model, prm, report, float(t), by_params)
     has = cb.present.__contains__
 
     # 1. Sizes, before anything else: every callback once, into guarded buffers filled with
     # two different values (entries written past the end, into the inputs, or never).
     eta0 = 1.0 + np.arange(m) / max(m, 1)
-    for slot in SLOTS:
+    for slot in SLOTS + tuple(map(_theta, PARAM_SLOTS)):
         if has(slot):
             cb.check_size(slot, q, eta0 if slot == "constraint_hessian" else v)
 
@@ -789,6 +830,20 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
             "constraint_time_derivative", k, cb("constraint_time_derivative", qk),
             _t_column(_fd(lambda x: cb.at("constraint", float(x[0]), qk), tt)), rtol))
 
+    # the derivatives by θ against differences of their callbacks in each parameter θ_l
+    def by_params_row(slot, k, qk, vk):
+        name = _theta(slot)
+        fd = _fd(lambda th: cb.with_params(slot, th, qk, vk), prm)
+        ref, est, fscale, hmin = (np.moveaxis(fd[0], -1, 0), np.moveaxis(fd[1], -1, 0)) + fd[2:]
+        if has(name):
+            return _compare(name, k, cb(name, qk, vk), (ref, est, fscale, hmin), rtol)
+        return _compare(name, k, np.zeros_like(ref), (ref, est, fscale, hmin), rtol,
+                        "declared 0 (independent of θ)")
+
+    for slot in PARAM_SLOTS if by_params else ():
+        if slot in model.param_derivatives:
+            each_state(_theta(slot), lambda k, qk, vk, _s=slot: by_params_row(_s, k, qk, vk))
+
     def hessian_rows(slot, k, qk, vk):
         if slot == "kinetic_hessian":
             return _compare(slot, k, cb(slot, qk, vk), _fd(lambda x: cb("kinetic_grad", x, vk), qk), rtol)
@@ -820,6 +875,7 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
     report.wall_time = time.perf_counter() - t0
     if report.ok:
         model.checked = True
+        model.param_derivatives_checked = model.param_derivatives_checked or by_params
     elif raise_on_error:
         raise ModelCheckError(report)
     return report

@@ -383,7 +383,8 @@ def integrate(
     compile_time = timed(model.kernel_arguments)
     check_time = 0.0
     if check and not model.checked:  # before the projection, which trusts G(q)
-        check_time = timed(lambda: model.check(q0, v0, params=prm, n_random=1, t=t0))
+        check_time = timed(lambda: model.check(q0, v0, params=prm, n_random=1, t=t0,
+                                               param_derivatives=False))
     else:  # check=False skips the derivatives, never the sizes (a size mistake corrupts memory)
         check_time = timed(lambda: guards.sizes(model, q0, v0, prm, t0))
     guards.signatures(events)

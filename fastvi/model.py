@@ -55,6 +55,25 @@ With ``time_dependent=True`` the potential and constraint callbacks of the first
 compiled signature stays the one above: the time travels in a hidden entry ``params[k]``
 after the user's ``k`` parameters, written by the kernels before each evaluation and read by
 the wrappers (:meth:`Model.kernel_params`); the other callbacks never look at it.
+
+Derivatives by the parameters θ = ``params`` (optional; ``Model(param_derivatives={slot: fn
+or 0})``, for the sensitivities and the adjoint):
+
+===========================  ==============================================  ================
+slot (:data:`PARAM_SLOTS`)   function: the arguments of that callback        ``out`` shape
+===========================  ==============================================  ================
+``mass``                     ``(q, params, out)``: ``out[l] = ∂M/∂θ_l``      (k, n, n)
+``kinetic_grad``             ``(q, v, params, out)``: ``∂(∂T/∂q)/∂θ_l``      (k, n)
+``potential_grad``           ``(q, params, out)``: ``∂(∇V)/∂θ_l``            (k, n)
+``constraint``               ``(q, params, out)``: ``∂g/∂θ_l``               (k, m)
+``constraint_jacobian``      ``(q, params, out)``: ``∂G/∂θ_l``               (k, m, n)
+``force``                    ``(t, q, v, params, out)``: ``∂F/∂θ_l``         (k, n)
+===========================  ==============================================  ================
+
+``0`` declares a callback independent of θ. When they cover every callback θ enters
+(:attr:`Model.param_derivatives_exact`), the linearised step uses them instead of
+five-point differences of the whole step in each θ_l; they are compiled on first use
+(:meth:`Model.param_derivative_data`), never by a plain integration.
 """
 
 from __future__ import annotations
@@ -64,6 +83,7 @@ import hashlib
 import os
 import types as types_module
 import warnings
+from collections.abc import Mapping
 from typing import Callable
 
 import numba as nb
@@ -73,9 +93,9 @@ from numba import carray, types
 from ._numba import njit, ptr
 from .kernels import layout as lay
 from .kernels.layout import SECOND as _SECOND
-from .kernels.layout import FD_T, FD_T_POINTS, SLOTS
+from .kernels.layout import FD_T, FD_T_POINTS, PARAM_SLOTS, SLOTS
 
-__all__ = ["Model", "CALLBACK_SIGNATURE", "SLOTS"]
+__all__ = ["Model", "CALLBACK_SIGNATURE", "SLOTS", "PARAM_SLOTS"]
 
 
 #: The one signature of every compiled model callback: ``void(q*, v*, params*, out*)``.
@@ -127,6 +147,9 @@ def _templates(n, m, k, tag):
 
     Kinds ending in ``@t`` take the time first: the kernels pass it in the hidden entry
     ``p[k]`` that follows the user's ``k`` parameters (the user sees ``params`` of length k).
+    Kinds ``<slot>/θ`` are the derivatives by the parameters of the callback ``<slot>``
+    (``Model(param_derivatives=...)``): the same inputs, ``out`` of shape ``(k,)`` + the
+    callback's output shape.
     """
     nn = (n, n)
 
@@ -199,6 +222,37 @@ def _templates(n, m, k, tag):
         tag  # noqa: B018
         out[0] = jf(p[k], carray(q, (n,)), carray(v, (n,)), carray(p, (k,)))  # noqa: F821
 
+    # ---- derivatives by the parameters: out[l] = ∂f/∂θ_l, shape (k,) + the shape of f
+    kn, km, kmn, knn = (k, n), (k, m), (k, m, n), (k, n, n)
+
+    def mass_p(q, v, p, out):
+        tag  # noqa: B018
+        jf(carray(q, (n,)), carray(p, (k,)), carray(out, knn))  # noqa: F821
+
+    def kinetic_grad_p(q, v, p, out):
+        tag  # noqa: B018
+        jf(carray(q, (n,)), carray(v, (n,)), carray(p, (k,)), carray(out, kn))  # noqa: F821
+
+    def potential_grad_p(q, v, p, out):
+        tag  # noqa: B018
+        jf(carray(q, (n,)), carray(p, (k,)), carray(out, kn))  # noqa: F821
+
+    def potential_grad_p_t(q, v, p, out):
+        tag  # noqa: B018
+        jf(p[k], carray(q, (n,)), carray(p, (k,)), carray(out, kn))  # noqa: F821
+
+    def constraint_p(q, v, p, out):
+        tag  # noqa: B018
+        jf(carray(q, (n,)), carray(p, (k,)), carray(out, km))  # noqa: F821
+
+    def constraint_jacobian_p(q, v, p, out):
+        tag  # noqa: B018
+        jf(carray(q, (n,)), carray(p, (k,)), carray(out, kmn))  # noqa: F821
+
+    def force_p_t(q, v, p, out):
+        tag  # noqa: B018
+        jf(p[k], carray(q, (n,)), carray(v, (n,)), carray(p, (k,)), carray(out, kn))  # noqa: F821
+
     return {"potential": potential, "mass": matrix, "potential_hessian": matrix,
             "potential_grad": potential_grad, "constraint": constraint,
             "constraint_jacobian": constraint_jacobian, "constraint_hessian": constraint_hessian,
@@ -210,7 +264,11 @@ def _templates(n, m, k, tag):
             "constraint_hessian@t": constraint_hessian_t,
             "constraint_time_derivative@t": constraint_t,
             "force@t": force_t, "force_jacobian_q@t": force_matrix_t,
-            "force_jacobian_v@t": force_matrix_t, "event@t": event_t}
+            "force_jacobian_v@t": force_matrix_t, "event@t": event_t,
+            "mass/θ": mass_p, "kinetic_grad/θ": kinetic_grad_p,
+            "potential_grad/θ": potential_grad_p, "potential_grad/θ@t": potential_grad_p_t,
+            "constraint/θ": constraint_p, "constraint_jacobian/θ": constraint_jacobian_p,
+            "force/θ@t": force_p_t}
 
 
 #: callbacks that take the time first when the model is ``time_dependent``
@@ -296,6 +354,15 @@ def _wrap(kind: str, fn: Callable, n: int, m: int, k: int):
         while len(_CALLBACKS) > _CALLBACKS_MAX:
             del _CALLBACKS[next(iter(_CALLBACKS))]
     return cached
+
+
+def _wrap_all(slots, functions: dict, kind: Callable, n: int, m: int, k: int) -> tuple:
+    """The cfuncs of ``slots`` in order: ``functions[slot]`` wrapped as the template
+    ``kind(slot)``, the no-op :func:`_absent` where ``functions`` has none."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", nb.NumbaExperimentalFeatureWarning)
+        return tuple(_wrap(kind(slot), functions[slot], n, m, k) if slot in functions else _absent
+                     for slot in slots)
 
 
 def _compile_callback(kind: str, fn: Callable, n: int, m: int, k: int):
@@ -424,6 +491,17 @@ class Model:
         the automatic check of the first integration) verifies it: a non-zero written
         outside the pattern, or a derivative ``∂g_a/∂q_b`` that finite differences find
         non-zero where the pattern says zero, is reported naming the entry.
+    param_derivatives : mapping, optional
+        Exact derivatives by the parameters θ = ``params`` of the callbacks θ can enter:
+        ``{slot: function or 0}`` with slots from :data:`PARAM_SLOTS` (``"mass"``,
+        ``"kinetic_grad"``, ``"potential_grad"``, ``"constraint"``,
+        ``"constraint_jacobian"``, ``"force"``). A function takes the arguments of the
+        callback of that slot and writes ``out`` of shape ``(k,)`` + that callback's output
+        shape, ``out[l] = ∂f/∂θ_l``; ``0`` declares that the callback does not depend on θ.
+        Given for every such callback of the model, the linearised step of the
+        sensitivities and the adjoint uses them instead of differences in θ
+        (``docs/custom-model.md``, "Derivatives by the parameters"). Not for a
+        ``time_dependent`` model with constraints.
     name : str, optional
         A label used in summaries and error messages.
 
@@ -436,6 +514,9 @@ class Model:
         True once :meth:`check` (or the automatic check of the first integration) passed;
         :func:`fastvi.integrate` then skips its check. Models built by the library
         (:mod:`fastvi.bodies`) start checked. A model unpickled elsewhere starts unchecked.
+    param_derivatives_checked : bool
+        True once :meth:`check` compared the derivatives by the parameters
+        (``param_derivatives``) with differences and they passed.
     recipe : tuple or None
         ``(scene, kwargs)`` for a model built by a function of :mod:`fastvi.scenes`: how it
         is rebuilt when pickled (None for a model built from user functions).
@@ -474,6 +555,7 @@ class Model:
         time_dependent: bool = False,
         constraint_time_derivative: Callable | None = None,
         constraint_jacobian_pattern=None,
+        param_derivatives=None,
         name: str | None = None,
     ):
         self.n = _as_int(n, "n", 1)
@@ -552,9 +634,50 @@ class Model:
                 raise TypeError(f"`{key}` must be a function{hint} or None, got {fn!r}")
         self._functions = {k: v for k, v in funcs.items() if v is not None}
         self.constraint_jacobian_pattern = _as_pattern(constraint_jacobian_pattern, self.m, self.n)
+        #: the derivatives by θ given as functions, and the slots declared 0
+        self._param_functions, self._param_zero = self._param_derivatives(param_derivatives)
         self._compiled = None
+        self._param_data = None
+        #: :meth:`check` compared the derivatives by θ with differences, and they passed
+        self.param_derivatives_checked = False
         self._mass_arg = mass
         self.checked = False
+
+    def _param_derivatives(self, given):
+        """Validate ``param_derivatives``: ``({slot: function}, {slots declared 0})``."""
+        name = "param_derivatives"
+        if given is None:
+            return {}, frozenset()
+        if not isinstance(given, Mapping):
+            raise TypeError(f"`{name}` must be a mapping {{slot: function or 0}} with slots from "
+                            f"{', '.join(PARAM_SLOTS)}, got {type(given).__name__}")
+        k = self.params.shape[0]
+        if k == 0:
+            raise ValueError(f"`{name}` was given but the model has no parameters (k = 0): "
+                             "leave it out")
+        if self.time_dependent and self.m > 0:
+            raise ValueError(f"`{name}` is not supported for a time_dependent model with "
+                             "constraints (derivatives by θ of rheonomic constraints): leave it "
+                             "out, and fastvi differences the step in θ instead")
+        functions, zero = {}, set()
+        for slot, fn in given.items():
+            if slot not in PARAM_SLOTS:
+                raise ValueError(f"`{name}` has the unknown slot {slot!r}; the slots are "
+                                 f"{', '.join(PARAM_SLOTS)}")
+            if slot not in self._functions:
+                why = {"mass": "its mass matrix is constant (data, not a function of θ)",
+                       "constraint": f"m = {self.m}", "constraint_jacobian": f"m = {self.m}"}.get(
+                    slot, f"it has no `{slot}`")
+                raise ValueError(f"`{name}[{slot!r}]` was given but the model has no `{slot}` "
+                                 f"callback ({why}): remove that entry")
+            if _is_zero(fn):
+                zero.add(slot)
+            elif callable(fn):
+                functions[slot] = fn
+            else:
+                raise TypeError(f"`{name}[{slot!r}]` must be a function or 0 (the callback does "
+                                f"not depend on θ), got {fn!r}")
+        return functions, frozenset(zero)
 
     # ------------------------------------------------------------------ pickling as a recipe
     def __reduce__(self):
@@ -565,7 +688,9 @@ class Model:
             scene, kwargs = self.recipe
             return (_scene_from_recipe, (scene, kwargs, self.params))
         in_main = []
-        for key, fn in self._functions.items():
+        named = list(self._functions.items())
+        named += [(f"param_derivatives[{s!r}]", fn) for s, fn in self._param_functions.items()]
+        for key, fn in named:
             qual = getattr(fn, "__qualname__", "")
             if "<locals>" in qual or "<lambda>" in qual:
                 raise TypeError(
@@ -589,7 +714,8 @@ class Model:
             funcs["potential_hessian"] = 0
         kwargs = dict(params=self.params, mass=self._mass_arg, name=self.name,
                       time_dependent=self.time_dependent,
-                      constraint_jacobian_pattern=self.constraint_jacobian_pattern, **funcs)
+                      constraint_jacobian_pattern=self.constraint_jacobian_pattern,
+                      param_derivatives=self._param_arg(), **funcs)
         return (_model_from_kwargs, (self.n, self.m, kwargs))
 
     # ------------------------------------------------------------------ compiled form
@@ -626,14 +752,7 @@ class Model:
     def _compile(self):
         if self._compiled is None:
             k = self.params.shape[0]
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", nb.NumbaExperimentalFeatureWarning)
-                cfs = tuple(
-                    _wrap(self._kind(slot), self._functions[slot], self.n, self.m, k)
-                    if slot in self._functions
-                    else _absent
-                    for slot in SLOTS
-                )
+            cfs = _wrap_all(SLOTS, self._functions, self._kind, self.n, self.m, k)
             flags = np.zeros(lay.FLAGS_SIZE, dtype=np.int64)
             flags[lay.F_N] = self.n
             flags[lay.F_M] = self.m
@@ -664,6 +783,86 @@ class Model:
         :meth:`kernel_params`.
         """
         return self._compile()
+
+    # ------------------------------------------------------------------ derivatives by θ
+    @property
+    def param_derivatives(self) -> frozenset:
+        """The slots (:data:`PARAM_SLOTS`) whose derivative by the parameters the model was
+        given, as a function or declared ``0`` (empty without ``param_derivatives``)."""
+        return frozenset(self._param_functions) | self._param_zero
+
+    @property
+    def param_derivatives_exact(self) -> bool:
+        """Whether the derivatives by θ cover every callback θ can enter: ``mass`` when it is
+        a function, ``kinetic_grad``, ``potential_grad``, ``constraint`` and
+        ``constraint_jacobian`` when m > 0, and ``force``. Only then does the linearised
+        step use them instead of differences in θ."""
+        needed = {slot for slot in PARAM_SLOTS if slot in self._functions}
+        return bool(self.param_derivatives) and needed <= self.param_derivatives
+
+    def _param_arg(self):
+        """``param_derivatives`` as given to the constructor (None when there were none)."""
+        if not self.param_derivatives:
+            return None
+        return {**self._param_functions, **dict.fromkeys(self._param_zero, 0)}
+
+    def _param_kind(self, slot: str) -> str:
+        """The template kind of the derivative by θ of ``slot`` (timed like the slot)."""
+        kind = self._kind(slot)
+        return slot + "/θ" + ("@t" if kind.endswith("@t") else "")
+
+    def param_derivative_data(self):
+        """The model's derivatives by θ as the linearised step reads them, a
+        :class:`fastvi.kernels.layout.ParamData` ``(fns, given, exact)``.
+
+        ``fns`` holds the compiled derivatives in :data:`PARAM_SLOTS` order (the no-op of an
+        absent callback where the model has none or declared ``0``), with the numba type of
+        :meth:`kernel_data`'s callbacks, so one compiled kernel serves every model; ``given``
+        (int64, shape (6,)) is 1 where ``fns`` holds a derivative; ``exact`` is 1 when
+        :attr:`param_derivatives_exact`, else 0 (then the kernels difference the step in θ).
+        A kernel calls ``fns[slot]`` with the pointers of the plain callback of that slot
+        (``(q, q, p, out)``, or ``(q, v, p, out)`` for ``kinetic_grad`` and ``force``) and
+        ``p`` from :meth:`kernel_params`.
+
+        Compiled on the first call (≈ 0.1 s per derivative, from numba's disk cache for
+        functions in source files) and kept: plain integrations never compile them.
+        """
+        if self._param_data is None:
+            k = self.params.shape[0]
+            fns = _wrap_all(PARAM_SLOTS, self._param_functions, self._param_kind, self.n, self.m, k)
+            given = np.array([int(slot in self._param_functions) for slot in PARAM_SLOTS],
+                             dtype=np.int64)
+            self._param_data = lay.ParamData(fns, given, int(self.param_derivatives_exact))
+        return self._param_data
+
+    def param_derivative_value(self, slot: str, q, v=None, params=None, t: float = 0.0):
+        """The derivative by θ of the callback ``slot`` (a name of :data:`PARAM_SLOTS`) at
+        ``(t, q, v)``, evaluated through its compiled form as the kernels call it: an array
+        of shape ``(k,) + output_shape(slot)`` with ``[l] = ∂f/∂θ_l`` (zeros for a declared
+        ``0``). ``v`` is the velocity of ``kinetic_grad`` and ``force`` (default ``q``);
+        ``t`` matters only for a force or a ``time_dependent`` model.
+
+        Raises
+        ------
+        ValueError
+            ``slot`` is not a name of :data:`PARAM_SLOTS`, or the model was not given its
+            derivative (:attr:`param_derivatives`).
+        """
+        if slot not in PARAM_SLOTS:
+            raise ValueError(f"`slot` must be one of {', '.join(PARAM_SLOTS)}, got {slot!r}")
+        shape = (self.params.shape[0],) + self.output_shape(slot)
+        if slot in self._param_zero:
+            return np.zeros(shape)
+        if slot not in self._param_functions:
+            given = ", ".join(s for s in PARAM_SLOTS if s in self.param_derivatives) or "none"
+            raise ValueError(f"the model has no derivative by θ of `{slot}` (given: {given}); "
+                             "see `Model(param_derivatives=...)`")
+        direct = self.__dict__.get("_param_direct")
+        if direct is None:
+            direct = self._param_direct = {
+                name: _DIRECT(cf.address)
+                for name, cf in zip(PARAM_SLOTS, self.param_derivative_data().fns)}
+        return _evaluate(direct[slot], q, v, self.kernel_params(params, t), shape)
 
     @property
     def has_exact_second_derivatives(self) -> dict[str, bool]:
@@ -717,12 +916,7 @@ class Model:
         if direct is None:
             direct = self._direct = {name: _DIRECT(cf.address)
                                      for name, cf in zip(SLOTS, self._compile()[0])}
-        q = np.ascontiguousarray(q, dtype=np.float64)
-        v = q if v is None else np.ascontiguousarray(v, dtype=np.float64)
-        p = self.kernel_params(params, t)
-        out = np.zeros(shape if shape else (1,))
-        direct[slot](q.ctypes.data, v.ctypes.data, p.ctypes.data, out.ctypes.data)
-        return out if shape else float(out[0])
+        return _evaluate(direct[slot], q, v, self.kernel_params(params, t), shape)
 
     def mass_matrix(self, q, params=None) -> np.ndarray:
         """M(q), shape (n, n)."""
@@ -785,12 +979,14 @@ class Model:
         v : array_like (n,), optional
             Velocity for the kinetic-energy derivatives (default: random).
         **options
-            ``params``, ``t``, ``n_random``, ``radius``, ``rtol``, ``seed``, ``raise_on_error``.
+            ``params``, ``t``, ``n_random``, ``radius``, ``rtol``, ``seed``, ``raise_on_error``,
+            ``param_derivatives`` (default True: the derivatives by θ too).
 
         Returns
         -------
         fastvi.check.CheckReport
-            Printable table: one line per callback.
+            Printable table: one line per callback (``<slot>/θ`` for the derivatives by the
+        parameters).
 
         Raises
         ------
@@ -806,6 +1002,16 @@ class Model:
         extra = (", force" if self.has_force else "") + (", time-dependent" if self.time_dependent else "")
         return (f"Model({self.name!r}, n={self.n}, m={self.m}, {kind} mass, "
                 f"k={self.params.shape[0]} params{extra})")
+
+
+def _evaluate(direct, q, v, p, shape):
+    """Call a compiled callback by its ctypes prototype ``direct`` at ``(q, v)`` with the
+    kernels' parameter vector ``p``: a fresh array of ``shape`` (a float for ``()``)."""
+    q = np.ascontiguousarray(q, dtype=np.float64)
+    v = q if v is None else np.ascontiguousarray(v, dtype=np.float64)
+    out = np.zeros(shape if shape else (1,))
+    direct(q.ctypes.data, v.ctypes.data, p.ctypes.data, out.ctypes.data)
+    return out if shape else float(out[0])
 
 
 def _model_from_kwargs(n, m, kwargs):

@@ -18,7 +18,8 @@ energy (or mass matrix), the potential and the constraints:
                                  params={M: 2.0, m: 1.0, l: 1.0, g: 9.81})
 
 The derivatives (``∂T/∂q``, ``∂²T/∂q²``, ``∂(M v)/∂q``, ``∇V``, ``∇²V``, ``G = ∂g/∂q``,
-``Σ η_a ∇²g_a``) are differentiated symbolically, common subexpressions are eliminated
+``Σ η_a ∇²g_a``) and the derivatives of the callbacks by the parameters
+(``param_derivatives`` of :class:`fastvi.Model`) are differentiated symbolically, common subexpressions are eliminated
 (``sympy.cse``), and each callback is printed as Python source (``math`` functions,
 ``q[i]``, ``v[i]``, ``p[k]``), executed into a private module namespace and handed to
 :class:`fastvi.Model`, which compiles it with numba exactly like a hand-written one. The
@@ -37,7 +38,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from .model import SLOTS, Model
+from .model import PARAM_SLOTS, SLOTS, Model
 
 __all__ = ["model_from_lagrangian", "velocities", "SymbolicModel"]
 
@@ -90,7 +91,9 @@ class SymbolicModel(Model):
     Parameters
     ----------
     source : str
-        Python source defining the callbacks (functions named after :data:`fastvi.model.SLOTS`).
+        Python source defining the callbacks (functions named after :data:`fastvi.model.SLOTS`)
+        and their derivatives by the parameters (``<slot>_by_params``, a function or ``0``,
+        for the slots of :data:`fastvi.model.PARAM_SLOTS`).
     n, m : int
         Coordinates and constraints.
     params : array_like (k,)
@@ -115,10 +118,13 @@ class SymbolicModel(Model):
                  coordinates=(), param_names=(), constraint_jacobian_pattern=None):
         namespace = _load(source, name)
         funcs = {slot: namespace[slot] for slot in SLOTS if slot in namespace}
+        by_params = {slot: namespace[_BY_PARAMS.format(slot)] for slot in PARAM_SLOTS
+                     if _BY_PARAMS.format(slot) in namespace}
         if "mass" in funcs:
             mass = funcs.pop("mass")
         super().__init__(n, m, params=params, mass=mass, name=name,
-                         constraint_jacobian_pattern=constraint_jacobian_pattern, **funcs)
+                         constraint_jacobian_pattern=constraint_jacobian_pattern,
+                         param_derivatives=by_params or None, **funcs)
         self.source = source
         self.coordinates = tuple(coordinates)
         self.param_names = tuple(param_names)
@@ -130,6 +136,10 @@ class SymbolicModel(Model):
             params=self.params, mass=self.mass_matrix_constant, name=self.name,
             coordinates=self.coordinates, param_names=self.param_names,
             constraint_jacobian_pattern=self.constraint_jacobian_pattern)))
+
+
+#: the name in generated source of the derivative by the parameters of a callback
+_BY_PARAMS = "{}_by_params"
 
 
 def _rebuild(source, n, m, kwargs):
@@ -208,11 +218,27 @@ class _Writer:
             lines.append(f"    return {float(e)!r}" if e.is_number else f"    return {self._expr(e)}")
         else:
             if zero_fill:  # only the nonzero entries are written below
-                lines.append("    out[:] = 0.0" if len(shape) == 1 else "    out[:, :] = 0.0")
+                lines.append(f"    out[{', '.join(':' * len(shape))}] = 0.0")
             for (targets, _), e in zip(outputs, reduced):
                 lines.append(f"    {targets[0]} = {self._expr(e)}")
                 lines += [f"    {t} = {targets[0]}" for t in targets[1:]]  # symmetric partner
         self.blocks.append("\n".join(lines))
+
+
+    def by_params(self, slot: str, args: str, outputs, shape, psyms):
+        """The derivative by each parameter of the callback ``slot`` whose entries are
+        ``outputs`` (``(targets, expr)``, ``out`` of ``shape``): a function
+        ``<slot>_by_params`` writing ``out[l, …] = ∂f/∂θ_l`` (shape ``(k,) + shape``), or the
+        declaration ``<slot>_by_params = 0`` when no entry depends on the parameters."""
+        sp = self.sp
+        name = _BY_PARAMS.format(slot)
+        derived = [(tuple(t.replace("out[", f"out[{l}, ", 1) for t in targets), sp.diff(sp.sympify(e), s))
+                   for l, s in enumerate(psyms) for targets, e in outputs]
+        if all(e == 0 for _, e in derived):
+            self.blocks.append(f"# {slot} does not depend on the parameters\n{name} = 0")
+            return
+        self.function(name, args, derived, (len(psyms),) + tuple(shape),
+                      f"∂({slot})/∂θ_l in out[l]")
 
 
 def _vector_outputs(exprs):
@@ -232,7 +258,8 @@ def _matrix_outputs(A, symmetric: bool):
 
 
 def model_from_lagrangian(q, T, V=0, constraints=(), *, v=None, params=None, name: str = "symbolic",
-                          exact_hessians: bool = True, compile: bool = True) -> SymbolicModel:
+                          exact_hessians: bool = True, param_derivatives: bool = True,
+                          compile: bool = True) -> SymbolicModel:
     r"""Build a :class:`fastvi.Model` from ``L = T − V`` and constraints ``g(q) = 0`` in SymPy.
 
     Parameters
@@ -263,6 +290,12 @@ def model_from_lagrangian(q, T, V=0, constraints=(), *, v=None, params=None, nam
         kernels finite-difference the first derivatives instead. A potential linear in q
         (∇²V = 0, e.g. gravity in Cartesian coordinates) is declared ``potential_hessian=0``
         instead of a callback: the kernels then evaluate ∇V once a trajectory.
+    param_derivatives : bool, default True
+        Generate the derivatives by the parameters of every callback they can enter
+        (``Model(param_derivatives=...)``: ``∂M/∂θ`` and ``∂(∂T/∂q)/∂θ`` when ``M``
+        depends on ``q``, ``∂(∇V)/∂θ``, ``∂g/∂θ``, ``∂G/∂θ``; ``0`` where one does not
+        depend on θ), so the sensitivities and the adjoint linearise the step exactly in θ.
+        Compiled when first needed, not by ``compile``.
     compile : bool, default True
         Compile the callbacks with numba now (about a second), so that an expression numba
         cannot compile fails here rather than at the first integration.
@@ -285,9 +318,10 @@ def model_from_lagrangian(q, T, V=0, constraints=(), *, v=None, params=None, nam
     ``kinetic_grad_i = ∂T/∂q_i``, ``kinetic_hessian_ij = ∂²T/∂q_i∂q_j``,
     ``momentum_jacobian_ab = ∂(M v)_a/∂q_b``, ``potential_grad = ∇V``,
     ``potential_hessian = ∇²V``, ``constraint_jacobian_ai = ∂g_a/∂q_i`` and
-    ``constraint_hessian = Σ_a η_a ∇²g_a``. Each callback's expressions go through one
-    ``sympy.cse`` call, so shared subexpressions (``sin θ``, ``cos θ``, …) are computed
-    once per call.
+    ``constraint_hessian = Σ_a η_a ∇²g_a``; ``<slot>_by_params`` writes
+    ``out[l, …] = ∂f/∂θ_l`` for each first-order callback ``f`` and ``M``. Each
+    callback's expressions go through one ``sympy.cse`` call, so shared subexpressions
+    (``sin θ``, ``cos θ``, …) are computed once per call.
 
     Examples
     --------
@@ -350,6 +384,7 @@ def model_from_lagrangian(q, T, V=0, constraints=(), *, v=None, params=None, nam
     replace.update({s: vb[i] for i, s in enumerate(vs)})
     replace.update({s: pb[k] for k, s in enumerate(psyms)})
     w = _Writer(replace)
+    by_params = param_derivatives and bool(psyms)
     eta = [sp.Dummy(f"eta{a}") for a in range(m)]
     w.replace.update({e: eb[a] for a, e in enumerate(eta)})
 
@@ -359,9 +394,13 @@ def model_from_lagrangian(q, T, V=0, constraints=(), *, v=None, params=None, nam
         vvec = sp.Matrix(vs)
         Tq = (vvec.T * M * vvec)[0, 0] / 2
         Mv = M * vvec
-        w.function("mass", "q, p, out", _matrix_outputs(M, True), (n, n), "M(q)")
-        w.function("kinetic_grad", "q, v, p, out", _vector_outputs([sp.diff(Tq, s) for s in qs]), (n,),
-                   "∂T/∂q, T = ½ vᵀ M(q) v")
+        mass_out = _matrix_outputs(M, True)
+        kgrad_out = _vector_outputs([sp.diff(Tq, s) for s in qs])
+        w.function("mass", "q, p, out", mass_out, (n, n), "M(q)")
+        w.function("kinetic_grad", "q, v, p, out", kgrad_out, (n,), "∂T/∂q, T = ½ vᵀ M(q) v")
+        if by_params:
+            w.by_params("mass", "q, p, out", mass_out, (n, n), psyms)
+            w.by_params("kinetic_grad", "q, v, p, out", kgrad_out, (n,), psyms)
         if exact_hessians:
             w.function("kinetic_hessian", "q, v, p, out", _matrix_outputs(sp.hessian(Tq, qs), True), (n, n),
                        "∂²T/∂q²")
@@ -374,7 +413,10 @@ def model_from_lagrangian(q, T, V=0, constraints=(), *, v=None, params=None, nam
         except TypeError:
             raise ValueError(f"the mass matrix could not be evaluated to numbers with `params`: {M}") from None
     w.function("potential", "q, p", [((), V)], None, "V(q)")
-    w.function("potential_grad", "q, p, out", _vector_outputs([sp.diff(V, s) for s in qs]), (n,), "∇V")
+    pgrad_out = _vector_outputs([sp.diff(V, s) for s in qs])
+    w.function("potential_grad", "q, p, out", pgrad_out, (n,), "∇V")
+    if by_params:
+        w.by_params("potential_grad", "q, p, out", pgrad_out, (n,), psyms)
     if exact_hessians:
         HV = sp.hessian(V, qs)
         if HV.is_zero_matrix:
@@ -386,6 +428,10 @@ def model_from_lagrangian(q, T, V=0, constraints=(), *, v=None, params=None, nam
     if m:
         Gm = sp.Matrix(gs).jacobian(qs)
         w.function("constraint", "q, p, out", _vector_outputs(gs), (m,), "g(q)")
+        if by_params:
+            w.by_params("constraint", "q, p, out", _vector_outputs(gs), (m,), psyms)
+            # not zeroed: the pattern of G need not be that of its derivatives by θ
+            w.by_params("constraint_jacobian", "q, p, out", _matrix_outputs(Gm, False), (m, n), psyms)
         # the structural non-zeros of G are its declared pattern: the callback writes only
         # them (O(nnz) instead of O(m n) a call) and the structured solves take it as it is
         pattern = np.array([[Gm[a, i].xreplace(replace) != 0 for i in range(n)] for a in range(m)],

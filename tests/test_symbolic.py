@@ -95,6 +95,7 @@ def test_generated_cart_has_every_q_dependent_callback_and_passes_the_check(cart
                                                                    "potential_hessian"))
     report = cart_sym.check([0.3, 1.1], [0.7, -1.3])
     assert report.checked == ["mass", "kinetic_grad", "momentum_jacobian", "potential_grad",
+                              "mass/θ", "kinetic_grad/θ", "potential_grad/θ",
                               "kinetic_hessian", "potential_hessian"]
     assert max(r.relative_error for r in report.rows) < 1e-10  # measured 1.4e-12
 

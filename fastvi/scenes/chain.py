@@ -101,6 +101,31 @@ def constraint_hessian(q, eta, p, out):
             out[2 * i + 3, 2 * i + 1] = e
 
 
+def potential_grad_by_params(q, p, out):
+    """``∂(∇V)/∂θ``: at each ``y_i``, ``g`` by ``m_i`` and ``m_i`` by ``g``; zero by the
+    lengths (and by a damping coefficient after ``g``)."""
+    nb = q.shape[0] // 2
+    out[:, :] = 0.0
+    for i in range(nb):
+        out[i, 2 * i + 1] = p[2 * nb]
+        out[2 * nb, 2 * i + 1] = p[i]
+
+
+def constraint_by_params(q, p, out):
+    """``∂g/∂θ``: ``∂g_i/∂l_i = −l_i``, zero otherwise."""
+    nb = q.shape[0] // 2
+    out[:, :] = 0.0
+    for i in range(nb):
+        out[nb + i, i] = -p[nb + i]
+
+
+def param_derivatives(damping: float = 0.0) -> dict:
+    """The chain's derivatives by ``params = (m_1 … m_N, l_1 … l_N, g[, c])`` (``Model``'s
+    ``param_derivatives``): the constant mass matrix is data, ``G`` does not depend on θ."""
+    return dict(potential_grad=potential_grad_by_params, constraint=constraint_by_params,
+                constraint_jacobian=0, **damping_.param_derivatives(damping))
+
+
 def pattern(N: int):
     """``(rows, cols)`` of the non-zeros of the chain's ``G`` (m = N, n = 2N): link i joins
     body i − 1 (the origin for i = 0) to body i."""
@@ -225,7 +250,7 @@ def chain(N: int, m=1.0, l=1.0, g: float = 9.81, damping: float = 0.0) -> Model:
         potential=potential, potential_grad=potential_grad, potential_hessian=0,
         constraint=constraint, constraint_jacobian=constraint_jacobian,
         constraint_hessian=constraint_hessian, constraint_jacobian_pattern=pattern(N),
-        name=f"chain{N}" + ("-damped" if c else ""),
+        name=f"chain{N}" + ("-damped" if c else ""), param_derivatives=param_derivatives(c),
         **damping_.options(c),
     )
     lengths = np.array(ls)

@@ -3,6 +3,8 @@ r"""Linear viscous damping ``F = −c v`` on every coordinate, shared by the sce
 The damping coefficient is the **last** entry of the scene's parameter vector, so a scene
 appends it to its own parameters and these functions serve every scene. For point masses in
 Cartesian coordinates ``−c v`` is a dashpot to the ground on every mass (force ``−c ṙ_i``).
+Its derivative by the parameters is ``∂F/∂c = −v`` and zero by every other parameter
+(:func:`param_derivatives`).
 """
 
 from __future__ import annotations
@@ -23,6 +25,20 @@ def jacobian_v(t, q, v, p, out):
     out[:, :] = 0.0
     for a in range(q.shape[0]):
         out[a, a] = -c
+
+
+def force_by_params(t, q, v, p, out):
+    """``out[l] = ∂F/∂θ_l``: ``−v`` for the last parameter ``c``, zero for the others."""
+    last = p.shape[0] - 1
+    out[:, :] = 0.0
+    for a in range(q.shape[0]):
+        out[last, a] = -v[a]
+
+
+def param_derivatives(damping) -> dict:
+    """The ``param_derivatives`` entries of the force of a scene with ``damping`` (none for
+    ``0``): merge them into the scene's own."""
+    return {"force": force_by_params} if damping else {}
 
 
 def options(damping) -> dict:

@@ -33,6 +33,20 @@ def _G(q, p, out):
     out[0, 1] = q[1]
 
 
+def _dV_by_params(q, p, out):
+    """``∂(∇V)/∂(m, l, g)``: ``g`` by ``m`` and ``m`` by ``g`` at ``y``."""
+    out[:, :] = 0.0
+    out[0, 1] = p[2]
+    out[2, 1] = p[0]
+
+
+def _g_by_params(q, p, out):
+    """``∂g/∂l = −l``."""
+    out[0, 0] = 0.0
+    out[1, 0] = -p[1]
+    out[2, 0] = 0.0
+
+
 def _ddg(q, eta, p, out):
     out[:, :] = 0.0
     out[0, 0] = eta[0]
@@ -49,6 +63,8 @@ def pendulum(m: float = 1.0, l: float = 1.0, g: float = 9.81) -> Model:
     model = Model(
         2, 1, params=(m, l, g), mass=m * np.eye(2), potential=_V, potential_grad=_dV,
         potential_hessian=0, constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
+        param_derivatives=dict(potential_grad=_dV_by_params, constraint=_g_by_params,
+                               constraint_jacobian=0),
         name="pendulum",
     )
 

@@ -151,6 +151,7 @@ def tree(branches: int = 3, links: int = 3, m=1.0, l=1.0, g: float = 9.81, dampi
         constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
         constraint_jacobian_pattern=pattern(branches, links),
         name=f"tree{branches}x{links}" + ("-damped" if c else ""), **damping_.options(c),
+        param_derivatives=damping_.param_derivatives(c),
     )
     lengths = np.array(ls)
 

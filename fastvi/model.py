@@ -985,8 +985,8 @@ class Model:
         Returns
         -------
         fastvi.check.CheckReport
-            Printable table: one line per callback (``<slot>/θ`` for the derivatives by the
-        parameters).
+            Printable table: one line per callback (``<slot>/θ`` for the derivatives by
+            the parameters).
 
         Raises
         ------

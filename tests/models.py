@@ -253,3 +253,22 @@ def bar_slider_crank_state(phi=0.3, omega=5.0):
     q = np.array([A[0] / 2, A[1] / 2, phi, C2[0], C2[1], th2, B[0], B[1]])
     v = np.array([dA[0] / 2, dA[1] / 2, omega, dC2[0], dC2[1], dth2, dB[0], dB[1]])
     return q, v
+
+
+def damped_double_pendulum_by_differences(damping=0.3):
+    """The damped double pendulum (a 2-link :func:`fastvi.scenes.chain`, unit masses and
+    rods) without its derivatives by the parameters: the linearised step then differences
+    the whole step in θ, the reference of the exact derivatives by θ."""
+    import importlib
+
+    # the module, which the package's function `chain` shadows as an attribute
+    chain = importlib.import_module("fastvi.scenes.chain")
+    damping_ = importlib.import_module("fastvi.scenes.damping")
+
+    return fastvi.Model(
+        4, 2, params=(1.0, 1.0, 1.0, 1.0, 9.81, damping), mass=np.ones(4),
+        potential=chain.potential, potential_grad=chain.potential_grad, potential_hessian=0,
+        constraint=chain.constraint, constraint_jacobian=chain.constraint_jacobian,
+        constraint_hessian=chain.constraint_hessian, constraint_jacobian_pattern=chain.pattern(2),
+        name="double_pendulum-by-differences",
+        **damping_.options(damping))

@@ -6,7 +6,9 @@ saved, everything compiled first, the stages sized for the model included) from
 
 * ``integrate`` with default settings, and with the generic stages (``specialize=False``);
 * ``sensitivity`` along 1 direction (q0[0]) and the 2n = 8 directions of (q0, v0);
-* ``adjoint``: the gradient by q0 and v0 of a cost of the final state.
+* ``adjoint``: the gradient by q0 and v0 of a cost of the final state, and by q0, v0 and
+  the k = 6 parameters: with the scene's derivatives by θ, and with the same model given
+  none (the step differenced in each θ_l, ``tests/models.py``).
 
 The medians per step and their ratios to the plain run are printed at the end. Run with
 ``make bench`` or ``.venv/bin/python -m pytest bench/test_bench_sensitivity.py
@@ -21,6 +23,7 @@ import numpy as np
 import pytest
 
 import fastvi
+from tests.models import damped_double_pendulum_by_differences
 
 N_STEPS = 5_000
 ROUNDS = 7
@@ -34,6 +37,7 @@ def _model():
 
 def _cases():
     dp, q0, v0 = _model()
+    twin = damped_double_pendulum_by_differences(0.3)
     n, k = dp.n, dp.params.size
     one = np.zeros((2 * n + k, 1))
     one[0, 0] = 1.0
@@ -50,6 +54,8 @@ def _cases():
         "sensitivity, 2n directions": lambda: fastvi.sensitivity(dp, q0, v0, **run),
         "adjoint, by q0 and v0": lambda: fastvi.adjoint(dp, q0, v0, final_cost, param_index=[],
                                                         **run),
+        "adjoint, + 6 params": lambda: fastvi.adjoint(dp, q0, v0, final_cost, **run),
+        "adjoint, + 6 params (diff.)": lambda: fastvi.adjoint(twin, q0, v0, final_cost, **run),
     }
 
 

@@ -200,7 +200,7 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     result = disc.finish(run, int(status), loop_time, 0.0, "the adjoint")
     pidx = list(range(k)) if param_index is None else disc.param_indices(param_index, k)
     Lq, Lp, direct = _cotangents(run, result, cotangent, pidx)
-    tw = disc.tangent_work(run, 1, pidx)
+    tw = disc.tangent_work(run, 0, pidx)  # no forward directions: pull contracts R_θ
     lq, lp, lth = np.zeros(n), np.zeros(n), np.zeros(max(len(pidx), 1))
     t_back = time.perf_counter()
     info[:] = run.info
@@ -230,7 +230,8 @@ def _cotangents(run, result, cotangent, pidx):
     r"""``(Lq, Lp, direct)``: the cotangents on ``(q_i, p_i)`` of ``cotangent(result)`` =
     ``(∂J/∂q_i, ∂J/∂v_i)``, with ``v = M(q, θ)⁻¹ p``: ``Lp = M⁻¹ J_v``,
     ``Lq = J_q − C_qᵀ M⁻¹ J_v``, and the direct part by the parameters
-    ``−Σ_i (M_θ v_i)ᵀ M⁻¹ J_v`` (for a configuration-dependent mass)."""
+    ``−Σ_i (M_θ v_i)ᵀ M⁻¹ J_v`` (for a configuration-dependent mass: the model's ``∂M/∂θ``,
+    or five-point differences in θ)."""
     model = run.model
     n, K = model.n, result.t.shape[0]
     out = cotangent(result)
@@ -245,11 +246,16 @@ def _cotangents(run, result, cotangent, pidx):
     if model.mass_matrix_constant is not None:
         return Jq, np.linalg.solve(model.mass_matrix_constant, Jv.T).T.copy(), direct
     Lq, Lp = Jq.copy(), np.zeros((K, n))
+    exact = "mass" in model.param_derivatives
     for i in range(K):
         q, v = result.q[i], result.v[i]
         M, _, _, _, Cq = point_terms(run.model_data, q, v, np.zeros(model.m))
         Lp[i] = np.linalg.solve(M, Jv[i])
         Lq[i] -= Cq.T @ Lp[i]
+        if exact and pidx:  # the model's ∂M/∂θ, as the linearised step reads it
+            dM = model.param_derivative_value("mass", q, params=run.prm)
+            direct -= (dM[pidx] @ v) @ Lp[i]
+            continue
         for j, l in enumerate(pidx):
             direct[j] -= disc.theta_derivative(lambda th: model.mass_matrix(q, th) @ v,
                                                run.prm, l) @ Lp[i]

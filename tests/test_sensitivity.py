@@ -236,15 +236,19 @@ def test_the_models_derivatives_by_theta_agree_with_differences_of_the_step():
         assert np.abs(x - y).max() < 1e-11 * np.abs(y).max()
 
 
-def test_adjoint_by_theta_from_the_models_derivatives_equals_the_forward_derivative():
-    _, bead, xb = _symbolic()  # g and G move with θ
-    assert bead.param_derivatives_exact
-    q0, v0 = fastvi.consistent_state(bead, xb, [0.3, -0.2, 0.1])
+@pytest.mark.parametrize("which", ["spring", "bead"])
+def test_adjoint_by_theta_from_the_models_derivatives_equals_the_forward_derivative(which):
+    spring, bead, xb = _symbolic()  # M(q, θ) and ∂T/∂q; g and G by θ
+    model, q, v = ((spring, [1.4, 0.6], [0.3, -0.5]) if which == "spring"
+                   else (bead, xb, [0.3, -0.2, 0.1]))
+    assert model.param_derivatives_exact
+    q0, v0 = fastvi.consistent_state(model, q, v)
+    n, k = model.n, model.params.size
     rng = np.random.default_rng(3)
-    Lq, Lv = rng.normal(size=(41, 3)), rng.normal(size=(41, 3))
-    A = fastvi.adjoint(bead, q0, v0, lambda r: (Lq, Lv), h=0.02, n_steps=40)
-    D = rng.normal(size=(9, 1))
-    S = fastvi.sensitivity(bead, q0, v0, h=0.02, n_steps=40, wrt=D)
+    Lq, Lv = rng.normal(size=(41, n)), rng.normal(size=(41, n))
+    A = fastvi.adjoint(model, q0, v0, lambda r: (Lq, Lv), h=0.02, n_steps=40)
+    D = rng.normal(size=(2 * n + k, 1))
+    S = fastvi.sensitivity(model, q0, v0, h=0.02, n_steps=40, wrt=D)
     forward = np.sum(Lq * S.dq[:, :, 0]) + np.sum(Lv * S.dv[:, :, 0])
     grad = np.concatenate([A.grad_q0, A.grad_v0, A.grad_params])
     assert abs(grad @ D[:, 0] - forward) < 1e-11 * abs(forward)

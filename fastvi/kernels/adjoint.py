@@ -212,7 +212,8 @@ def run_adjoint(md, tabs, tx, opts, h, state, ws, n_total, every, smp, info, sou
             st = linearise(mdp, txp, h, rec.time[j], rec.X[j], rec.q1[j], rec.v1[j],
                            rec.eta[j, :m], rec.P[j], twp)
             if st == OK:
-                st = pull(twp, lq, lp, lth)
+                st = pull(mdp, txp, h, twp, rec.q1[j], rec.v1[j], rec.eta[j, :m], lq, lp,
+                          lth)
             if st != OK:
                 info[I_FAILED] = k
                 return st

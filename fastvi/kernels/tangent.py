@@ -127,6 +127,7 @@ TangentWork = namedtuple("TangentWork", [
     "Rk",  # (np, N') R_θ of the extended step by the model's derivatives by θ
     "tho",  # (k · max(n², m n),) a derivative callback's output, flat
     "thF", "thP",  # (k, n) ∂F/∂θ and ∂(M v)/∂θ at a quadrature point
+    "mu",  # (N',) the adjoint's cotangent on the rows of the extended step
 ])
 
 
@@ -212,7 +213,7 @@ def tangent_work(xws, rows, cols, pidx, d, sp, pd, k):
         np.zeros(n), np.zeros(n), np.zeros((mm, n)), np.zeros(mm), np.zeros(mm), np.zeros(n),
         np.zeros(n), np.zeros(n), np.zeros(N), np.zeros(n), np.zeros(n), np.zeros(STEP_OUT_SIZE),
         pd, np.zeros((npar, sx * n + J * m)), np.zeros(max(k, 1) * n * max(n, m)),
-        np.zeros((max(k, 1), n)), np.zeros((max(k, 1), n)))
+        np.zeros((max(k, 1), n)), np.zeros((max(k, 1), n)), np.zeros(sx * n + J * m))
 
 
 def make_point_work(n, m):
@@ -438,76 +439,115 @@ def _point_of(qk, X, Lt, i, sx, n, out):
                 out[a] += cl * X[off + a]
 
 
+# The derivatives by θ from the model's own (``tw.pd``, :class:`.layout.ParamData`). At fixed
+# unknowns the step's residual is linear in the values of the callbacks at its quadrature
+# and constraint points (:func:`.step.residual`), so ``R_θ`` is the same sums with each
+# value replaced by its derivative by θ: one call of each derivative a point serves all
+# ``k`` parameters, and no residual is evaluated again. The forward directions need the
+# columns of ``R_θ`` (:func:`_theta_exact`); the adjoint only ``μᵀ R_θ`` for its cotangent
+# ``μ`` (:func:`_theta_pull`), which costs O(k n) a point instead of O(k n s).
+@hot_inline
+def _theta_at_quadrature(md, pd, tx, h, wx, qk, i, sx, n, pidx, o, thF, thP):
+    """At the extended step's quadrature point ``i``: ``thF[l] = ∂F/∂θ_l`` with
+    ``F = ∂T/∂q − ∇V + F_nc``, and ``thP[l] = (∂M/∂θ_l) v``, for ``l`` in ``pidx``."""
+    fns, given, prm = pd.fns, pd.given, md.prm
+    X, qi, vi = wx.X, wx.qi, wx.vi
+    _at_point(md, wx, h, tx.c[i])
+    _point_of(qk, X, tx.L, i, sx, n, qi)
+    if given[P_KGRAD] != 0 or given[P_FORCE] != 0 or given[P_MASS] != 0:
+        for a in range(n):
+            vi[a] = 0.0
+        inv_h = 1.0 / h
+        for nu in range(1, sx + 1):
+            cd = tx.Ld[nu, i] * inv_h
+            off = (nu - 1) * n
+            for a in range(n):
+                vi[a] += cd * X[off + a]
+    for ii in range(pidx.shape[0]):
+        l = pidx[ii]
+        for a in range(n):
+            thF[l, a] = 0.0
+    if given[P_PGRAD] != 0:
+        fns[P_PGRAD](ptr(qi), ptr(qi), ptr(prm), ptr(o))
+        for ii in range(pidx.shape[0]):
+            l = pidx[ii]
+            for a in range(n):
+                thF[l, a] -= o[l * n + a]
+    if given[P_KGRAD] != 0:
+        fns[P_KGRAD](ptr(qi), ptr(vi), ptr(prm), ptr(o))
+        for ii in range(pidx.shape[0]):
+            l = pidx[ii]
+            for a in range(n):
+                thF[l, a] += o[l * n + a]
+    if given[P_FORCE] != 0:
+        fns[P_FORCE](ptr(qi), ptr(vi), ptr(prm), ptr(o))
+        for ii in range(pidx.shape[0]):
+            l = pidx[ii]
+            for a in range(n):
+                thF[l, a] += o[l * n + a]
+    if given[P_MASS] != 0:
+        _mass_times(fns[P_MASS], qi, vi, prm, pidx, o, thP, n)
+    else:
+        for ii in range(pidx.shape[0]):
+            l = pidx[ii]
+            for a in range(n):
+                thP[l, a] = 0.0
+
+
+@hot_inline
+def _mass_times(fn, q, v, prm, pidx, o, out, n):
+    """``out[l] = (∂M/∂θ_l)(q) v`` for ``l`` in ``pidx``, by the derivative ``fn``."""
+    fn(ptr(q), ptr(q), ptr(prm), ptr(o))
+    for ii in range(pidx.shape[0]):
+        l = pidx[ii]
+        for a in range(n):
+            acc = 0.0
+            for c in range(n):
+                acc += o[(l * n + a) * n + c] * v[c]
+            out[l, a] = acc
+
+
+@hot_inline
+def _jacobian_by_theta(md, pd, wx, h, tx, qk, j, sx, n, m, o):
+    """``o = ∂G/∂θ`` (k, m, n flat) at the extended step's constraint point ``j``
+    (``j = 0``: ``q_k`` at ``t_k``)."""
+    _at_point(md, wx, h, tx.d[j])
+    _point_of(qk, wx.X, tx.Lc, j, sx, n, wx.qi)
+    for kk in range((md.prm.shape[0] - 1) * m * n):
+        o[kk] = 0.0  # a derivative of a patterned Jacobian may write its non-zeros only
+    pd.fns[P_CJAC](ptr(wx.qi), ptr(wx.qi), ptr(md.prm), ptr(o))
+
+
+@hot_inline
+def _constraint_by_theta(md, pd, wx, h, tx, qk, j, sx, n, o):
+    """``o = ∂g/∂θ`` (k, m flat) at the extended step's constraint point ``j ≥ 1``."""
+    _at_point(md, wx, h, tx.d[j])
+    _point_of(qk, wx.X, tx.Lc, j, sx, n, wx.qi)
+    pd.fns[P_CON](ptr(wx.qi), ptr(wx.qi), ptr(md.prm), ptr(o))
+
+
 @hot
 def _theta_exact(md_, tx_, h, tw_):
-    """``tw.Rth`` (the rows of R, then of P) from the model's derivatives by θ (``tw.pd``)
-    at the extended step's unknowns: at fixed ``X`` the residual is linear in the values
-    of the callbacks at its quadrature and constraint points (:func:`.step.residual`), so
-    ``R_θ`` is the same sums with each value replaced by its derivative by θ — one call of
-    each derivative a point for all ``k`` parameters, no residual evaluated again."""
+    """``tw.Rth`` (the rows of R, then of P) from the model's derivatives by θ at the
+    extended step's unknowns."""
     md, tx, tw = own(md_), own(tx_), own(tw_)
     wx, pd = tw.ws, tw.pd
     n, m, s, N = _step_sizes(wx)
     sx = s + 1
     J = sizes(wx)[4]
-    fns, given, prm = pd.fns, pd.given, md.prm
-    X, qi, vi, qk = wx.X, wx.qi, wx.vi, tw.qk
+    given, X, qk = pd.given, wx.X, tw.qk
     Rk, o, thF, thP, pidx = tw.Rk, tw.tho, tw.thF, tw.thP, tw.pidx
     npar = pidx.shape[0]
     b, L, Ld, Lc = tx.b, tx.L, tx.Ld, tx.Lc
     for ii in range(npar):
         for kk in range(Rk.shape[1]):
             Rk[ii, kk] = 0.0
-    need_v = given[P_KGRAD] != 0 or given[P_FORCE] != 0 or given[P_MASS] != 0
-    if need_v or given[P_PGRAD] != 0:
-        inv_h = 1.0 / h
+    if (given[P_PGRAD] != 0 or given[P_KGRAD] != 0 or given[P_FORCE] != 0
+            or given[P_MASS] != 0):
         for i in range(b.shape[0]):
-            _at_point(md, wx, h, tx.c[i])
-            _point_of(qk, X, L, i, sx, n, qi)
-            if need_v:
-                for a in range(n):
-                    vi[a] = 0.0
-                for nu in range(1, sx + 1):
-                    cd = Ld[nu, i] * inv_h
-                    off = (nu - 1) * n
-                    for a in range(n):
-                        vi[a] += cd * X[off + a]
-            for ii in range(npar):
-                l = pidx[ii]
-                for a in range(n):
-                    thF[l, a] = 0.0
-                    thP[l, a] = 0.0
-            # F = ∂T/∂q − ∇V + F_nc and the momentum M(q) v, each by θ
-            if given[P_PGRAD] != 0:
-                fns[P_PGRAD](ptr(qi), ptr(qi), ptr(prm), ptr(o))
-                for ii in range(npar):
-                    l = pidx[ii]
-                    for a in range(n):
-                        thF[l, a] -= o[l * n + a]
-            if given[P_KGRAD] != 0:
-                fns[P_KGRAD](ptr(qi), ptr(vi), ptr(prm), ptr(o))
-                for ii in range(npar):
-                    l = pidx[ii]
-                    for a in range(n):
-                        thF[l, a] += o[l * n + a]
-            if given[P_FORCE] != 0:
-                fns[P_FORCE](ptr(qi), ptr(vi), ptr(prm), ptr(o))
-                for ii in range(npar):
-                    l = pidx[ii]
-                    for a in range(n):
-                        thF[l, a] += o[l * n + a]
-            if given[P_MASS] != 0:
-                fns[P_MASS](ptr(qi), ptr(qi), ptr(prm), ptr(o))
-                for ii in range(npar):
-                    l = pidx[ii]
-                    for a in range(n):
-                        acc = 0.0
-                        for c in range(n):
-                            acc += o[(l * n + a) * n + c] * vi[c]
-                        thP[l, a] = acc
-            w = h * b[i]
+            _theta_at_quadrature(md, pd, tx, h, wx, qk, i, sx, n, pidx, o, thF, thP)
             for nu in range(sx):
-                cl = w * L[nu, i]
+                cl = h * b[i] * L[nu, i]
                 cd = b[i] * Ld[nu, i]
                 row = nu * n
                 for ii in range(npar):
@@ -516,23 +556,16 @@ def _theta_exact(md_, tx_, h, tw_):
                         Rk[ii, row + a] += cl * thF[l, a] + cd * thP[l, a]
     if m > 0 and given[P_CON] != 0:
         for j in range(1, J + 1):
-            _at_point(md, wx, h, tx.d[j])
-            _point_of(qk, X, Lc, j, sx, n, qi)
-            fns[P_CON](ptr(qi), ptr(qi), ptr(prm), ptr(o))
+            _constraint_by_theta(md, pd, wx, h, tx, qk, j, sx, n, o)
             row = sx * n + (j - 1) * m
             for ii in range(npar):
                 l = pidx[ii]
                 for c in range(m):
                     Rk[ii, row + c] += o[l * m + c]
     if m > 0 and given[P_CJAC] != 0:
-        # −Σ_j ℓ_ν(d_j) (∂G_j/∂θ)ᵀ η_j, with G_0 = G(q_k) at t_k
-        km = (prm.shape[0] - 1) * m * n
+        # −Σ_j ℓ_ν(d_j) (∂G_j/∂θ)ᵀ η_j
         for j in range(J):
-            _at_point(md, wx, h, tx.d[j])
-            _point_of(qk, X, Lc, j, sx, n, qi)
-            for kk in range(km):
-                o[kk] = 0.0  # a derivative of a patterned Jacobian may write its non-zeros only
-            fns[P_CJAC](ptr(qi), ptr(qi), ptr(prm), ptr(o))
+            _jacobian_by_theta(md, pd, wx, h, tx, qk, j, sx, n, m, o)
             col = sx * n + j * m
             for ii in range(npar):
                 l = pidx[ii]
@@ -562,7 +595,6 @@ def _theta_projection(md_, tw_, q1, v1, eta):
     md, tw = own(md_), own(tw_)
     pd, pidx, Pth = tw.pd, tw.pidx, tw.Pth
     n, m = q1.shape[0], eta.shape[0]
-    fns, given, prm = pd.fns, pd.given, md.prm
     o, thP, u, w = tw.tho, tw.thP, tw.u, tw.w
     G, Yg = tw.pt.G, tw.Yg
     npar = pidx.shape[0]
@@ -571,24 +603,7 @@ def _theta_projection(md_, tw_, q1, v1, eta):
             Pth[a, ii] = 0.0
     if m == 0:
         return
-    for ii in range(npar):
-        l = pidx[ii]
-        for a in range(n):
-            thP[l, a] = 0.0
-    if given[P_MASS] != 0:
-        fns[P_MASS](ptr(q1), ptr(q1), ptr(prm), ptr(o))
-        for ii in range(npar):
-            l = pidx[ii]
-            for a in range(n):
-                acc = 0.0
-                for c in range(n):
-                    acc += o[(l * n + a) * n + c] * v1[c]
-                thP[l, a] = acc
-    km = (prm.shape[0] - 1) * m * n
-    for kk in range(km):
-        o[kk] = 0.0
-    if given[P_CJAC] != 0:
-        fns[P_CJAC](ptr(q1), ptr(q1), ptr(prm), ptr(o))
+    _projection_terms(md, pd, q1, v1, pidx, o, thP, n, m)
     for ii in range(npar):
         l = pidx[ii]
         base = l * m * n
@@ -608,6 +623,109 @@ def _theta_projection(md_, tw_, q1, v1, eta):
             for c in range(m):
                 acc -= G[c, a] * w[c]
             Pth[a, ii] = acc
+
+
+@hot_inline
+def _projection_terms(md, pd, q1, v1, pidx, o, thP, n, m):
+    """At ``q_{k+1}``: ``o = ∂G/∂θ`` (k, m, n flat; zero where the model declares none)
+    and ``thP[l] = (∂M/∂θ_l) v_{k+1}`` (zero for a constant mass)."""
+    for ii in range(pidx.shape[0]):
+        for a in range(n):
+            thP[pidx[ii], a] = 0.0
+    if pd.given[P_MASS] != 0:
+        _mass_times(pd.fns[P_MASS], q1, v1, md.prm, pidx, o, thP, n)
+    for kk in range((md.prm.shape[0] - 1) * m * n):
+        o[kk] = 0.0
+    if pd.given[P_CJAC] != 0:
+        pd.fns[P_CJAC](ptr(q1), ptr(q1), ptr(md.prm), ptr(o))
+
+
+@hot
+def _theta_pull(md_, tx_, h, tw_, q1, v1, eta, yb, zb, wb, u, lth):
+    """``lth += μᵀ R_θ`` and the projection's part, for the cotangent of :func:`pull`: ``yb``
+    on the step's rows, ``zb`` on the rows of ``P`` (and the projection's ``λ_p + u``),
+    ``wb`` = ``−S⁻ᵀ G λ_p``, ``u = M⁻ᵀ Gᵀ wb`` — contracted point by point with the
+    model's derivatives by θ, never forming ``R_θ``:
+
+        λ_pᵀ p_θ = −ηᵀ G_θ (λ_p + u) + wbᵀ G_θ v − uᵀ M_θ v."""
+    md, tx, tw = own(md_), own(tx_), own(tw_)
+    wx, pd = tw.ws, tw.pd
+    n, m, s, N = _step_sizes(wx)
+    sx = s + 1
+    J = sizes(wx)[4]
+    given, X, qk = pd.given, wx.X, tw.qk
+    o, thF, thP, pidx, mu, cF, cP = tw.tho, tw.thF, tw.thP, tw.pidx, tw.mu, tw.z, tw.zb
+    npar = pidx.shape[0]
+    b, L, Ld, Lc = tx.b, tx.L, tx.Ld, tx.Lc
+    for kk in range(N):  # with P's rows, every row of the extended step
+        mu[tw.rows[kk]] = yb[kk]
+    for a in range(n):
+        mu[s * n + a] = zb[a]
+    if m > 0 and (given[P_CJAC] != 0 or given[P_MASS] != 0):  # the projection, at q_{k+1}
+        if md.flags[F_TIME] != 0:
+            md.prm[md.flags[F_TSLOT]] = wx.time[1]
+        _projection_terms(md, pd, q1, v1, pidx, o, thP, n, m)
+        for ii in range(npar):
+            l = pidx[ii]
+            base = l * m * n
+            acc = 0.0
+            for c in range(m):
+                for a in range(n):
+                    g = o[base + c * n + a]
+                    acc += g * (wb[c] * v1[a] - eta[c] * zb[a])
+            for a in range(n):
+                acc -= u[a] * thP[l, a]
+            lth[ii] += acc
+    # zb is free from here: the weights of the quadrature points' values
+    if (given[P_PGRAD] != 0 or given[P_KGRAD] != 0 or given[P_FORCE] != 0
+            or given[P_MASS] != 0):
+        for i in range(b.shape[0]):
+            for a in range(n):
+                cF[a] = 0.0
+                cP[a] = 0.0
+            for nu in range(sx):
+                cl = h * b[i] * L[nu, i]
+                cd = b[i] * Ld[nu, i]
+                for a in range(n):
+                    cF[a] += cl * mu[nu * n + a]
+                    cP[a] += cd * mu[nu * n + a]
+            _theta_at_quadrature(md, pd, tx, h, wx, qk, i, sx, n, pidx, o, thF, thP)
+            for ii in range(npar):
+                l = pidx[ii]
+                acc = 0.0
+                for a in range(n):
+                    acc += cF[a] * thF[l, a]
+                if given[P_MASS] != 0:
+                    for a in range(n):
+                        acc += cP[a] * thP[l, a]
+                lth[ii] += acc
+    if m > 0 and given[P_CON] != 0:
+        for j in range(1, J + 1):
+            _constraint_by_theta(md, pd, wx, h, tx, qk, j, sx, n, o)
+            row = sx * n + (j - 1) * m
+            for ii in range(npar):
+                l = pidx[ii]
+                acc = 0.0
+                for c in range(m):
+                    acc += mu[row + c] * o[l * m + c]
+                lth[ii] += acc
+    if m > 0 and given[P_CJAC] != 0:
+        for j in range(J):
+            for a in range(n):
+                acc = 0.0
+                for nu in range(sx):
+                    acc += Lc[nu, j] * mu[nu * n + a]
+                cF[a] = acc
+            _jacobian_by_theta(md, pd, wx, h, tx, qk, j, sx, n, m, o)
+            col = sx * n + j * m
+            for ii in range(npar):
+                base = pidx[ii] * m * n
+                acc = 0.0
+                for c in range(m):
+                    e = X[col + c]
+                    for a in range(n):
+                        acc += o[base + c * n + a] * e * cF[a]
+                lth[ii] -= acc
 
 
 @hot
@@ -678,9 +796,13 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
     elif lu_factor(K, tw.piv, N) != 0:
         return SINGULAR
     exact = _exact_in_theta(md, tw)
+    # the forward directions' columns of R_θ; the adjoint (no directions) contracts them in
+    # pull (_theta_pull)
+    columns = tw.pidx.shape[0] > 0 and tw.dq.shape[0] > 0
     if tw.pidx.shape[0] > 0:
         if exact:
-            _theta_exact(md_, tx_, h, tw_)
+            if columns:
+                _theta_exact(md_, tx_, h, tw_)
         else:
             st = _theta_differences(md_, tx_, h, q1, P, tw_)
             if st != OK:
@@ -691,7 +813,7 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
     if m > 0 and pw.sp.gsta.shape[0] > 0:
         _grouped_hv(wx, md, q1, v1, pw, n, m)
     st = _factor_projection(md, tw, wx, pw, sp, n, m)
-    if st == OK and exact and tw.pidx.shape[0] > 0:
+    if st == OK and exact and columns:
         _theta_projection(md_, tw_, q1, v1, eta)
     return st
 
@@ -1022,16 +1144,19 @@ def push(tw_):
 
 
 @hot
-def pull(tw_, lq, lp, lth):
+def pull(md_, tx_, h, tw_, q1, v1, eta, lq, lp, lth):
     """The transpose of :func:`push`: the cotangent ``(lq, lp)`` at ``t_{k+1}`` becomes the
     one at ``t_k`` (in place), and ``lth`` (np,) gains the parameters' part
-    (``lth += (∂x_{k+1}/∂θ)ᵀ λ_{k+1}``). One transposed solve with ``K``. Returns a status
-    code."""
+    (``lth += (∂x_{k+1}/∂θ)ᵀ λ_{k+1}``): from the model's derivatives by θ
+    (:func:`_theta_pull`, at the step :func:`linearise` was given: ``q1``, ``v1``, ``eta``),
+    or from the differences ``R_θ``, ``P_θ`` that :func:`linearise` made. One transposed
+    solve with ``K``. Returns a status code."""
     tw = own(tw_)
     pw = tw.pt
     n, m, s, N = _step_sizes(tw.ws)
     sn = s * n
-    npar = tw.pidx.shape[0]
+    exact = _exact_in_theta(own(md_), tw)
+    npar = 0 if exact else tw.pidx.shape[0]  # the columns of R_θ, P_θ (differences)
     Tq, Rth, PX = tw.Tq, tw.Rth, tw.PX
     G, He, Hv, Cq, Yg = pw.G, pw.He, pw.Hv, pw.Cq, tw.Yg
     zb, u, wb, yb, dq1b = tw.zb, tw.u, tw.wb, tw.yb, tw.z
@@ -1095,6 +1220,8 @@ def pull(tw_, lq, lp, lth):
             for i in range(N):
                 acc += Tq[i, b] * yb[i]
             lq[b] = acc
+    if exact and tw.pidx.shape[0] > 0:
+        _theta_pull(md_, tx_, h, tw_, q1, v1, eta, yb, zb, wb, u, lth)
     for a in range(n):
         lp[a] = yb[a]
     for l in range(npar):

@@ -446,10 +446,16 @@ def _point_of(qk, X, Lt, i, sx, n, out):
 # ``k`` parameters, and no residual is evaluated again. The forward directions need the
 # columns of ``R_θ`` (:func:`_theta_exact`); the adjoint only ``μᵀ R_θ`` for its cotangent
 # ``μ`` (:func:`_theta_pull`), which costs O(k n) a point instead of O(k n s).
-@hot_inline
-def _theta_at_quadrature(md, pd, tx, h, wx, qk, i, sx, n, pidx, o, thF, thP):
-    """At the extended step's quadrature point ``i``: ``thF[l] = ∂F/∂θ_l`` with
-    ``F = ∂T/∂q − ∇V + F_nc``, and ``thP[l] = (∂M/∂θ_l) v``, for ``l`` in ``pidx``."""
+# The helpers below take the records by pointer and are compiled once for both paths (inlined,
+# each path typed them again: 7 s more of compiling).
+@hot
+def _theta_at_quadrature(md_, tx_, h, tw_, i):
+    """At the extended step's quadrature point ``i``: ``tw.thF[l] = ∂F/∂θ_l`` with
+    ``F = ∂T/∂q − ∇V + F_nc``, and ``tw.thP[l] = (∂M/∂θ_l) v``, for ``l`` in ``tw.pidx``."""
+    md, tx, tw = own(md_), own(tx_), own(tw_)
+    wx, pd, qk, pidx, o, thF, thP = tw.ws, tw.pd, tw.qk, tw.pidx, tw.tho, tw.thF, tw.thP
+    n, _, s, _ = _step_sizes(wx)
+    sx = s + 1
     fns, given, prm = pd.fns, pd.given, md.prm
     X, qi, vi = wx.X, wx.qi, wx.vi
     _at_point(md, wx, h, tx.c[i])
@@ -507,10 +513,14 @@ def _mass_times(fn, q, v, prm, pidx, o, out, n):
             out[l, a] = acc
 
 
-@hot_inline
-def _jacobian_by_theta(md, pd, wx, h, tx, qk, j, sx, n, m, o):
-    """``o = ∂G/∂θ`` (k, m, n flat) at the extended step's constraint point ``j``
+@hot
+def _jacobian_by_theta(md_, tx_, h, tw_, j):
+    """``tw.tho = ∂G/∂θ`` (k, m, n flat) at the extended step's constraint point ``j``
     (``j = 0``: ``q_k`` at ``t_k``)."""
+    md, tx, tw = own(md_), own(tx_), own(tw_)
+    wx, pd, qk, o = tw.ws, tw.pd, tw.qk, tw.tho
+    n, m, s, _ = _step_sizes(wx)
+    sx = s + 1
     _at_point(md, wx, h, tx.d[j])
     _point_of(qk, wx.X, tx.Lc, j, sx, n, wx.qi)
     for kk in range((md.prm.shape[0] - 1) * m * n):
@@ -518,9 +528,13 @@ def _jacobian_by_theta(md, pd, wx, h, tx, qk, j, sx, n, m, o):
     pd.fns[P_CJAC](ptr(wx.qi), ptr(wx.qi), ptr(md.prm), ptr(o))
 
 
-@hot_inline
-def _constraint_by_theta(md, pd, wx, h, tx, qk, j, sx, n, o):
-    """``o = ∂g/∂θ`` (k, m flat) at the extended step's constraint point ``j ≥ 1``."""
+@hot
+def _constraint_by_theta(md_, tx_, h, tw_, j):
+    """``tw.tho = ∂g/∂θ`` (k, m flat) at the extended step's constraint point ``j ≥ 1``."""
+    md, tx, tw = own(md_), own(tx_), own(tw_)
+    wx, pd, qk, o = tw.ws, tw.pd, tw.qk, tw.tho
+    n, _, s, _ = _step_sizes(wx)
+    sx = s + 1
     _at_point(md, wx, h, tx.d[j])
     _point_of(qk, wx.X, tx.Lc, j, sx, n, wx.qi)
     pd.fns[P_CON](ptr(wx.qi), ptr(wx.qi), ptr(md.prm), ptr(o))
@@ -545,7 +559,7 @@ def _theta_exact(md_, tx_, h, tw_):
     if (given[P_PGRAD] != 0 or given[P_KGRAD] != 0 or given[P_FORCE] != 0
             or given[P_MASS] != 0):
         for i in range(b.shape[0]):
-            _theta_at_quadrature(md, pd, tx, h, wx, qk, i, sx, n, pidx, o, thF, thP)
+            _theta_at_quadrature(md_, tx_, h, tw_, i)
             for nu in range(sx):
                 cl = h * b[i] * L[nu, i]
                 cd = b[i] * Ld[nu, i]
@@ -556,7 +570,7 @@ def _theta_exact(md_, tx_, h, tw_):
                         Rk[ii, row + a] += cl * thF[l, a] + cd * thP[l, a]
     if m > 0 and given[P_CON] != 0:
         for j in range(1, J + 1):
-            _constraint_by_theta(md, pd, wx, h, tx, qk, j, sx, n, o)
+            _constraint_by_theta(md_, tx_, h, tw_, j)
             row = sx * n + (j - 1) * m
             for ii in range(npar):
                 l = pidx[ii]
@@ -565,7 +579,7 @@ def _theta_exact(md_, tx_, h, tw_):
     if m > 0 and given[P_CJAC] != 0:
         # −Σ_j ℓ_ν(d_j) (∂G_j/∂θ)ᵀ η_j
         for j in range(J):
-            _jacobian_by_theta(md, pd, wx, h, tx, qk, j, sx, n, m, o)
+            _jacobian_by_theta(md_, tx_, h, tw_, j)
             col = sx * n + j * m
             for ii in range(npar):
                 l = pidx[ii]
@@ -603,7 +617,7 @@ def _theta_projection(md_, tw_, q1, v1, eta):
             Pth[a, ii] = 0.0
     if m == 0:
         return
-    _projection_terms(md, pd, q1, v1, pidx, o, thP, n, m)
+    _projection_terms(md_, tw_, q1, v1)
     for ii in range(npar):
         l = pidx[ii]
         base = l * m * n
@@ -625,10 +639,13 @@ def _theta_projection(md_, tw_, q1, v1, eta):
             Pth[a, ii] = acc
 
 
-@hot_inline
-def _projection_terms(md, pd, q1, v1, pidx, o, thP, n, m):
-    """At ``q_{k+1}``: ``o = ∂G/∂θ`` (k, m, n flat; zero where the model declares none)
-    and ``thP[l] = (∂M/∂θ_l) v_{k+1}`` (zero for a constant mass)."""
+@hot
+def _projection_terms(md_, tw_, q1, v1):
+    """At ``q_{k+1}``: ``tw.tho = ∂G/∂θ`` (k, m, n flat; zero where the model declares
+    none) and ``tw.thP[l] = (∂M/∂θ_l) v_{k+1}`` (zero for a constant mass)."""
+    md, tw = own(md_), own(tw_)
+    pd, pidx, o, thP = tw.pd, tw.pidx, tw.tho, tw.thP
+    n, m = q1.shape[0], sizes(tw.ws)[1]
     for ii in range(pidx.shape[0]):
         for a in range(n):
             thP[pidx[ii], a] = 0.0
@@ -664,7 +681,7 @@ def _theta_pull(md_, tx_, h, tw_, q1, v1, eta, yb, zb, wb, u, lth):
     if m > 0 and (given[P_CJAC] != 0 or given[P_MASS] != 0):  # the projection, at q_{k+1}
         if md.flags[F_TIME] != 0:
             md.prm[md.flags[F_TSLOT]] = wx.time[1]
-        _projection_terms(md, pd, q1, v1, pidx, o, thP, n, m)
+        _projection_terms(md_, tw_, q1, v1)
         for ii in range(npar):
             l = pidx[ii]
             base = l * m * n
@@ -689,7 +706,7 @@ def _theta_pull(md_, tx_, h, tw_, q1, v1, eta, yb, zb, wb, u, lth):
                 for a in range(n):
                     cF[a] += cl * mu[nu * n + a]
                     cP[a] += cd * mu[nu * n + a]
-            _theta_at_quadrature(md, pd, tx, h, wx, qk, i, sx, n, pidx, o, thF, thP)
+            _theta_at_quadrature(md_, tx_, h, tw_, i)
             for ii in range(npar):
                 l = pidx[ii]
                 acc = 0.0
@@ -701,7 +718,7 @@ def _theta_pull(md_, tx_, h, tw_, q1, v1, eta, yb, zb, wb, u, lth):
                 lth[ii] += acc
     if m > 0 and given[P_CON] != 0:
         for j in range(1, J + 1):
-            _constraint_by_theta(md, pd, wx, h, tx, qk, j, sx, n, o)
+            _constraint_by_theta(md_, tx_, h, tw_, j)
             row = sx * n + (j - 1) * m
             for ii in range(npar):
                 l = pidx[ii]
@@ -716,7 +733,7 @@ def _theta_pull(md_, tx_, h, tw_, q1, v1, eta, yb, zb, wb, u, lth):
                 for nu in range(sx):
                     acc += Lc[nu, j] * mu[nu * n + a]
                 cF[a] = acc
-            _jacobian_by_theta(md, pd, wx, h, tx, qk, j, sx, n, m, o)
+            _jacobian_by_theta(md_, tx_, h, tw_, j)
             col = sx * n + j * m
             for ii in range(npar):
                 base = pidx[ii] * m * n

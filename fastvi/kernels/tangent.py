@@ -474,23 +474,11 @@ def _theta_at_quadrature(md_, tx_, h, tw_, i):
         for a in range(n):
             thF[l, a] = 0.0
     if given[P_PGRAD] != 0:
-        fns[P_PGRAD](ptr(qi), ptr(qi), ptr(prm), ptr(o))
-        for ii in range(pidx.shape[0]):
-            l = pidx[ii]
-            for a in range(n):
-                thF[l, a] -= o[l * n + a]
+        _add_by_theta(fns[P_PGRAD], qi, qi, prm, pidx, o, thF, n, -1.0)
     if given[P_KGRAD] != 0:
-        fns[P_KGRAD](ptr(qi), ptr(vi), ptr(prm), ptr(o))
-        for ii in range(pidx.shape[0]):
-            l = pidx[ii]
-            for a in range(n):
-                thF[l, a] += o[l * n + a]
+        _add_by_theta(fns[P_KGRAD], qi, vi, prm, pidx, o, thF, n, 1.0)
     if given[P_FORCE] != 0:
-        fns[P_FORCE](ptr(qi), ptr(vi), ptr(prm), ptr(o))
-        for ii in range(pidx.shape[0]):
-            l = pidx[ii]
-            for a in range(n):
-                thF[l, a] += o[l * n + a]
+        _add_by_theta(fns[P_FORCE], qi, vi, prm, pidx, o, thF, n, 1.0)
     if given[P_MASS] != 0:
         _mass_times(fns[P_MASS], qi, vi, prm, pidx, o, thP, n)
     else:
@@ -498,6 +486,17 @@ def _theta_at_quadrature(md_, tx_, h, tw_, i):
             l = pidx[ii]
             for a in range(n):
                 thP[l, a] = 0.0
+
+
+@hot_inline
+def _add_by_theta(fn, q, v, prm, pidx, o, out, n, sign):
+    """``out[l] += sign · ∂f/∂θ_l`` for ``l`` in ``pidx``, ``f`` an (n,) callback whose
+    derivative by θ is ``fn``."""
+    fn(ptr(q), ptr(v), ptr(prm), ptr(o))
+    for ii in range(pidx.shape[0]):
+        l = pidx[ii]
+        for a in range(n):
+            out[l, a] += sign * o[l * n + a]
 
 
 @hot_inline
@@ -514,42 +513,30 @@ def _mass_times(fn, q, v, prm, pidx, o, out, n):
 
 
 @hot
-def _jacobian_by_theta(md_, tx_, h, tw_, j):
-    """``tw.tho = ∂G/∂θ`` (k, m, n flat) at the extended step's constraint point ``j``
-    (``j = 0``: ``q_k`` at ``t_k``)."""
+def _at_constraint_point(md_, tx_, h, tw_, j, slot):
+    """``tw.tho`` = the derivative by θ ``slot`` (``P_CON``: ``∂g/∂θ``, k × m; ``P_CJAC``:
+    ``∂G/∂θ``, k × m × n, flat) at the extended step's constraint point ``j`` (``j = 0``:
+    ``q_k`` at ``t_k``)."""
     md, tx, tw = own(md_), own(tx_), own(tw_)
-    wx, pd, qk, o = tw.ws, tw.pd, tw.qk, tw.tho
+    wx, o = tw.ws, tw.tho
     n, m, s, _ = _step_sizes(wx)
-    sx = s + 1
     _at_point(md, wx, h, tx.d[j])
-    _point_of(qk, wx.X, tx.Lc, j, sx, n, wx.qi)
+    _point_of(tw.qk, wx.X, tx.Lc, j, s + 1, n, wx.qi)
     for kk in range((md.prm.shape[0] - 1) * m * n):
         o[kk] = 0.0  # a derivative of a patterned Jacobian may write its non-zeros only
-    pd.fns[P_CJAC](ptr(wx.qi), ptr(wx.qi), ptr(md.prm), ptr(o))
-
-
-@hot
-def _constraint_by_theta(md_, tx_, h, tw_, j):
-    """``tw.tho = ∂g/∂θ`` (k, m flat) at the extended step's constraint point ``j ≥ 1``."""
-    md, tx, tw = own(md_), own(tx_), own(tw_)
-    wx, pd, qk, o = tw.ws, tw.pd, tw.qk, tw.tho
-    n, _, s, _ = _step_sizes(wx)
-    sx = s + 1
-    _at_point(md, wx, h, tx.d[j])
-    _point_of(qk, wx.X, tx.Lc, j, sx, n, wx.qi)
-    pd.fns[P_CON](ptr(wx.qi), ptr(wx.qi), ptr(md.prm), ptr(o))
+    tw.pd.fns[slot](ptr(wx.qi), ptr(wx.qi), ptr(md.prm), ptr(o))
 
 
 @hot
 def _theta_exact(md_, tx_, h, tw_):
     """``tw.Rth`` (the rows of R, then of P) from the model's derivatives by θ at the
     extended step's unknowns."""
-    md, tx, tw = own(md_), own(tx_), own(tw_)
+    tx, tw = own(tx_), own(tw_)
     wx, pd = tw.ws, tw.pd
     n, m, s, N = _step_sizes(wx)
     sx = s + 1
     J = sizes(wx)[4]
-    given, X, qk = pd.given, wx.X, tw.qk
+    given, X = pd.given, wx.X
     Rk, o, thF, thP, pidx = tw.Rk, tw.tho, tw.thF, tw.thP, tw.pidx
     npar = pidx.shape[0]
     b, L, Ld, Lc = tx.b, tx.L, tx.Ld, tx.Lc
@@ -570,7 +557,7 @@ def _theta_exact(md_, tx_, h, tw_):
                         Rk[ii, row + a] += cl * thF[l, a] + cd * thP[l, a]
     if m > 0 and given[P_CON] != 0:
         for j in range(1, J + 1):
-            _constraint_by_theta(md_, tx_, h, tw_, j)
+            _at_constraint_point(md_, tx_, h, tw_, j, P_CON)
             row = sx * n + (j - 1) * m
             for ii in range(npar):
                 l = pidx[ii]
@@ -579,7 +566,7 @@ def _theta_exact(md_, tx_, h, tw_):
     if m > 0 and given[P_CJAC] != 0:
         # −Σ_j ℓ_ν(d_j) (∂G_j/∂θ)ᵀ η_j
         for j in range(J):
-            _jacobian_by_theta(md_, tx_, h, tw_, j)
+            _at_constraint_point(md_, tx_, h, tw_, j, P_CJAC)
             col = sx * n + j * m
             for ii in range(npar):
                 l = pidx[ii]
@@ -606,8 +593,8 @@ def _theta_projection(md_, tw_, q1, v1, eta):
     with ``G``, ``Y = G M⁻¹`` and the factored ``S = G M⁻¹ Gᵀ`` of :func:`linearise`:
 
         S δη = G_θ v − Y M_θ v − Y G_θᵀ η,     p_θ = −G_θᵀ η − Gᵀ δη."""
-    md, tw = own(md_), own(tw_)
-    pd, pidx, Pth = tw.pd, tw.pidx, tw.Pth
+    tw = own(tw_)
+    pidx, Pth = tw.pidx, tw.Pth
     n, m = q1.shape[0], eta.shape[0]
     o, thP, u, w = tw.tho, tw.thP, tw.u, tw.w
     G, Yg = tw.pt.G, tw.Yg
@@ -670,7 +657,7 @@ def _theta_pull(md_, tx_, h, tw_, q1, v1, eta, yb, zb, wb, u, lth):
     n, m, s, N = _step_sizes(wx)
     sx = s + 1
     J = sizes(wx)[4]
-    given, X, qk = pd.given, wx.X, tw.qk
+    given, X = pd.given, wx.X
     o, thF, thP, pidx, mu, cF, cP = tw.tho, tw.thF, tw.thP, tw.pidx, tw.mu, tw.z, tw.zb
     npar = pidx.shape[0]
     b, L, Ld, Lc = tx.b, tx.L, tx.Ld, tx.Lc
@@ -718,7 +705,7 @@ def _theta_pull(md_, tx_, h, tw_, q1, v1, eta, yb, zb, wb, u, lth):
                 lth[ii] += acc
     if m > 0 and given[P_CON] != 0:
         for j in range(1, J + 1):
-            _constraint_by_theta(md_, tx_, h, tw_, j)
+            _at_constraint_point(md_, tx_, h, tw_, j, P_CON)
             row = sx * n + (j - 1) * m
             for ii in range(npar):
                 l = pidx[ii]
@@ -733,7 +720,7 @@ def _theta_pull(md_, tx_, h, tw_, q1, v1, eta, yb, zb, wb, u, lth):
                 for nu in range(sx):
                     acc += Lc[nu, j] * mu[nu * n + a]
                 cF[a] = acc
-            _jacobian_by_theta(md_, tx_, h, tw_, j)
+            _at_constraint_point(md_, tx_, h, tw_, j, P_CJAC)
             col = sx * n + j * m
             for ii in range(npar):
                 base = pidx[ii] * m * n

@@ -224,7 +224,6 @@ class _Writer:
                 lines += [f"    {t} = {targets[0]}" for t in targets[1:]]  # symmetric partner
         self.blocks.append("\n".join(lines))
 
-
     def by_params(self, slot: str, args: str, outputs, shape, psyms):
         """The derivative by each parameter of the callback ``slot`` whose entries are
         ``outputs`` (``(targets, expr)``, ``out`` of ``shape``): a function

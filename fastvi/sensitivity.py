@@ -213,8 +213,9 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     -----
     Cost: one linearisation a step (an assembly of the exact Newton matrix, about twice the
     size of the step's, an LU factorisation, the second derivatives of the projection) and
-    one solve per direction; each parameter moved adds four residual evaluations a step
-    (its five-point difference). See ``docs/sensitivities.md`` for measured costs.
+    one solve per direction; each parameter moved adds one direction and, for a model
+    without derivatives by θ (``Model(param_derivatives=...)``), four residual evaluations a
+    step (its five-point difference). See ``docs/sensitivities.md`` for measured costs.
 
     References
     ----------

@@ -26,9 +26,14 @@ quadrature and constraint point and leaves the velocities alone). The one term t
 constraint point is ``q_k`` itself, fixed within a step), is added to that column here.
 ``K`` is gathered from the rest: the step's exact Newton matrix, assembled by the step's
 own code with its second derivatives (the callbacks, or the same finite differences as the
-full Newton). Derivatives by the parameters are five-point differences in ``θ`` (the
-kernels' rule for differences in time, ``layout.FD_T``) of the extended residual and of
-the projection.
+full Newton). Derivatives by the parameters come from the model's own derivatives of its
+callbacks by ``θ`` where it gives them (``Model(param_derivatives=...)``,
+:class:`.layout.ParamData`): at fixed ``X`` the residual is linear in the callbacks'
+values at its points, so ``R_θ`` is the same sums of their derivatives
+(:func:`_theta_exact`, and :func:`_theta_pull` for the adjoint, which contracts them with
+its cotangent instead). Otherwise they are five-point differences in ``θ`` (the kernels'
+rule for differences in time, ``layout.FD_T``) of the extended residual and of the
+projection (:func:`_theta_differences`).
 
 :func:`linearise` computes and factors these blocks once a step; :func:`push` applies the
 step's derivative to any number of directions (one solve each), :func:`pull` its transpose

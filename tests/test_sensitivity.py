@@ -309,6 +309,33 @@ def test_errors_name_what_is_not_defined(double_pendulum, dp_start):
                        n_steps=5)
 
 
+def nan_potential_grad_by_params(q, p, out):
+    out[:, :] = np.nan
+
+
+def circle_g_by_params(q, p, out):
+    out[:, :] = 0.0
+    out[2, 0] = -p[2]
+
+
+def test_a_non_finite_derivative_by_theta_raises_never_a_nan_gradient():
+    model = fastvi.Model(2, 1, params=(9.81, 3.0, 1.2), mass=[1.0, 1.0], potential=circle_V,
+                         potential_grad=circle_dV, constraint=circle_g,
+                         constraint_jacobian=circle_G, name="circle-nan",
+                         param_derivatives=dict(potential_grad=nan_potential_grad_by_params,
+                                                constraint=circle_g_by_params,
+                                                constraint_jacobian=0))
+    a = 1.2 * np.array([np.sin(0.7), -np.cos(0.7)])
+    q0, v0 = a, np.array([-a[1], a[0]])
+    run = dict(h=0.05, n_steps=4, check=False)  # the model check would name it first
+    with pytest.raises(fastvi.IntegrationError, match="sensitivity is not defined"):
+        fastvi.sensitivity(model, q0, v0, wrt=("params",), **run)
+    with pytest.raises(fastvi.IntegrationError):
+        fastvi.adjoint(model, q0, v0, lambda r: (np.ones((len(r.t), 2)), None), **run)
+    with pytest.raises(fastvi.check.ModelCheckError, match="potential_grad/θ"):
+        model.check(q0, v0)
+
+
 def test_a_plan_kept_dense_gives_the_dense_linearised_step():
     # a chain of 4 links with P3L-Q4G: its plan is analysed (patterns detected) but keeps
     # every solve dense, so its workspace is not structured and the linearised step must

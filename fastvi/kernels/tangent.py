@@ -1241,6 +1241,8 @@ def pull(md_, tx_, h, tw_, q1, v1, eta, lq, lp, lth):
     bad = False
     for a in range(n):
         bad = bad or not (np.isfinite(lq[a]) and np.isfinite(lp[a]))
+    for l in range(tw.pidx.shape[0]):  # a model's derivative by θ may be what is not finite
+        bad = bad or not np.isfinite(lth[l])
     return NONFINITE if bad else OK
 
 

@@ -8,7 +8,10 @@ saved, everything compiled first, the stages sized for the model included) from
 * ``sensitivity`` along 1 direction (q0[0]) and the 2n = 8 directions of (q0, v0);
 * ``adjoint``: the gradient by q0 and v0 of a cost of the final state, and by q0, v0 and
   the k = 6 parameters: with the scene's derivatives by θ, and with the same model given
-  none (the step differenced in each θ_l, ``tests/models.py``).
+  none (the step differenced in each θ_l, ``tests/models.py``);
+* the derivatives with default settings use the linearised step compiled for the model's
+  sizes (compiled first, with ``specialize=True``); the same with ``specialize=False``, the
+  generic kernels. The two give the same numbers bit for bit (asserted before timing).
 
 The medians per step and their ratios to the plain run are printed at the end. Run with
 ``make bench`` or ``.venv/bin/python -m pytest bench/test_bench_sensitivity.py
@@ -56,6 +59,10 @@ def _cases():
                                                         **run),
         "adjoint, + 6 params": lambda: fastvi.adjoint(dp, q0, v0, final_cost, **run),
         "adjoint, + 6 params (diff.)": lambda: fastvi.adjoint(twin, q0, v0, final_cost, **run),
+        "sensitivity, 1 direction, generic": lambda: fastvi.sensitivity(
+            dp, q0, v0, wrt=one, specialize=False, **run),
+        "adjoint, + 6 params, generic": lambda: fastvi.adjoint(
+            dp, q0, v0, final_cost, specialize=False, **run),
     }
 
 
@@ -66,8 +73,15 @@ CASES = list(_cases())
 def _compiled():
     dp, q0, v0 = _model()
     fastvi.integrate(dp, q0, v0, h=0.01, n_steps=2, specialize=True)  # the sized stages too
-    for call in _cases().values():
-        call()
+    # the sized linearised steps, which the default then takes
+    fastvi.sensitivity(dp, q0, v0, h=0.01, n_steps=2, specialize=True)
+    fastvi.adjoint(dp, q0, v0, lambda r: (np.ones_like(r.q), None), h=0.01, n_steps=2,
+                   specialize=True)
+    out = {label: call() for label, call in _cases().items()}
+    assert np.array_equal(out["sensitivity, 1 direction"].dq,
+                          out["sensitivity, 1 direction, generic"].dq)
+    assert np.array_equal(out["adjoint, + 6 params"].gradient,
+                          out["adjoint, + 6 params, generic"].gradient)
 
 
 @pytest.mark.parametrize("label", CASES)
@@ -88,6 +102,6 @@ def _report(print_uncaptured):
     def show(write):
         write.sep("derivatives of the discrete flow (damped double pendulum, P2L-Q3G, medians)")
         for label, t in _times.items():
-            write(f"{label:<30} {t:6.2f} µs a step   {t / plain:5.2f} × integrate")
+            write(f"{label:<36} {t:6.2f} µs a step   {t / plain:5.2f} × integrate")
 
     print_uncaptured(show)

@@ -65,6 +65,9 @@ class Run:
     monitor: bool
     #: what the linearised step uses of the model's structure (large mechanisms)
     sparsity: object
+    #: whether the linearised step is compiled for the model's sizes (``structure.sizing``:
+    #: True, "cached" or False)
+    sized: object
 
 
 #: options of :func:`fastvi.integrate` that the derivatives of the discrete flow do not take,
@@ -80,7 +83,6 @@ _NOT_DIFFERENTIATED = {
     "dense_output": "derivatives are given at the saved steps; save more often with "
                     "`save_every`",
     "t_eval": "derivatives are given at the saved steps; choose them with `save_every`",
-    "specialize": "the derivatives run with the generic compiled stages",
     "progress": "it shows no progress yet (`fastvi.sensitivity` does); split a long run and "
                 "chain the derivatives",
 }
@@ -97,7 +99,7 @@ def refuse(options: dict, what: str) -> None:
 
 
 def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every, tol, max_iter,
-            newton, params, solver, check, monitor, what) -> Run:
+            newton, params, solver, check, monitor, what, specialize=None) -> Run:
     """Validate the arguments of a run of the linearised flow (as :func:`fastvi.integrate`
     does, and refusing what ``what`` — the caller's name — does not differentiate) and
     allocate its kernels' arguments."""
@@ -136,10 +138,13 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
     patterns = structure.plan(model, meth, prm, solver).patterns if ws.structured else {}
     sparsity = make_sparsity(step_band(ws), structure.linearisation_patterns(
         patterns["G"], patterns["newton"], meth.s, meth.J) if patterns else None)
+    specialize = valid.optional_flag(specialize, "specialize")
     # the stages compiled for the model's sizes when integrate has compiled them: the same
     # steps bit for bit, at half the cost
     stepk, stages = step_kernel(md, tabs, opts, ws, full=True,
-                                sized=structure.sizing(None, n, total))
+                                sized=structure.sizing(specialize, n, total))
+    sized = False if ws.structured else structure.sizing(specialize, n, total,
+                                                         structure.SIZED_TANGENT_MIN_STEPS)
     compile_time = time.perf_counter() - compile_time
     state = np.zeros((6, n))
     state[0], state[1], state[2] = q0, model.mass_matrix(q0, prm) @ v0, v0
@@ -149,7 +154,7 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
                extended_tables(tabs, meth.s, meth.J), ws, opts,
                events_.prepare(model, meth, None, 0), stepk, stages, state, info,
                np.zeros(lay.STEP_OUT_SIZE), smp, K, started, compile_time, check_time,
-               valid.flag(monitor, "monitor"), sparsity)
+               valid.flag(monitor, "monitor"), sparsity, sized)
 
 
 def tangent_work(run: Run, d: int, pidx):

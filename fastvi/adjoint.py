@@ -19,7 +19,7 @@ from . import _validate as valid
 from ._launch import Launcher
 from ._numba import quiet
 from .kernels.adjoint import (make_checkpoints, make_records, recorder, run_adjoint,
-                              run_checkpointed)
+                              run_checkpointed, sweeper)
 from .kernels.tangent import point_terms
 from .results import (Result, ResultBase, SavedResult, matching_model, result_arrays,
                       result_from, run_items, run_text, stats_arrays, stats_from, timing)
@@ -118,7 +118,8 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
             param_index=None, initial_state=None, params=None, save_every: int = 1,
             checkpoint_every: int | None = None, tol: float = valid.DEFAULT_TOL,
             max_iter: int = valid.DEFAULT_MAX_ITER, newton: str = "auto", solver: str = "auto",
-            check: bool = True, monitor: bool = True, **unsupported) -> AdjointResult:
+            check: bool = True, monitor: bool = True, specialize: bool | None = None,
+            **unsupported) -> AdjointResult:
     r"""The gradient of a cost ``J`` of the saved states by the discrete adjoint.
 
     For ``J`` a function of the samples ``(q_i, v_i)`` of the run, ``cotangent(result)``
@@ -147,7 +148,7 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
 
     Parameters
     ----------
-    model, q0, v0, h, t_end, n_steps, t0, t_span, method, params, save_every, tol, max_iter, newton, solver, check, monitor :
+    model, q0, v0, h, t_end, n_steps, t0, t_span, method, params, save_every, tol, max_iter, newton, solver, check, monitor, specialize :
         As :func:`fastvi.sensitivity`.
     cotangent : callable
         ``cotangent(result) -> (dJ_dq, dJ_dv)``, (K, n) each at the samples of
@@ -179,7 +180,7 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     run = disc.prepare(model, q0, v0, h=h, t_end=t_end, n_steps=n_steps, t0=t0, t_span=t_span,
                        method=method, save_every=save_every, tol=tol, max_iter=max_iter,
                        newton=newton, params=params, solver=solver, check=check,
-                       monitor=monitor, what="the adjoint")
+                       monitor=monitor, what="the adjoint", specialize=specialize)
     n, m, k = model.n, model.m, run.prm.shape[0]
     meth = run.meth
     N = meth.s * n + meth.J * m
@@ -204,12 +205,13 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     Lq, Lp, direct = _cotangents(run, result, cotangent, pidx)
     tw = disc.tangent_work(run, 0, pidx)  # no forward directions: pull contracts R_θ
     lq, lp, lth = np.zeros(n), np.zeros(n), np.zeros(max(len(pidx), 1))
+    back = sweeper(run.model_data, run.tx, tw, rec, lth, run.sized)
     t_back = time.perf_counter()
     info[:] = run.info
     with quiet():
         status = _BACKWARD(run.model_data, run.tabs, run.tx, run.opts, run.h, run.state, run.ws,
                            run.total, run.every, run.smp, info, run.sout, run.ev, run.stepk,
-                           run.stages, tw, ck, rec, Lq, Lp, lq, lp, lth, each)
+                           run.stages, tw, ck, rec, Lq, Lp, lq, lp, lth, each, back)
     back_time = time.perf_counter() - t_back
     if status != 0:
         run.info[:] = info

@@ -143,7 +143,8 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
                 params=None, save_every: int = 1, tol: float = valid.DEFAULT_TOL,
                 max_iter: int = valid.DEFAULT_MAX_ITER, newton: str = "auto",
                 solver: str = "auto", check: bool = True, monitor: bool = True,
-                progress: bool = False, **unsupported) -> SensitivityResult:
+                progress: bool = False, specialize: bool | None = None,
+                **unsupported) -> SensitivityResult:
     r"""Integrate like :func:`fastvi.integrate` and propagate derivatives along the run.
 
     Each step solves ``R(X; q_k, p_k, θ) = 0`` for its unknowns ``X`` and reads off
@@ -180,10 +181,23 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     model, q0, v0, h, t_end, n_steps, t0, t_span, method, params, save_every, tol, max_iter, newton, solver, check, monitor, progress :
         As :func:`fastvi.integrate`. The run must be a whole number of steps of ``h``.
     **unsupported :
-        ``events``, ``adaptive``, ``recover``, ``on_failure``, ``dense_output``,
-        ``t_eval`` and ``specialize`` of :func:`fastvi.integrate` raise
-        ``TypeError`` saying why (an event makes the flow non-smooth; a recovered step
-        changes the map; the step-size controller is not differentiated).
+        ``events``, ``adaptive``, ``recover``, ``on_failure``, ``dense_output`` and
+        ``t_eval`` of :func:`fastvi.integrate` raise ``TypeError`` saying why (an event
+        makes the flow non-smooth; a recovered step changes the map; the step-size
+        controller is not differentiated).
+    specialize : bool or None, default None
+        Compile the linearised step (with the step's stages, as in
+        :func:`fastvi.integrate`) for this model's and method's sizes as compile-time
+        constants. The derivatives are the generic kernels' bit for bit; a step of the
+        double pendulum with one direction costs about 0.75× as much
+        (``docs/decisions/0021-sized-linearised-step.md``). The price is one compile per
+        size, about as long as the first generic one (``docs/benchmarks.md``), then cached
+        on disk. ``None`` uses the sized step whenever it is compiled already (in this
+        process or on disk) and compiles it for a run of at least
+        ``fastvi.structure.SIZED_TANGENT_MIN_STEPS`` steps of a model of at most
+        ``SIZED_MAX_N`` coordinates. ``True`` always compiles it, ``False`` never uses it.
+        :func:`fastvi.adjoint` and :func:`fastvi.sensitivity_ensemble` take the same
+        option.
     wrt : sequence of {"q0", "v0", "params"}, or array (2n + k, d), default ("q0", "v0")
         The directions: the unit vectors of ``q0`` (n), ``v0`` (n) and the parameters of
         ``param_index``, in the order named; or the columns of an array of raw directions
@@ -236,7 +250,7 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     run = disc.prepare(model, q0, v0, h=h, t_end=t_end, n_steps=n_steps, t0=t0, t_span=t_span,
                        method=method, save_every=save_every, tol=tol, max_iter=max_iter,
                        newton=newton, params=params, solver=solver, check=check,
-                       monitor=monitor, what="the sensitivity")
+                       monitor=monitor, what="the sensitivity", specialize=specialize)
     n, k = model.n, run.prm.shape[0]
     D, labels = disc.directions(wrt, n, k, param_index)
     dq0, dp0, pidx, dth = disc.initial_tangent(run, D, initial_state)
@@ -248,7 +262,8 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     dQ = np.zeros((run.K, d, n))
     dP = np.zeros((run.K, d, n))
     dQ[0], dP[0] = dq0, dp0
-    each = differentiator(run.model_data, run.state, run.ws, run.info, run.tx, tw, dQ)
+    each = differentiator(run.model_data, run.state, run.ws, run.info, run.tx, tw, dQ,
+                          run.sized)
     total = run.total
     bar = ProgressBar(total, label="fastvi sensitivity") if progress else None
     chunk = total if bar is None else max(1, total // UPDATES)

@@ -129,7 +129,8 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
                          save_every: int = 1, tol: float = valid.DEFAULT_TOL,
                          max_iter: int = valid.DEFAULT_MAX_ITER, newton: str = "auto",
                          solver: str = "auto", check: bool = True, monitor: bool = True,
-                         threads: int | None = None, **unsupported) -> EnsembleSensitivityResult:
+                         threads: int | None = None, specialize: bool | None = None,
+                         **unsupported) -> EnsembleSensitivityResult:
     r"""Forward sensitivities of ``N`` members in one parallel loop.
 
     Member ``i`` starts from ``(Q0[i], V0[i])`` with parameters ``params[i]`` and carries
@@ -152,7 +153,7 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
         :func:`fastvi.integrate` does.
     params : array_like (k,) or (N, k), optional
         The parameters of all members, or of each (default: the model's).
-    h, t_end, n_steps, t0, t_span, method, wrt, param_index, save_every, tol, max_iter, newton, solver, check, monitor :
+    h, t_end, n_steps, t0, t_span, method, wrt, param_index, save_every, tol, max_iter, newton, solver, check, monitor, specialize :
         As :func:`fastvi.sensitivity`; the same for every member.
     threads : int, optional
         Threads of the parallel loop (default: numba's setting), as
@@ -201,7 +202,8 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
     runs = [disc.prepare(model, Q0[i], V0[i], h=h, t_end=t_end, n_steps=n_steps, t0=t0,
                          t_span=t_span, method=method, save_every=save_every, tol=tol,
                          max_iter=max_iter, newton=newton, params=P[i], solver=solver,
-                         check=check, monitor=monitor, what="the sensitivity")
+                         check=check, monitor=monitor, what="the sensitivity",
+                         specialize=specialize)
             for i in range(N)]
     first = runs[0]
     meth, m, k = first.meth, model.m, P.shape[1]
@@ -226,7 +228,7 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
     rows, cols = index_maps(n, m, meth.s, meth.J)
     # the hook for a member's argument types, which are those of a single run's
     each = differentiator(md, first.state, ws, first.info, first.tx,
-                          disc.tangent_work(first, d, pidx), dQ[0])
+                          disc.tangent_work(first, d, pidx), dQ[0], first.sized)
     group = Members(md.fns, md.flags, md.Mc, KP, first.tabs, first.tx, first.opts, first.h,
                     ws.dims, ws.si, ws.sb, ws.structured, X0, first.total, first.every, smp,
                     infos, ev, first.stepk, first.stages, rows, cols,

@@ -415,14 +415,20 @@ SIZED_MIN_STEPS = 10_000_000
 #: … and only up to this many coordinates: the sized loops are unrolled, and a large
 #: model's step is set by its solves, not by loop overhead
 SIZED_MAX_N = 24
+#: the linearised step of the derivatives (:func:`fastvi.sensitivity`, :func:`fastvi.adjoint`)
+#: is compiled for a model's sizes, with ``specialize=None``, for a run of at least this
+#: many steps: its ≈ 40–70 s of compiling save ≈ 1 µs a step of the double pendulum
+#: (docs/decisions/0021-sized-linearised-step.md)
+SIZED_TANGENT_MIN_STEPS = 100_000_000
 
 
-def sizing(specialize, n: int, steps: int):
+def sizing(specialize, n: int, steps: int, min_steps: int = SIZED_MIN_STEPS):
     """What ``step_kernel(sized=…)`` gets for ``specialize`` (``None``: automatic), a model
     of ``n`` coordinates and a run of ``steps`` steps: ``True`` (compile the sized stages),
-    ``"cached"`` (use them if compiled already) or ``False``."""
+    ``"cached"`` (use them if compiled already) or ``False``; ``min_steps``: the run that
+    repays their compile (:data:`SIZED_TANGENT_MIN_STEPS` for the linearised step)."""
     if specialize is not None:
         return bool(specialize)
     if n > SIZED_MAX_N:
         return False
-    return True if steps >= SIZED_MIN_STEPS else "cached"
+    return True if steps >= min_steps else "cached"

@@ -18,7 +18,9 @@ double pendulum, the step's stages compiled for its sizes (which the default,
 ``specialize=None``, then uses for every run of a model of those sizes). ``--only
 sensitivity,adjoint,sensitivity-ensemble`` compiles (or times) the derivatives of the flow:
 ``sensitivity`` of the damped double pendulum by its initial state and parameters (the
-full Newton included), ``adjoint`` of it, and ``sensitivity_ensemble`` of 4 members.
+full Newton included), ``adjoint`` of it, and ``sensitivity_ensemble`` of 4 members;
+``sensitivity-sized`` and ``adjoint-sized`` the same two with ``specialize=True``, the
+linearised step compiled for the model's sizes.
 """
 
 from __future__ import annotations
@@ -101,19 +103,20 @@ def _damped():
     return (model, *model.initial_state(1.0, 0.5))
 
 
-def _sensitivity():
+def _sensitivity(specialize=None):
     import fastvi
 
     model, q0, v0 = _damped()
-    return fastvi.sensitivity(model, q0, v0, h=0.01, n_steps=10, wrt=("q0", "v0", "params"))
+    return fastvi.sensitivity(model, q0, v0, h=0.01, n_steps=10, wrt=("q0", "v0", "params"),
+                              specialize=specialize)
 
 
-def _adjoint():
+def _adjoint(specialize=None):
     import fastvi
 
     model, q0, v0 = _damped()
     return fastvi.adjoint(model, q0, v0, lambda r: (np.ones((len(r.t), model.n)), None),
-                          h=0.01, n_steps=10)
+                          h=0.01, n_steps=10, specialize=specialize)
 
 
 def _sensitivity_ensemble():
@@ -134,6 +137,8 @@ FIRST_CALLS = {
     "sensitivity": _sensitivity,
     "adjoint": _adjoint,
     "sensitivity-ensemble": _sensitivity_ensemble,
+    "sensitivity-sized": lambda: _sensitivity(specialize=True),
+    "adjoint-sized": lambda: _adjoint(specialize=True),
 }
 _SESSION = ("integrate", "forces", "events+dense", "ensemble")
 

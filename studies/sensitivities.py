@@ -54,14 +54,14 @@ def cost_table(steps: int, repeat: int, h: float = 0.01, method: str = "P2L-Q3G"
             return fastvi.integrate(dp, q0, v0, specialize=specialize,
                                     **run).stats["integration_time"]
 
-    def sens(wrt):
-        return lambda: fastvi.sensitivity(dp, q0, v0, wrt=wrt, **run).result.stats[
-            "integration_time"]
+    def sens(wrt, specialize=None):
+        return lambda: fastvi.sensitivity(dp, q0, v0, wrt=wrt, specialize=specialize,
+                                          **run).result.stats["integration_time"]
 
-    def adj(param_index=None):
+    def adj(param_index=None, specialize=None):
         def timed():
             A = fastvi.adjoint(dp, q0, v0, lambda r: (np.ones((len(r.t), n)), None),
-                               param_index=param_index, **run)
+                               param_index=param_index, specialize=specialize, **run)
             return A.result.stats["integration_time"] + A.stats["backward_time"]
         return timed
 
@@ -79,6 +79,10 @@ def cost_table(steps: int, repeat: int, h: float = 0.01, method: str = "P2L-Q3G"
     rows.append(("adjoint: gradient by q0 and v0", _best(adj([]), repeat), 2 * n))
     rows.append((f"adjoint: gradient by q0, v0 and the k = {k} params", _best(adj(), repeat),
                  2 * n + k))
+    rows.append(("sensitivity, 1 direction, generic kernels (`specialize=False`)",
+                 _best(sens(one, False), repeat), 1))
+    rows.append((f"adjoint by q0, v0 and the {k} params, generic kernels (`specialize=False`)",
+                 _best(adj(None, False), repeat), 2 * n + k))
     rows.append((f"finite differences, forward: {2 * n + k + 1} runs", (2 * n + k + 1) * t_plain,
                  2 * n + k))
     rows.append((f"finite differences, central: {2 * (2 * n + k)} runs", 2 * (2 * n + k) * t_plain,
@@ -350,9 +354,12 @@ def main(argv=None) -> int:
 
     dp = fastvi.scenes.double_pendulum(damping=0.3)  # compile everything first: not timed
     fastvi.integrate(dp, *dp.initial_state(1.0, 0.5), h=0.01, n_steps=2, specialize=True)
-    fastvi.sensitivity(dp, *dp.initial_state(1.0, 0.5), h=0.01, n_steps=2, wrt=("params",))
-    fastvi.adjoint(dp, *dp.initial_state(1.0, 0.5), lambda r: (np.ones((len(r.t), 4)), None),
-                   h=0.01, n_steps=2)
+    for specialize in (False, True):  # the sized linearised step, which the default then takes
+        fastvi.sensitivity(dp, *dp.initial_state(1.0, 0.5), h=0.01, n_steps=2, wrt=("params",),
+                           specialize=specialize)
+        fastvi.adjoint(dp, *dp.initial_state(1.0, 0.5),
+                       lambda r: (np.ones((len(r.t), 4)), None), h=0.01, n_steps=2,
+                       specialize=specialize)
     parts = [("Cost", cost_table(args.steps, args.repeat)), ("Adjoint memory", memory_table()),
              ("Large mechanisms", scaling_table()),
              ("Ensembles", ensemble_table()), ("Order", order_table()),

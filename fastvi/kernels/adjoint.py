@@ -24,12 +24,13 @@ import numba
 from numba.core import types
 
 from .._numba import byref, erased, hot, own
-from .drive import run, step_hook
+from .._launch import _key
+from .drive import c_entry, run, step_hook
 from .layout import H_SIZE, I_FAILED, I_FIRST, I_STEPS, OK, sizes
-from .tangent import linearise, pull
+from .tangent import linearise, pull, sized_twin
 
 __all__ = ["Checkpoints", "Records", "make_checkpoints", "make_records", "run_checkpointed",
-           "run_adjoint", "recorder"]
+           "run_adjoint", "recorder", "sweeper", "Sweep"]
 
 #: what a step needs of the past to be retaken bit for bit: the state (rows q, p, v), the
 #: predictor's unknowns of the last two steps, the workspace's flags and step lengths, and
@@ -161,6 +162,47 @@ def _record(mdp, h, k, statep, wsp, infop, slot, recp):
     return OK
 
 
+#: what a step of the backward sweep (:func:`_sweep_step`) reads besides the model: pointers
+#: to the extended tables and the TangentWork, the records, the cotangent ``(lq, lp)`` and
+#: the parameters' gradient ``lth``
+Sweep = namedtuple("Sweep", ["txp", "twp", "rec", "lq", "lp", "lth"])
+
+
+def _sweep_step(mdp, h, j, sweepp):
+    """Step ``j`` of the records swept back: :func:`.tangent.linearise` at it, then
+    :func:`.tangent.pull` of the cotangent. Returns a status code."""
+    sw = own(sweepp)
+    tw, rec = own(sw.twp), sw.rec
+    m = sizes(tw.ws)[1]
+    for a in range(tw.qk.shape[0]):
+        tw.qk[a] = rec.qk[j, a]
+        tw.pk[a] = rec.pk[j, a]
+    st = linearise(mdp, sw.txp, h, rec.time[j], rec.X[j], rec.q1[j], rec.v1[j],
+                   rec.eta[j, :m], rec.P[j], sw.twp)
+    if st == OK:
+        st = pull(mdp, sw.txp, h, sw.twp, rec.q1[j], rec.v1[j], rec.eta[j, :m], sw.lq, sw.lp,
+                  sw.lth)
+    return st
+
+
+def sweeper(md, tx, tw, rec, lth, sized=False):
+    """:func:`_sweep_step` compiled as a C function for these argument types, called by
+    :func:`run_adjoint` through its address: the sweep's loop is then compiled once for
+    the generic and the sized linearised step (``sized`` as in
+    :func:`.tangent.differentiator`)."""
+    P, typeof = types.CPointer, numba.typeof
+
+    def entry(t, compile):
+        key = (_sweep_step,) + tuple(_key(x) for x in (md, tx, t, rec, lth))
+        return c_entry(key, lambda: (P(typeof(md)), types.float64, types.int64), _sweep_step,
+                       lambda: types.NamedTuple([P(typeof(tx)), P(typeof(t)), typeof(rec),
+                                                 typeof(lth), typeof(lth), typeof(lth)], Sweep),
+                       compile)
+
+    twin = entry(sized_twin(tw), sized is True) if sized and tw.ws.structured is None else None
+    return twin or entry(tw, True)
+
+
 def recorder(md, state, ws, info, rec):
     """:func:`_record` compiled as the per-step hook of :func:`.drive.run`
     (:func:`.drive.step_hook`) for these argument types: what :func:`run_adjoint` passes."""
@@ -170,17 +212,17 @@ def recorder(md, state, ws, info, rec):
 
 @hot
 def run_adjoint(md, tabs, tx, opts, h, state, ws, n_total, every, smp, info, sout, ev, stepk,
-                stages, tw, ck, rec, Lq, Lp, lq, lp, lth, each):
+                stages, tw, ck, rec, Lq, Lp, lq, lp, lth, each, back):
     """The backward sweep: ``(lq, lp)`` becomes ``λ_0`` for the sample cotangents ``Lq``,
     ``Lp`` (K, n), and ``lth`` (np,) the gradient by the parameters ``tw.pidx`` through the
     steps. Each segment of ``ck`` (:func:`run_checkpointed`), last first, is swept backwards
-    with :func:`.tangent.linearise` and :func:`.tangent.pull`: the last one from ``rec`` as
-    the forward run left it, the others retaken into ``rec`` (by ``each``, the
-    :func:`recorder`) from their checkpoints.
+    with :func:`.tangent.linearise` and :func:`.tangent.pull` (by ``back``, the
+    :func:`sweeper`): the last one from ``rec`` as the forward run left it, the others
+    retaken into ``rec`` (by ``each``, the :func:`recorder`) from their checkpoints.
     Returns a status code; ``info[I_FAILED]`` is the failed step."""
-    mdp, txp, twp = byref(md), byref(tx), byref(tw)
+    mdp = byref(md)
+    sw = erased(byref(Sweep(byref(tx), byref(tw), rec, lq, lp, lth)))
     n = state.shape[1]
-    m = sizes(tw.ws)[1]
     C = rec.qk.shape[0]
     K = Lq.shape[0]
     for a in range(n):
@@ -206,14 +248,7 @@ def run_adjoint(md, tabs, tx, opts, h, state, ws, n_total, every, smp, info, sou
                 for a in range(n):
                     lq[a] += Lq[i, a]
                     lp[a] += Lp[i, a]
-            for a in range(n):
-                tw.qk[a] = rec.qk[j, a]
-                tw.pk[a] = rec.pk[j, a]
-            st = linearise(mdp, txp, h, rec.time[j], rec.X[j], rec.q1[j], rec.v1[j],
-                           rec.eta[j, :m], rec.P[j], twp)
-            if st == OK:
-                st = pull(mdp, txp, h, twp, rec.q1[j], rec.v1[j], rec.eta[j, :m], lq, lp,
-                          lth)
+            st = back(mdp, h, j, sw)
             if st != OK:
                 info[I_FAILED] = k
                 return st

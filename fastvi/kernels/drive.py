@@ -31,7 +31,7 @@ from .._launch import _key
 from .step import cached_cfunc
 
 __all__ = ["run", "run_member", "run_members", "EnsembleMembers", "member_function",
-           "ensemble_member", "energy", "accept", "record", "step_hook", "INFO_SIZE"]
+           "ensemble_member", "energy", "accept", "record", "step_hook", "c_entry", "INFO_SIZE"]
 
 
 @hot
@@ -236,7 +236,7 @@ def run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, s
 _HOOKS = {}
 
 
-def step_hook(fn, md, state, ws, info, data, data_type):
+def step_hook(fn, md, state, ws, info, data, data_type, compile=True):
     """``fn(mdp, h, k, statep, wsp, infop, slot, datap)`` compiled as a C function (cached
     on disk) for the types of ``md``, ``state``, ``ws``, ``info`` and of the hook's data,
     made of the values ``data`` and typed ``data_type()`` (a numba type): the ``each`` hook
@@ -245,17 +245,38 @@ def step_hook(fn, md, state, ws, info, data, data_type):
     typed by its signature alone. Found again by the arguments' type fingerprints
     (:func:`fastvi._launch._key`): building numba's types costs milliseconds a call.
 
+    With ``compile`` false, the hook only if it is compiled already (in this process or in
+    numba's disk cache), else None.
+
     :func:`run` types the hook with ``datap`` an untyped pointer (``void*``, what the
     caller passes: :func:`fastvi._numba.erased`), the same machine word: one compiled time
     loop then serves every hook (the sensitivities' and the adjoint's), where a loop typed
     by each hook's data took 7–8 s of compiling each."""
     key = (fn,) + tuple(_key(x) for x in (md, state, ws, info, *data))
+    P, typeof = types.CPointer, numba.typeof
+    return c_entry(key, lambda: (P(typeof(md)), types.float64, types.int64, P(typeof(state)),
+                                 P(typeof(ws)), P(typeof(info)), types.int64),
+                   fn, data_type, compile)
+
+
+#: the keys of :func:`c_entry` looked up in numba's disk cache and not found, in this process
+_NOT_CACHED = set()
+
+
+def c_entry(key, head, fn, data_type, compile=True):
+    """``fn(*head, datap)`` as a C function (cached on disk), ``datap`` a pointer to a
+    record of the numba type ``data_type()``, called as ``fn(*head, void*)``: one type
+    for every record, so that its caller is compiled once for all of them. Kept by
+    ``key``; with ``compile`` false, None unless compiled already (:func:`step_hook`)."""
     hook = _HOOKS.get(key)
     if hook is None:
-        P, typeof = types.CPointer, numba.typeof
-        head = (P(typeof(md)), types.float64, types.int64, P(typeof(state)), P(typeof(ws)),
-                P(typeof(info)), types.int64)
-        cf = cached_cfunc(fn, types.int64(*head, P(data_type())))
+        if not compile and key in _NOT_CACHED:
+            return None  # looked up once: a lookup costs a few ms
+        head = head()
+        cf = cached_cfunc(fn, types.int64(*head, types.CPointer(data_type())), compile)
+        if cf is None:
+            _NOT_CACHED.add(key)
+            return None
         hook = _HOOKS[key] = CalledAs(cf, types.int64(*head, types.voidptr))
     return hook
 

@@ -50,6 +50,7 @@ from numba.core import types
 
 from .._numba import byref, erased, hot, hot_inline, njit, only_if, own, ptr
 from .drive import run, step_hook
+from .layout import specialize as layout_specialize
 from .layout import (CHESS, CJAC, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_MJAC, F_MASSFN, F_TIME,
                      F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SI_A,
                      SI_A_KL, SI_A_KU, SI_A_PERM, SI_S, SINGULAR, SOLVE_BANDED, SOLVE_DENSE,
@@ -58,15 +59,16 @@ from .layout import (CHESS, CJAC, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_MJAC, F_MA
                      make_workspace, sizes, with_plan, workspace_for)
 from .banded import (band_factor, band_ld, band_solve, band_solve_transposed, gmg_factor,
                      gmg_solve)
-from .linalg import lu_factor, lu_solve
+# inlined: with the sizes as constants (sized_twin) the factorisations and solves unroll
+from .linalg import lu_factor_small, lu_solve_small
 from .step import (fd_constraint_hessian, fd_momentum_jacobian, assemble, end_momentum,
                    jacobian_rate, linear_force)
 
 __all__ = ["PointWork", "TangentWork", "extended_tables", "make_point_work",
            "make_tangent_work", "point", "point_terms", "linearise", "push", "pull",
-           "lu_solve_transposed", "run_tangent", "differentiator", "Members", "tangent_member",
-           "point_work", "tangent_work", "index_maps", "step_band", "Sparsity",
-           "make_sparsity"]
+           "lu_solve_transposed", "run_tangent", "differentiator", "sized_twin", "Members",
+           "tangent_member", "point_work", "tangent_work", "index_maps", "step_band",
+           "Sparsity", "make_sparsity"]
 
 #: the second derivatives at a point of the constrained phase space, and their scratch
 PointWork = namedtuple("PointWork", [
@@ -99,7 +101,6 @@ Sparsity = namedtuple("Sparsity", [
 
 #: the linearised step (:func:`linearise`) and the tangent state of the directions
 TangentWork = namedtuple("TangentWork", [
-    "ws",  # Workspace of the extended step (n, m, s + 1, r, J)
     "pt",  # PointWork at q_{k+1}: M (factored), G, He, Hv, Cq
     "rows",  # (N,) int64: the rows of the extended Newton matrix that are the step's equations
     "cols",  # (N,) int64: its columns that are the step's unknowns
@@ -133,6 +134,10 @@ TangentWork = namedtuple("TangentWork", [
     "tho",  # (k · max(n², m n),) a derivative callback's output, flat
     "thF", "thP",  # (k, n) ∂F/∂θ and ∂(M v)/∂θ at a quadrature point
     "mu",  # (N',) the adjoint's cotangent on the rows of the extended step
+    # Workspace of the extended step (n, m, s + 1, r, J). Last, as the sizes are last in
+    # it: the sized twin (:func:`sized_twin`) then has the same layout but for those, and
+    # the linearised step compiled for it reads a generic TangentWork by pointer as it is
+    "ws",
 ])
 
 
@@ -208,7 +213,7 @@ def tangent_work(xws, rows, cols, pidx, d, sp, pd, k):
     Nd = 1 if banded else N
     Nb = band_ld(sp.kl, sp.ku) * N if banded else 1
     return TangentWork(
-        xws, point_work(n, m, sp), rows, cols, np.zeros((Nd, Nd)), np.zeros(N, dtype=np.int64),
+        point_work(n, m, sp), rows, cols, np.zeros((Nd, Nd)), np.zeros(N, dtype=np.int64),
         np.zeros(Nb), np.zeros(N),
         np.zeros((N + n, n)), np.zeros((n, N)), np.zeros(max(sp.tcol.shape[0], 1)),
         np.zeros(max(sp.xcol.shape[0], 1)), pidx, np.zeros((N + n, npar)),
@@ -218,7 +223,7 @@ def tangent_work(xws, rows, cols, pidx, d, sp, pd, k):
         np.zeros(n), np.zeros(n), np.zeros((mm, n)), np.zeros(mm), np.zeros(mm), np.zeros(n),
         np.zeros(n), np.zeros(n), np.zeros(N), np.zeros(n), np.zeros(n), np.zeros(STEP_OUT_SIZE),
         pd, np.zeros((npar, sx * n + J * m)), np.zeros(max(k, 1) * n * max(n, m)),
-        np.zeros((max(k, 1), n)), np.zeros((max(k, 1), n)), np.zeros(sx * n + J * m))
+        np.zeros((max(k, 1), n)), np.zeros((max(k, 1), n)), np.zeros(sx * n + J * m), xws)
 
 
 def make_point_work(n, m):
@@ -344,6 +349,10 @@ def lu_solve_transposed(A, piv, b, N):
             t = b[k]
             b[k] = b[p]
             b[p] = t
+
+
+#: inlined into the solves, as lu_solve_small
+_lu_solve_transposed = hot_inline(lu_solve_transposed.py_func)
 
 
 # ----------------------------------------------------------------------------- linearisation
@@ -802,7 +811,7 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
     if banded:
         if _band_factor(wx, A, rows, cols, sp, tw.ab, tw.piv, N) != 0:
             return SINGULAR
-    elif lu_factor(K, tw.piv, N) != 0:
+    elif lu_factor_small(K, tw.piv, N) != 0:
         return SINGULAR
     exact = _exact_in_theta(md, tw)
     # the forward directions' columns of R_θ; the adjoint (no directions) contracts them in
@@ -857,23 +866,23 @@ def _factor_projection(md, tw, wx, pw, sp, n, m):
                 return OK
             if sp.gsta.shape[0] > 0:
                 _sparse_gmg(wx, sp, Yg, G, S, m)
-                if lu_factor(S, tw.pivm, m) != 0:
+                if lu_factor_small(S, tw.pivm, m) != 0:
                     return SINGULAR_CONSTRAINTS
                 return OK
         else:
-            if lu_factor(M, tw.pivn, n) != 0:
+            if lu_factor_small(M, tw.pivn, n) != 0:
                 return SINGULAR_MASS
             for c in range(m):
                 for a in range(n):
                     Yg[c, a] = G[c, a]
-                lu_solve(M, tw.pivn, Yg[c], n)
+                lu_solve_small(M, tw.pivn, Yg[c], n)
         for c in range(m):
             for e in range(m):
                 acc = 0.0
                 for a in range(n):
                     acc += Yg[c, a] * G[e, a]
                 S[c, e] = acc
-        if lu_factor(S, tw.pivm, m) != 0:
+        if lu_factor_small(S, tw.pivm, m) != 0:
             return SINGULAR_CONSTRAINTS
     return OK
 
@@ -1045,9 +1054,9 @@ def _solve(tw, y, N, transposed):
     if tw.pt.sp.perm.shape[0] > 0:
         _band_solve(tw.ws, tw.pt.sp, tw.ab, tw.piv, tw.t, y, N, transposed)
     elif transposed:
-        lu_solve_transposed(tw.K, tw.piv, y, N)
+        _lu_solve_transposed(tw.K, tw.piv, y, N)
     else:
-        lu_solve(tw.K, tw.piv, y, N)
+        lu_solve_small(tw.K, tw.piv, y, N)
 
 
 @hot_inline
@@ -1058,9 +1067,9 @@ def _solve_projection(tw, x, m, transposed):
     if tw.ws.si[SI_S] != SOLVE_DENSE:
         _projection_solve(tw.ws, x, m, tw.pivm)
     elif transposed:
-        lu_solve_transposed(tw.S, tw.pivm, x, m)
+        _lu_solve_transposed(tw.S, tw.pivm, x, m)
     else:
-        lu_solve(tw.S, tw.pivm, x, m)
+        lu_solve_small(tw.S, tw.pivm, x, m)
 
 
 @hot_inline
@@ -1279,12 +1288,32 @@ def _differentiate(mdp, h, k, statep, wsp, infop, slot, runp):
     return OK
 
 
-def differentiator(md, state, ws, info, tx, tw, dQ):
+def differentiator(md, state, ws, info, tx, tw, dQ, sized=False):
     """:func:`_differentiate` compiled as the per-step hook of :func:`.drive.run`
-    (:func:`.drive.step_hook`) for these argument types: what :func:`run_tangent` passes."""
+    (:func:`.drive.step_hook`) for these argument types: what :func:`run_tangent` passes.
+
+    ``sized``: ``True`` compiles it for the model's sizes (:func:`sized_twin`),
+    ``"cached"`` takes that one if it is compiled already, ``False`` (or a structured
+    model) the generic one. Both take the same generic ``tw``."""
     P, typeof = types.CPointer, numba.typeof
-    return step_hook(_differentiate, md, state, ws, info, (tx, tw, dQ), lambda: types.NamedTuple(
-        [P(typeof(tx)), P(typeof(tw)), typeof(dQ), typeof(dQ)], TangentRun))
+
+    def hook(t, compile):
+        return step_hook(_differentiate, md, state, ws, info, (tx, t, dQ),
+                         lambda: types.NamedTuple([P(typeof(tx)), P(typeof(t)), typeof(dQ),
+                                                   typeof(dQ)], TangentRun), compile)
+
+    twin = hook(sized_twin(tw), sized is True) if sized and tw.ws.structured is None else None
+    return twin or hook(tw, True)
+
+
+def sized_twin(tw):
+    """``tw`` with its extended step's sizes as compile-time constants
+    (:func:`.layout.specialize`): the type for which the linearised step is compiled with
+    every loop over coordinates, constraints and control points of known length
+    (``docs/decisions/0021-sized-linearised-step.md``). That code reads a generic ``tw``
+    by pointer as it is: the two differ only in the sizes, the last field, which it takes
+    from its type."""
+    return tw._replace(ws=layout_specialize(tw.ws))
 
 
 @hot

@@ -20,7 +20,9 @@ from ._launch import Launcher
 from ._numba import quiet
 from .kernels.adjoint import (make_checkpoints, make_records, recorder, run_adjoint,
                               run_checkpointed, sweeper)
+from .kernels import layout as lay
 from .kernels.tangent import point_terms
+from .progress import UPDATES, ProgressBar
 from .results import (Result, ResultBase, SavedResult, matching_model, result_arrays,
                       result_from, run_items, run_text, stats_arrays, stats_from, timing)
 
@@ -118,8 +120,8 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
             param_index=None, initial_state=None, params=None, save_every: int = 1,
             checkpoint_every: int | None = None, tol: float = valid.DEFAULT_TOL,
             max_iter: int = valid.DEFAULT_MAX_ITER, newton: str = "auto", solver: str = "auto",
-            check: bool = True, monitor: bool = True, specialize: bool | None = None,
-            **unsupported) -> AdjointResult:
+            check: bool = True, monitor: bool = True, progress: bool = False,
+            specialize: bool | None = None, **unsupported) -> AdjointResult:
     r"""The gradient of a cost ``J`` of the saved states by the discrete adjoint.
 
     For ``J`` a function of the samples ``(q_i, v_i)`` of the run, ``cotangent(result)``
@@ -150,6 +152,10 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     ----------
     model, q0, v0, h, t_end, n_steps, t0, t_span, method, params, save_every, tol, max_iter, newton, solver, check, monitor, specialize :
         As :func:`fastvi.sensitivity`.
+    progress : bool, default False
+        Show progress on stderr: the forward run's steps, then the backward sweep's, over
+        twice the number of steps (one updating line on a terminal, plain lines in a log).
+        The gradient is the same bit for bit.
     cotangent : callable
         ``cotangent(result) -> (dJ_dq, dJ_dv)``, (K, n) each at the samples of
         ``result`` (a :class:`fastvi.Result`); ``dJ_dv`` may be None.
@@ -177,6 +183,7 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     differentiation, optimal control, and more, SIAM Review 58 (2016) 3–33.
     """
     disc.refuse(unsupported, "fastvi.adjoint")
+    progress = valid.flag(progress, "progress")
     run = disc.prepare(model, q0, v0, h=h, t_end=t_end, n_steps=n_steps, t0=t0, t_span=t_span,
                        method=method, save_every=save_every, tol=tol, max_iter=max_iter,
                        newton=newton, params=params, solver=solver, check=check,
@@ -194,11 +201,22 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     rec = make_records(C, n, m, N)
     info = run.info.copy()
     each = recorder(run.model_data, run.state, run.ws, info, rec)
+    total = run.total
+    # the forward run, then the sweep, in chunks of steps between two updates of the line
+    bar = ProgressBar(2 * total, label="fastvi adjoint") if progress else None
+    chunk = total if bar is None else max(1, total // UPDATES)
     t_loop = time.perf_counter()
-    with quiet():
-        status = _FORWARD(run.model_data, run.tabs, run.opts, run.h, run.state, run.ws,
-                          run.total, run.every, run.smp, run.info, run.sout, run.ev,
-                          run.stepk, run.stages, ck, rec, each)
+    while True:
+        stop = min(int(run.info[lay.I_STEPS]) + chunk, total)
+        with quiet():
+            status = _FORWARD(run.model_data, run.tabs, run.opts, run.h, run.state, run.ws,
+                              total, run.every, run.smp, run.info, run.sout, run.ev,
+                              run.stepk, run.stages, ck, rec, each, stop)
+        done = int(run.info[lay.I_STEPS])
+        if bar is not None:
+            bar.update(done, f"forward, t = {run.t0 + done * run.h:.6g}", final=status != 0)
+        if status != 0 or done >= total:
+            break
     loop_time = time.perf_counter() - t_loop
     result = disc.finish(run, int(status), loop_time, 0.0, "the adjoint")
     pidx = list(range(k)) if param_index is None else disc.param_indices(param_index, k)
@@ -208,10 +226,22 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     back = sweeper(run.model_data, run.tx, tw, rec, lth, run.sized)
     t_back = time.perf_counter()
     info[:] = run.info
-    with quiet():
-        status = _BACKWARD(run.model_data, run.tabs, run.tx, run.opts, run.h, run.state, run.ws,
-                           run.total, run.every, run.smp, info, run.sout, run.ev, run.stepk,
-                           run.stages, tw, ck, rec, Lq, Lp, lq, lp, lth, each, back)
+    hi = total
+    while hi > 0:
+        lo = max(hi - chunk, 0)
+        with quiet():
+            status = _BACKWARD(run.model_data, run.tabs, run.tx, run.opts, run.h, run.state,
+                               run.ws, total, run.every, run.smp, info, run.sout, run.ev,
+                               run.stepk, run.stages, tw, ck, rec, Lq, Lp, lq, lp, lth, each,
+                               back, hi, lo)
+        if status != 0:
+            break
+        hi = lo
+        if bar is not None:
+            bar.update(2 * total - hi, f"backward, t = {run.t0 + hi * run.h:.6g}",
+                       final=hi == 0)
+    if bar is not None and status != 0:
+        bar.update(2 * total - hi, "backward", final=True)
     back_time = time.perf_counter() - t_back
     if status != 0:
         run.info[:] = info

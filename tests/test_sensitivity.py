@@ -591,4 +591,23 @@ def test_progress_reports_the_steps_and_changes_no_bit(damped, start, capsys):
     with pytest.raises(TypeError, match="`progress` must be True or False"):
         fastvi.sensitivity(damped, *start, h=H, n_steps=3, progress="yes")
     with pytest.raises(TypeError, match="does not take `progress`: it shows no progress yet"):
-        fastvi.adjoint(damped, *start, lambda r: (r.q, None), h=H, n_steps=3, progress=True)
+        fastvi.sensitivity_ensemble(damped, np.stack([start[0]]), np.stack([start[1]]), h=H,
+                                    n_steps=3, progress=True)
+
+
+@pytest.mark.parametrize("checkpoint_every", [None, 13])
+def test_adjoint_progress_reports_both_sweeps_and_changes_no_bit(damped, start, capsys,
+                                                                 checkpoint_every):
+    def cost(res):
+        return np.cos(res.q), res.v
+
+    kw = dict(h=H, n_steps=120, save_every=7, checkpoint_every=checkpoint_every)
+    quiet_run = fastvi.adjoint(damped, *start, cost, **kw)
+    shown = fastvi.adjoint(damped, *start, cost, progress=True, **kw)
+    err = capsys.readouterr().err
+    assert "fastvi adjoint: 240/240 steps (100%)" in err and "backward, t = 0" in err, err
+    assert "forward, t = " in err, err
+    assert np.array_equal(quiet_run.gradient, shown.gradient)
+    assert np.array_equal(quiet_run.result.q, shown.result.q)
+    with pytest.raises(TypeError, match="`progress` must be True or False"):
+        fastvi.adjoint(damped, *start, cost, h=H, n_steps=3, progress="yes")

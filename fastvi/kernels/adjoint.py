@@ -97,31 +97,38 @@ def _restore(ck, i, state, ws, info):
 
 
 @hot
-def _segment(md, tabs, opts, h, state, ws, cnt, n_total, every, smp, info, sout, ev, stepk,
-             stages, rec, each):
-    """``cnt`` steps of :func:`.drive.run` from the state of step ``info[I_STEPS]``, each
-    recorded into ``rec`` by ``each`` (the :func:`recorder`). Returns a status code."""
-    for a in range(state.shape[1]):
-        rec.qk[0, a] = state[0, a]
-        rec.pk[0, a] = state[1, a]
-    return run(md, tabs, opts, h, state, ws, cnt, n_total, every, smp, info, sout, ev, stepk,
-               stages, None, each, erased(byref(Recording(rec, int(info[I_STEPS])))))
+def _segment(md, tabs, opts, h, state, ws, k0, cnt, n_total, every, smp, info, sout, ev,
+             stepk, stages, rec, each):
+    """The steps of :func:`.drive.run` from the state of step ``info[I_STEPS]`` to step
+    ``k0 + cnt``, each recorded into ``rec``, the records of the segment that starts at
+    step ``k0``, by ``each`` (the :func:`recorder`); the segment's start too, if it starts
+    here. Returns a status code."""
+    if int(info[I_STEPS]) == k0:
+        for a in range(state.shape[1]):
+            rec.qk[0, a] = state[0, a]
+            rec.pk[0, a] = state[1, a]
+    return run(md, tabs, opts, h, state, ws, k0 + cnt - int(info[I_STEPS]), n_total, every,
+               smp, info, sout, ev, stepk, stages, None, each,
+               erased(byref(Recording(rec, k0))))
 
 
 @hot
 def run_checkpointed(md, tabs, opts, h, state, ws, n_total, save_every, smp, info, sout, ev,
-                     stepk, stages, ck, rec, each):
+                     stepk, stages, ck, rec, each, stop):
     """:func:`.drive.run` in segments of ``C`` steps (``rec`` holds ``C``), keeping a
     checkpoint before each in ``ck`` (``ceil(n_total / C)`` of them) and recording each
     segment into ``rec`` by ``each`` (the :func:`recorder`): at the end ``rec`` holds the
-    last segment, which :func:`run_adjoint` then needs not retake. Returns a status code."""
+    last segment, which :func:`run_adjoint` then needs not retake. Up to step ``stop``: a
+    call continues where the last one stopped (a progress display between them). Returns a
+    status code."""
     C = rec.qk.shape[0]
-    i = 0
-    while int(info[I_STEPS]) < n_total:
-        _keep(ck, i, state, ws, info)
-        i += 1
-        st = _segment(md, tabs, opts, h, state, ws, C, n_total, save_every, smp, info, sout,
-                      ev, stepk, stages, rec, each)
+    end = min(stop, n_total)
+    while int(info[I_STEPS]) < end:
+        i = int(info[I_STEPS]) // C  # the segments start at multiples of C
+        if int(info[I_STEPS]) == i * C:
+            _keep(ck, i, state, ws, info)
+        st = _segment(md, tabs, opts, h, state, ws, i * C, min(C, end - i * C), n_total,
+                      save_every, smp, info, sout, ev, stepk, stages, rec, each)
         if st != 0:
             return st
     return 0
@@ -212,47 +219,46 @@ def recorder(md, state, ws, info, rec):
 
 @hot
 def run_adjoint(md, tabs, tx, opts, h, state, ws, n_total, every, smp, info, sout, ev, stepk,
-                stages, tw, ck, rec, Lq, Lp, lq, lp, lth, each, back):
-    """The backward sweep: ``(lq, lp)`` becomes ``λ_0`` for the sample cotangents ``Lq``,
-    ``Lp`` (K, n), and ``lth`` (np,) the gradient by the parameters ``tw.pidx`` through the
-    steps. Each segment of ``ck`` (:func:`run_checkpointed`), last first, is swept backwards
-    with :func:`.tangent.linearise` and :func:`.tangent.pull` (by ``back``, the
-    :func:`sweeper`): the last one from ``rec`` as the forward run left it, the others
-    retaken into ``rec`` (by ``each``, the :func:`recorder`) from their checkpoints.
+                stages, tw, ck, rec, Lq, Lp, lq, lp, lth, each, back, k_hi, k_lo):
+    """The backward sweep over the steps ``k_hi − 1`` down to ``k_lo``: the cotangent
+    ``(lq, lp)`` after step ``k_hi`` becomes the one at step ``k_lo`` for the sample
+    cotangents ``Lq``, ``Lp`` (K, n) (at step 0: ``λ_0``), and ``lth`` (np,) gains the
+    gradient by the parameters ``tw.pidx`` through those steps. A sweep from ``n_total`` to
+    0 in several calls, each continuing where the last one stopped, equals one call (a
+    progress display between them). Each segment of ``ck`` (:func:`run_checkpointed`) is
+    swept backwards with :func:`.tangent.linearise` and :func:`.tangent.pull` (by
+    ``back``, the :func:`sweeper`): the last one from ``rec`` as the forward run left it,
+    the others retaken into ``rec`` (by ``each``, the :func:`recorder`) from their
+    checkpoints when the sweep reaches their last step.
     Returns a status code; ``info[I_FAILED]`` is the failed step."""
     mdp = byref(md)
     sw = erased(byref(Sweep(byref(tx), byref(tw), rec, lq, lp, lth)))
     n = state.shape[1]
     C = rec.qk.shape[0]
     K = Lq.shape[0]
-    for a in range(n):
-        lq[a] = 0.0
-        lp[a] = 0.0
-    for l in range(lth.shape[0]):
-        lth[l] = 0.0
     nseg = (n_total + C - 1) // C
     no_samples = nseg - nseg  # an int64 of run time: a literal would compile `run` again
-    for seg in range(nseg - 1, -1, -1):
+    for k in range(k_hi - 1, k_lo - 1, -1):
+        seg = k // C
         k0 = ck.steps[seg]
-        cnt = min(C, n_total - k0)
-        if seg < nseg - 1:
+        j = k - k0
+        if seg < nseg - 1 and j == C - 1:
             _restore(ck, seg, state, ws, info)
-            st = _segment(md, tabs, opts, h, state, ws, cnt, n_total, no_samples, smp, info,
+            st = _segment(md, tabs, opts, h, state, ws, k0, C, n_total, no_samples, smp, info,
                           sout, ev, stepk, stages, rec, each)
             if st != 0:
                 return st
-        for j in range(cnt - 1, -1, -1):
-            k = k0 + j
-            i = _sample_of(k + 1, every, n_total, K)
-            if i >= 0:
-                for a in range(n):
-                    lq[a] += Lq[i, a]
-                    lp[a] += Lp[i, a]
-            st = back(mdp, h, j, sw)
-            if st != OK:
-                info[I_FAILED] = k
-                return st
-    for a in range(n):
-        lq[a] += Lq[0, a]
-        lp[a] += Lp[0, a]
+        i = _sample_of(k + 1, every, n_total, K)
+        if i >= 0:
+            for a in range(n):
+                lq[a] += Lq[i, a]
+                lp[a] += Lp[i, a]
+        st = back(mdp, h, j, sw)
+        if st != OK:
+            info[I_FAILED] = k
+            return st
+    if k_lo == 0:
+        for a in range(n):
+            lq[a] += Lq[0, a]
+            lp[a] += Lp[0, a]
     return 0

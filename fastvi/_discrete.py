@@ -83,8 +83,6 @@ _NOT_DIFFERENTIATED = {
     "dense_output": "derivatives are given at the saved steps; save more often with "
                     "`save_every`",
     "t_eval": "derivatives are given at the saved steps; choose them with `save_every`",
-    "progress": "it shows no progress yet (`fastvi.sensitivity` and `fastvi.adjoint` do); "
-                "split the members into groups",
 }
 
 

@@ -524,7 +524,7 @@ def integrate_ensemble(
 
 
 #: groups of members a run with ``progress=True`` is split into (at most)
-_PROGRESS_GROUPS = 20
+PROGRESS_GROUPS = 20
 
 
 def _ensemble_with_progress(model, Q0, V0, params, opts, threads, run_check, events):
@@ -534,7 +534,7 @@ def _ensemble_with_progress(model, Q0, V0, params, opts, threads, run_check, eve
 
     Q0, V0, P = _members(model, Q0, V0, params)
     N = Q0.shape[0]
-    size = max(threads or numba.get_num_threads(), -(-N // _PROGRESS_GROUPS))
+    size = max(threads or numba.get_num_threads(), -(-N // PROGRESS_GROUPS))
     bar = ProgressBar(N * opts["total"], unit="member-steps")
     parts, done = [], 0
     for a in range(0, N, size):

@@ -20,12 +20,13 @@ from . import _discrete as disc
 from . import _validate as valid
 from ._launch import Launcher
 from ._numba import quiet
-from .ensemble import parallel_section
+from .ensemble import PROGRESS_GROUPS, parallel_section
 from .integrate import IntegrationError
 from .kernels.layout import Samples
 from .kernels.drive import member_function, run_members
 from .kernels.tangent import Members, differentiator, index_maps, tangent_member
 from .model import Model
+from .progress import ProgressBar
 from .results import (ResultBase, SavedResult, run_items, run_text, stats_arrays,
                       stats_from, timing)
 from .sensitivity import (SensitivityResult, directions_text, largest_last,
@@ -129,7 +130,8 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
                          save_every: int = 1, tol: float = valid.DEFAULT_TOL,
                          max_iter: int = valid.DEFAULT_MAX_ITER, newton: str = "auto",
                          solver: str = "auto", check: bool = True, monitor: bool = True,
-                         threads: int | None = None, specialize: bool | None = None,
+                         threads: int | None = None, progress: bool = False,
+                         specialize: bool | None = None,
                          **unsupported) -> EnsembleSensitivityResult:
     r"""Forward sensitivities of ``N`` members in one parallel loop.
 
@@ -158,6 +160,10 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
     threads : int, optional
         Threads of the parallel loop (default: numba's setting), as
         :func:`fastvi.integrate_ensemble`.
+    progress : bool, default False
+        Show progress on stderr in member-steps, as :func:`fastvi.integrate_ensemble`: the
+        members run in up to 20 groups, one after the other, each in the parallel loop.
+        The results are the same bit for bit.
 
     Returns
     -------
@@ -189,6 +195,7 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
     """
     started = time.perf_counter()
     disc.refuse(unsupported, "fastvi.sensitivity_ensemble")
+    progress = valid.flag(progress, "progress")
     if not isinstance(model, Model):
         raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
     Q0 = valid.member_vectors(Q0, "Q0", model.n)
@@ -238,12 +245,21 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
         t_compile = time.perf_counter()
         member = member_function(tangent_member, group)
         compile_time = time.perf_counter() - t_compile
+    bar = ProgressBar(N * first.total, unit="member-steps",
+                      label="fastvi sensitivity_ensemble") if progress else None
     with parallel_section(threads, N) as used:
+        # consecutive groups of members between two updates of the line (a member runs to
+        # its end in one go)
+        size = N if bar is None else max(used, -(-N // PROGRESS_GROUPS))
         with quiet():
             run, seconds = _RUN.bind(member, group, status)
             compile_time += seconds
             t_loop = time.perf_counter()
-            run(member, group, status)
+            for a in range(0, N, size):
+                b = min(a + size, N)
+                run(member, _members_of(group, a, b), status[a:b])
+                if bar is not None:
+                    bar.update(b * first.total, f"{b}/{N} members", final=b == N)
             loop_time = time.perf_counter() - t_loop
     members, failed = [], []
     for i, r in enumerate(runs):
@@ -269,6 +285,18 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
     stats = dict(members=N, threads=used, integration_time=loop_time, compile_time=compile_time,
                  setup_time=wall - loop_time, wall_time=wall)
     return _gathered(members, labels, P, stats)
+
+
+def _members_of(group: Members, a: int, b: int) -> Members:
+    """The members ``a … b − 1`` of ``group``: views of the rows of its arrays indexed by
+    member first, the same numba types (the compiled loop is not compiled again)."""
+    if a == 0 and b == group.P.shape[0]:
+        return group
+    rows = slice(a, b)
+    return group._replace(P=group.P[rows], X0=group.X0[rows],
+                          smp=Samples(*(x[rows] for x in group.smp)),
+                          infos=group.infos[rows], DQ=group.DQ[rows], DP=group.DP[rows],
+                          TH=group.TH[rows], dQ=group.dQ[rows], dP=group.dP[rows])
 
 
 def _gathered(members, labels, params, stats, cls=EnsembleSensitivityResult):

@@ -590,9 +590,6 @@ def test_progress_reports_the_steps_and_changes_no_bit(damped, start, capsys):
     assert np.array_equal(quiet_run.result.q, shown.result.q)
     with pytest.raises(TypeError, match="`progress` must be True or False"):
         fastvi.sensitivity(damped, *start, h=H, n_steps=3, progress="yes")
-    with pytest.raises(TypeError, match="does not take `progress`: it shows no progress yet"):
-        fastvi.sensitivity_ensemble(damped, np.stack([start[0]]), np.stack([start[1]]), h=H,
-                                    n_steps=3, progress=True)
 
 
 @pytest.mark.parametrize("checkpoint_every", [None, 13])

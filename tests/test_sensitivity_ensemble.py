@@ -44,6 +44,23 @@ def test_members_equal_single_sensitivities_bit_for_bit():
 
 
 @pytest.mark.slow
+def test_progress_runs_groups_of_members_and_changes_no_bit(capsys):
+    dp = fastvi.scenes.double_pendulum(damping=0.3)
+    Q0, V0 = _members(dp, [(0.9, -0.4), (2.0, 1.0), (0.1, 0.2)])
+    P = np.tile(dp.params, (3, 1))
+    P[2, 5] *= 2.0
+    kw = dict(h=0.02, n_steps=STEPS, params=P, save_every=10, threads=2)
+    quiet_run = fastvi.sensitivity_ensemble(dp, Q0, V0, **kw)
+    shown = fastvi.sensitivity_ensemble(dp, Q0, V0, progress=True, **kw)  # groups of 2 and 1
+    err = capsys.readouterr().err
+    assert f"{3 * STEPS}/{3 * STEPS} member-steps (100%)" in err and "3/3 members" in err, err
+    for name in ("q", "p", "dq", "dv", "dp"):
+        assert np.array_equal(getattr(quiet_run, name), getattr(shown, name)), name
+    with pytest.raises(TypeError, match="`progress` must be True or False"):
+        fastvi.sensitivity_ensemble(dp, Q0, V0, progress=1, **kw)
+
+
+@pytest.mark.slow
 def test_a_failed_member_is_named_never_returned_as_nan(double_pendulum):
     # member 1 falls under g = 20000: six Newton iterations cannot follow it
     Q0, V0 = _members(double_pendulum, [(1.5, 1.5), (1.5, 1.5)])

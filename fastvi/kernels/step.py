@@ -339,6 +339,28 @@ def _jacobian(md, exact, slot, of, kind, q, v, out, s1, s2, s3, n):
 
 
 @hot_inline
+def _span(B, a, n):
+    """``(lo, hi)``: row ``a`` of the (n, n) block ``B`` is zero outside columns
+    ``lo … hi − 1`` (``lo = hi = 0``: all of it)."""
+    lo = 0
+    while lo < n and B[a, lo] == 0.0:
+        lo += 1
+    if lo == n:
+        return 0, 0
+    hi = n
+    while B[a, hi - 1] == 0.0:
+        hi -= 1
+    return lo, hi
+
+
+@hot_inline
+def _add_row(A, r, c0, coef, B, a, lo, hi):
+    """``A[r, c0 + c] += coef · B[a, c]`` for ``c`` in ``lo … hi − 1``."""
+    for c in range(lo, hi):
+        A[r, c0 + c] += coef * B[a, c]
+
+
+@hot_inline
 def _nonzero(B, n):
     """Whether the (n, n) block ``B`` has an entry other than zero."""
     for a in range(n):
@@ -449,6 +471,25 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
             # adds nothing: skipping it leaves A as it was
             force_q = _nonzero(Aq, n)
             w = h * b[i]
+            if n > _MASS_ROWS_SMALL:
+                # a large model's blocks are sparse (a damping force's F_v is diagonal, a
+                # chain's Hessians are banded): each row's span of non-zeros, found once and
+                # added to every block, in the order the dense loops below add them
+                if force_q:
+                    for a in range(n):
+                        lo, hi = _span(Aq, a, n)
+                        for nu in range(s):
+                            for mu in range(1, s + 1):
+                                cA = w * L[nu, i] * L[mu, i]
+                                _add_row(A, nu * n + a, (mu - 1) * n, cA, Aq, a, lo, hi)
+                    force_q = False
+                if has_force:
+                    for a in range(n):
+                        lo, hi = _span(Fv, a, n)
+                        for nu in range(s):
+                            for mu in range(1, s + 1):
+                                cB = b[i] * L[nu, i] * Ld[mu, i]
+                                _add_row(A, nu * n + a, (mu - 1) * n, cB, Fv, a, lo, hi)
             for nu in range(s):
                 for mu in range(1, s + 1):
                     cA = w * L[nu, i] * L[mu, i]
@@ -467,7 +508,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                             for c in range(n):
                                 A[r0 + a, c0 + c] += (cM * Mi[a, c] + cB * Cq[c, a]
                                                       + cC * Cq[a, c])
-                    if has_force:
+                    if has_force and n <= _MASS_ROWS_SMALL:
                         cB = b[i] * L[nu, i] * Ld[mu, i]
                         for a in range(n):
                             for c in range(n):
@@ -500,15 +541,24 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                                                    ws.Gm, ws.si, n, m)  # Pm: spent scratch
                 else:
                     fd_constraint_hessian(fns[CJAC], qd, eta, prm, Hc, fa, ws.Gp, ws.Gm, n, m)
-                for nu in range(s):
-                    for mu in range(1, s + 1):
-                        cc = Lc[nu, j] * Lc[mu, j]
-                        if cc != 0.0:
-                            r0 = nu * n
-                            c0 = (mu - 1) * n
-                            for a in range(n):
-                                for c in range(n):
-                                    A[r0 + a, c0 + c] -= cc * Hc[a, c]
+                if n > _MASS_ROWS_SMALL:
+                    for a in range(n):
+                        lo, hi = _span(Hc, a, n)
+                        for nu in range(s):
+                            for mu in range(1, s + 1):
+                                cc = Lc[nu, j] * Lc[mu, j]
+                                if cc != 0.0:
+                                    _add_row(A, nu * n + a, (mu - 1) * n, -cc, Hc, a, lo, hi)
+                else:
+                    for nu in range(s):
+                        for mu in range(1, s + 1):
+                            cc = Lc[nu, j] * Lc[mu, j]
+                            if cc != 0.0:
+                                r0 = nu * n
+                                c0 = (mu - 1) * n
+                                for a in range(n):
+                                    for c in range(n):
+                                        A[r0 + a, c0 + c] -= cc * Hc[a, c]
         for j in range(J):
             Gj = G[j]
             col = sn + j * m

@@ -471,10 +471,12 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
             # adds nothing: skipping it leaves A as it was
             force_q = _nonzero(Aq, n)
             w = h * b[i]
+            # a large model's blocks are sparse (a damping force's F_v is diagonal, a chain's
+            # Hessians are banded): each row's span of non-zeros, found once and added to
+            # every block. Each entry gets its terms in the dense loops' order: ∂F/∂q first,
+            # ∂F/∂v last, so F_v goes here only where no mass term comes between.
+            sparse_fv = has_force and not has_mass and n > _MASS_ROWS_SMALL
             if n > _MASS_ROWS_SMALL:
-                # a large model's blocks are sparse (a damping force's F_v is diagonal, a
-                # chain's Hessians are banded): each row's span of non-zeros, found once and
-                # added to every block, in the order the dense loops below add them
                 if force_q:
                     for a in range(n):
                         lo, hi = _span(Aq, a, n)
@@ -483,7 +485,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                                 cA = w * L[nu, i] * L[mu, i]
                                 _add_row(A, nu * n + a, (mu - 1) * n, cA, Aq, a, lo, hi)
                     force_q = False
-                if has_force:
+                if sparse_fv:
                     for a in range(n):
                         lo, hi = _span(Fv, a, n)
                         for nu in range(s):
@@ -508,7 +510,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                             for c in range(n):
                                 A[r0 + a, c0 + c] += (cM * Mi[a, c] + cB * Cq[c, a]
                                                       + cC * Cq[a, c])
-                    if has_force and n <= _MASS_ROWS_SMALL:
+                    if has_force and not sparse_fv:
                         cB = b[i] * L[nu, i] * Ld[mu, i]
                         for a in range(n):
                             for c in range(n):

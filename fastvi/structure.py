@@ -204,7 +204,35 @@ def compressed_rows(P):
             np.nonzero(P)[1].astype(np.int64))
 
 
-def linearisation_patterns(PG, PA, s: int, J: int):
+def coupling(PG, PA, s: int):
+    """The coupling of the coordinates, (n, n) boolean: ``q_a`` and ``q_b`` meet in some
+    coordinate block of the Newton matrix of pattern ``PA`` (the mass, the forces and the
+    constraint Hessians) or in a constraint of G's pattern ``PG`` (m, n). Every coordinate
+    block of the exact Newton matrix, of the step or of the linearised step's extended
+    one, is a combination of such terms, so its pattern is within this."""
+    PG, PA = np.asarray(PG, dtype=bool), np.asarray(PA, dtype=bool)
+    n = PG.shape[1]
+    Gi = PG.astype(np.int64)
+    B = (Gi.T @ Gi) > 0
+    for nu in range(s):
+        for mu in range(s):
+            B |= PA[nu * n:(nu + 1) * n, mu * n:(mu + 1) * n]
+    return B
+
+
+def spans(P):
+    """``[lo_0, hi_0, lo_1, hi_1, …]``: row i of the boolean pattern ``P`` is empty outside
+    the columns ``lo_i … hi_i − 1`` (``lo = hi = 0``: an empty row)."""
+    P = np.asarray(P, dtype=bool)
+    out = np.zeros(2 * P.shape[0], dtype=np.int64)
+    for i, row in enumerate(P):
+        nz = np.flatnonzero(row)
+        if nz.size:
+            out[2 * i], out[2 * i + 1] = nz[0], nz[-1] + 1
+    return out
+
+
+def linearisation_patterns(PG, PA, s: int, J: int, diagonal_mass: bool = False):
     """What the linearised step of a structured model uses of its patterns (``PG`` of G,
     (m, n), ``PA`` of the step's Newton matrix, (N, N)), for a method of ``s`` and ``J``:
     a dict of int64 arrays for :func:`fastvi.kernels.tangent.make_sparsity`.
@@ -219,7 +247,10 @@ def linearisation_patterns(PG, PA, s: int, J: int):
       constraint Hessians (``B``, the union of its blocks and of ``Gᵀ G``), every impulse
       column through ``Gᵀ``; so ``R_q`` has ``B`` in the rows of the equations and ``G`` in
       the constraint rows, ``P_q`` has ``B``, and ``P_X`` has ``B`` in each position block
-      and ``Gᵀ`` in each impulse block (supersets)."""
+      and ``Gᵀ`` in each impulse block (supersets).
+    - ``bspan``, ``gspan``: each row's span of non-zeros (:func:`spans`) of ``B``
+      symmetrised and of G, for a constant ``diagonal_mass`` only (else empty): ``G M⁻¹``
+      then has G's pattern, and ``∂(M v)/∂q`` is zero."""
     PG, PA = np.asarray(PG, dtype=bool), np.asarray(PA, dtype=bool)
     m, n = PG.shape
     z = np.zeros(0, dtype=np.int64)
@@ -233,15 +264,14 @@ def linearisation_patterns(PG, PA, s: int, J: int):
             out["gptr"], out["gcol"] = compressed_rows(PG)
             out["grow"] = np.argsort(colour, kind="stable").astype(np.int64)
             out["gsta"] = np.searchsorted(colour[out["grow"]], np.arange(ng + 1)).astype(np.int64)
-    B = (Gi.T @ Gi) > 0
-    for nu in range(s):
-        for mu in range(s):
-            B |= PA[nu * n:(nu + 1) * n, mu * n:(mu + 1) * n]
+    B = coupling(PG, PA, s)
     T = np.vstack([B] * s + [PG] * J + [B])
     X = np.hstack([B] * s + [PG.T] * J)
     assert T.shape == (s * n + J * m + n, n) and X.shape == (n, s * n + J * m)
     out["tptr"], out["tcol"] = compressed_rows(T)
     out["xptr"], out["xcol"] = compressed_rows(X)
+    if diagonal_mass:
+        out["bspan"], out["gspan"] = spans(B | B.T), spans(PG)
     return out
 
 
@@ -333,6 +363,11 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
         si[lay.SI_A_PERM] = put(perm)
         si[lay.SI_A_BAND] = band(band_ld(kl, ku) * N)
     solvers["newton"] = "banded" if si[lay.SI_A] else "dense"
+    if si[lay.SI_A]:
+        PG = pats["G"]
+        B = coupling(PG, pats["newton"], s)
+        si[lay.SI_BSPAN] = put(spans(B | B.T))
+        si[lay.SI_GSPAN] = put(spans(PG))
     flags = model.kernel_arguments()[1]
 
     def put_g_pattern():

@@ -98,3 +98,42 @@ def test_structured_ensemble_members_are_the_single_runs(chain):
         S = fastvi.sensitivity(chain, Q0[i], V0[i], **run)
         assert np.array_equal(E.dq[i], S.dq) and np.array_equal(E.dv[i], S.dv)
 
+
+
+@pytest.mark.slow
+def test_the_spans_change_no_bit(monkeypatch):
+    """A banded plan assembles the extended Newton matrix, and forms the projection's
+    products, over each row's span of non-zeros (``ws.si[SI_BSPAN]``, ``Sparsity.bspan``):
+    the same derivatives, bit for bit, as the same plan without the spans."""
+    from fastvi import structure
+    from fastvi.kernels import layout as lay
+
+    q0, v0 = _chain_start(LINKS)
+    rng = np.random.default_rng(5)
+    N, every = 90, 30
+    K = N // every + 1
+    Lq, Lv = rng.normal(size=(K, 2 * LINKS)), rng.normal(size=(K, 2 * LINKS))
+
+    def derivatives():
+        model = fastvi.scenes.chain(LINKS, damping=0.2)  # a model of its own: its own plan
+        S = fastvi.sensitivity(model, q0, v0, h=0.01, n_steps=N, save_every=every,
+                               wrt=("q0", "params"))
+        A = fastvi.adjoint(model, q0, v0, lambda r: (Lq, Lv), h=0.01, n_steps=N,
+                           save_every=every, checkpoint_every=7)
+        return S.dq, S.dv, A.grad_q0, A.grad_v0, A.grad_params
+
+    spans = derivatives()
+    workspace, patterns = structure.workspace, structure.linearisation_patterns
+
+    def without_spans(*a, **k):
+        ws = workspace(*a, **k)
+        assert ws.si[lay.SI_BSPAN] and ws.si[lay.SI_GSPAN]
+        si = ws.si.copy()
+        si[lay.SI_BSPAN] = si[lay.SI_GSPAN] = 0
+        return ws._replace(si=si)
+
+    monkeypatch.setattr(structure, "workspace", without_spans)
+    monkeypatch.setattr(structure, "linearisation_patterns",
+                        lambda PG, PA, s, J, diagonal_mass=False: patterns(PG, PA, s, J))
+    for a, b in zip(spans, derivatives()):
+        assert np.array_equal(a, b)

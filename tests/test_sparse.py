@@ -254,3 +254,29 @@ def test_grouped_differences_give_the_exact_hessians_trajectory():
     b = fastvi.integrate(exact, q0, v0, h=0.01, n_steps=40, newton="full", check=False)
     # measured 1e-14: central differences of a quadratic constraint are exact up to round-off
     assert np.abs(a.q - b.q).max() < 1e-11
+
+
+@pytest.mark.parametrize("model", [chain(16, damping=0.3), _chain_without_constraint_hessian(24)],
+                         ids=["damped", "grouped-hessians"])
+def test_the_banded_plans_assembly_over_spans_is_the_dense_one_bit_for_bit(model):
+    """A banded plan assembles the exact Newton matrix over each row's span of the
+    coordinates' coupling and of G, and zeroes only those spans: every entry must be the
+    dense assembly's, at several states in a row (nothing stale is left outside the spans)."""
+    ws = structure.workspace(model, P2)
+    assert ws.si[lay.SI_A] == lay.SOLVE_BANDED and ws.si[lay.SI_BSPAN] and ws.si[lay.SI_GSPAN]
+    si = ws.si.copy()
+    si[lay.SI_BSPAN] = si[lay.SI_GSPAN] = 0  # the same plan, assembled densely
+    dense = lay.make_workspace(model.n, model.m, P2.s, P2.r, P2.J)._replace(
+        si=si, sb=ws.sb.copy(), structured=True)
+    md = model.kernel_data()
+    rng = np.random.default_rng(3)
+    n = model.n
+    for _ in range(3):
+        q, p = rng.standard_normal(n), rng.standard_normal(n)
+        X = 0.1 * rng.standard_normal(ws.X.size)
+        for w in (ws, dense):
+            w.X[:] = X
+            w.G[0] = model.constraint_jacobian_value(q)
+            assert assemble(md, P2.kernel_tables, 0.02, q, p, w, True) == lay.OK
+        assert np.array_equal(ws.A, dense.A)
+        assert np.count_nonzero(ws.A) > 3 * ws.A.shape[0]  # something was assembled

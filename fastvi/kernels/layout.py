@@ -174,11 +174,17 @@ SOLVE_DENSE, SOLVE_BANDED, SOLVE_SPARSE = 0, 1, 2
  # number of groups (0: one column at a time), the offsets in si of the coordinates of each
  # group (pointers, coordinates) and of the Hessian entries (a, b) each group yields
  # (pointers, rows a, columns b)
- SI_HC_NG, SI_HC_CPTR, SI_HC_COLS, SI_HC_PPTR, SI_HC_ROWS, SI_HC_BCOL) = range(33)
+ SI_HC_NG, SI_HC_CPTR, SI_HC_COLS, SI_HC_PPTR, SI_HC_ROWS, SI_HC_BCOL,
+ # a banded Newton matrix: the offsets in si of each row's span of non-zeros, (lo, hi)
+ # pairs with the columns lo … hi − 1, of the coupling of the coordinates (n rows: the
+ # union of the Newton matrix's coordinate blocks and of Gᵀ G, symmetrised) and of G (m
+ # rows). The exact Newton matrix is then assembled over these spans alone, and its
+ # entries outside them are never written (they stay the zeros of the allocation)
+ SI_BSPAN, SI_GSPAN) = range(35)
 #: length of the header of ``ws.si``; with ``si[SI_SC]`` or ``si[SI_S]`` structured the
 #: kernels use the pattern of G (a diagonal constant mass is then required), as with
 #: ``si[SI_HC_NG]`` non-zero
-SI_HEADER = 33
+SI_HEADER = 35
 #: descriptor of a sparse LU in ``ws.si`` (sparse_lu.py): offsets in si of its arrays, for
 #: an N-row system in its fill-reducing order — position in the factor storage of each
 #: pivot; of each column's entries below the diagonal (pointers, rows, positions); of each

@@ -45,7 +45,8 @@ from .layout import (FD_T, FD_T_POINTS, CHESS, CJAC, CON, F_AUGMENT, F_DIAG, F_E
                      F_MASSFN, F_TIME, F_TSLOT, FJQ, FJV, FORCE, GT, H_FG, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
                      NEEDS_FULL_NEWTON, NEWTON_FAILED, NEWTON_FULL, NONFINITE, OK, PGRAD, PHESS,
                      POT, KHESS, S_FULL,
-                     S_G, S_GV, S_ITERS, S_RES, S_WORK, S_WORK_F, SI_A, SI_GCOL, SI_GPTR,
+                     S_G, S_GV, S_ITERS, S_RES, S_WORK, S_WORK_F, SI_A, SI_BSPAN, SI_GCOL,
+                     SI_GPTR, SI_GSPAN,
                      SI_HC_BCOL,
                      SI_HC_COLS, SI_HC_CPTR, SI_HC_NG, SI_HC_PPTR, SI_HC_ROWS, SI_S, SI_SC, SINGULAR,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, SOLVE_BANDED, SOLVE_DENSE, is_timed,
@@ -54,7 +55,7 @@ from .layout import specialize as layout_specialize
 from .linalg import (augmented_mass, invert, invert_unpivoted, lu_factor, lu_factor_small,
                      lu_solve, lu_solve_small)
 
-__all__ = ["make_workspace", "assemble", "newton_matrix", "residual", "linear_force", "step", "step_kernel",
+__all__ = ["make_workspace", "assemble", "newton_matrix", "add_block", "residual", "linear_force", "step", "step_kernel",
            "take_step", "step_once", "cached_cfunc",
            "end_momentum", "velocity_residual", "hidden_residual", "constraint_rate",
            "jacobian_rate"]
@@ -339,21 +340,6 @@ def _jacobian(md, exact, slot, of, kind, q, v, out, s1, s2, s3, n):
 
 
 @hot_inline
-def _span(B, a, n):
-    """``(lo, hi)``: row ``a`` of the (n, n) block ``B`` is zero outside columns
-    ``lo … hi − 1`` (``lo = hi = 0``: all of it)."""
-    lo = 0
-    while lo < n and B[a, lo] == 0.0:
-        lo += 1
-    if lo == n:
-        return 0, 0
-    hi = n
-    while B[a, hi - 1] == 0.0:
-        hi -= 1
-    return lo, hi
-
-
-@hot_inline
 def _add_row(A, r, c0, coef, B, a, lo, hi):
     """``A[r, c0 + c] += coef · B[a, c]`` for ``c`` in ``lo … hi − 1``."""
     for c in range(lo, hi):
@@ -361,13 +347,77 @@ def _add_row(A, r, c0, coef, B, a, lo, hi):
 
 
 @hot_inline
-def _nonzero(B, n):
-    """Whether the (n, n) block ``B`` has an entry other than zero."""
+def _row_span(B, a, n, si, sp):
+    """``(lo, hi)``: row ``a`` of the (n, n) block ``B`` is zero outside columns
+    ``lo … hi − 1`` (``lo = hi = 0``: all of it). Scanned within the plan's span of that
+    row where it has one (``sp``: the offset in ``si`` of the rows' spans, 0: none): O(1)
+    a row of a banded model, and no wider than the row's own non-zeros (a damping force's
+    diagonal ``F_v`` adds one entry a row, not the coupling's)."""
+    lo, hi = (si[sp + 2 * a], si[sp + 2 * a + 1]) if sp != 0 else (0, n)
+    while lo < hi and B[a, lo] == 0.0:
+        lo += 1
+    if lo == hi:
+        return 0, 0
+    while B[a, hi - 1] == 0.0:
+        hi -= 1
+    return lo, hi
+
+
+@hot_inline
+def _nonzero(B, n, si, sp):
+    """Whether the (n, n) block ``B`` has an entry other than zero (within the rows'
+    spans ``si[sp …]`` where ``sp`` is not 0)."""
+    if sp != 0:
+        for a in range(n):
+            for c in range(si[sp + 2 * a], si[sp + 2 * a + 1]):
+                if B[a, c] != 0.0:
+                    return True
+        return False
     for a in range(n):
         for c in range(n):
             if B[a, c] != 0.0:
                 return True
     return False
+
+
+@hot_inline
+def add_block(A, r0, c0, coef, B, rows, n, si, sp):
+    """``A[r0 + a, c0 + c] += coef · B[a, c]`` for the ``rows`` rows of ``B`` (n columns),
+    over their spans ``si[sp …]`` where ``sp`` is not 0, else over all columns."""
+    if sp != 0:
+        for a in range(rows):
+            for c in range(si[sp + 2 * a], si[sp + 2 * a + 1]):
+                A[r0 + a, c0 + c] += coef * B[a, c]
+    else:
+        for a in range(rows):
+            for c in range(n):
+                A[r0 + a, c0 + c] += coef * B[a, c]
+
+
+@hot_inline
+def _set_block(A, r0, c0, coef, B, rows, n, si, sp):
+    """``A[r0 + a, c0 + c] = coef · B[a, c]``, over the spans as :func:`add_block`."""
+    if sp != 0:
+        for a in range(rows):
+            for c in range(si[sp + 2 * a], si[sp + 2 * a + 1]):
+                A[r0 + a, c0 + c] = coef * B[a, c]
+    else:
+        for a in range(rows):
+            for c in range(n):
+                A[r0 + a, c0 + c] = coef * B[a, c]
+
+
+@hot_inline
+def _clear(B, n, si, sp):
+    """``B ← 0`` (n, n), over the rows' spans as :func:`add_block`."""
+    if sp != 0:
+        for a in range(n):
+            for c in range(si[sp + 2 * a], si[sp + 2 * a + 1]):
+                B[a, c] = 0.0
+    else:
+        for a in range(n):
+            for c in range(n):
+                B[a, c] = 0.0
 
 
 @hot
@@ -386,6 +436,12 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
     with ``∂F/∂q = T_qq − ∇²V + ∂F_nc/∂q``, ``C_q = ∂(M v)/∂q`` and ``F_v = ∂F_nc/∂v``. The
     quadrature terms are formed only for what the model has: a constant mass, a potential
     linear in q and no force leave the mass block and the constraint terms alone.
+
+    With a banded plan (``ws.si[SI_BSPAN]``, :func:`fastvi.structure.plan`) each row of a
+    block is formed over its span of the coordinates' coupling (of G's pattern for the
+    constraint blocks) alone, and only those spans are zeroed: the rest of ``ws.A`` keeps
+    the zeros of its allocation. The assembly then costs O(nnz), not O(N²), and every
+    entry it forms is the same, bit for bit.
     """
     md, tabs, ws = own(md_), own(tabs_), own(ws_)
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
@@ -400,9 +456,16 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
     sn = s * n
     N = sn + J * m
     inv_h = 1.0 / h
-    for k in range(N):
-        for l in range(N):
-            A[k, l] = 0.0
+    si = ws.si
+    bsp, gsp = si[SI_BSPAN], si[SI_GSPAN]
+    if bsp != 0:
+        for nu in range(s):
+            for mu in range(s):
+                _clear(A[nu * n:(nu + 1) * n, mu * n:(mu + 1) * n], n, si, bsp)
+    else:
+        for k in range(N):
+            for l in range(N):
+                A[k, l] = 0.0
 
     if not has_mass:
         # the derivative of the residual's quadratic form, row 0 as its sum (as there)
@@ -421,9 +484,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                     for a in range(n):
                         A[r0 + a, c0 + a] = cM * Mc[a, a]
                 else:
-                    for a in range(n):
-                        for c in range(n):
-                            A[r0 + a, c0 + c] = cM * Mc[a, c]
+                    _set_block(A, r0, c0, cM, Mc, n, n, si, bsp)
 
     if has_mass or has_force or flags[F_LINPOT] == 0:
         Mi, Fv = ws.Mi, ws.Fv
@@ -440,22 +501,16 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                 vi[a] = va * inv_h
             # ∂F/∂q = T_qq − V_qq (+ ∂F_nc/∂q); F, Pm, fa are spent scratch of the residual
             if flags[F_LINPOT] != 0:
-                for a in range(n):
-                    for c in range(n):
-                        Aq[a, c] = 0.0
+                _clear(Aq, n, si, bsp)
             else:
                 _jacobian(md, flags[F_EX_PHESS], PHESS, PGRAD, _FD_HESSIAN, qi, qi, Aq, fa, F,
                           Pm, n)
-            for a in range(n):
-                for c in range(n):
-                    Aq[a, c] = -Aq[a, c]
+            _set_block(Aq, 0, 0, -1.0, Aq, n, n, si, bsp)  # −x exactly, as −0.0 for 0.0
             if has_mass:
                 fns[MASS](ptr(qi), ptr(qi), ptr(prm), ptr(Mi))
                 _jacobian(md, flags[F_EX_KHESS], KHESS, KGRAD, _FD_HESSIAN, qi, vi, Hc, fa, F,
                           Pm, n)
-                for a in range(n):
-                    for c in range(n):
-                        Aq[a, c] += Hc[a, c]
+                add_block(Aq, 0, 0, 1.0, Hc, n, n, si, bsp)
                 if flags[F_EX_MJAC] != 0:
                     fns[MJAC](ptr(qi), ptr(vi), ptr(prm), ptr(Cq))
                 else:
@@ -463,13 +518,11 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
             if has_force:
                 # ∂F_nc/∂q joins the force block, ∂F_nc/∂v the mixed block (docs/method.md §11)
                 _jacobian(md, flags[F_EX_FJQ], FJQ, FORCE, _FD_Q, qi, vi, Hc, fa, F, Pm, n)
-                for a in range(n):
-                    for c in range(n):
-                        Aq[a, c] += Hc[a, c]
+                add_block(Aq, 0, 0, 1.0, Hc, n, n, si, bsp)
                 _jacobian(md, flags[F_EX_FJV], FJV, FORCE, _FD_V, qi, vi, Fv, Ma[0], fa, F, n)
             # a block of zeros (a linear potential and a force of v alone: viscous damping)
             # adds nothing: skipping it leaves A as it was
-            force_q = _nonzero(Aq, n)
+            force_q = _nonzero(Aq, n, si, bsp)
             w = h * b[i]
             # a large model's blocks are sparse (a damping force's F_v is diagonal, a chain's
             # Hessians are banded): each row's span of non-zeros, found once and added to
@@ -479,7 +532,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
             if n > _MASS_ROWS_SMALL:
                 if force_q:
                     for a in range(n):
-                        lo, hi = _span(Aq, a, n)
+                        lo, hi = _row_span(Aq, a, n, si, bsp)
                         for nu in range(s):
                             for mu in range(1, s + 1):
                                 cA = w * L[nu, i] * L[mu, i]
@@ -487,7 +540,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                     force_q = False
                 if sparse_fv:
                     for a in range(n):
-                        lo, hi = _span(Fv, a, n)
+                        lo, hi = _row_span(Fv, a, n, si, bsp)
                         for nu in range(s):
                             for mu in range(1, s + 1):
                                 cB = b[i] * L[nu, i] * Ld[mu, i]
@@ -506,15 +559,18 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                         cM = b[i] * Ld[nu, i] * Ld[mu, i] * inv_h
                         cB = b[i] * L[nu, i] * Ld[mu, i]
                         cC = b[i] * Ld[nu, i] * L[mu, i]
-                        for a in range(n):
-                            for c in range(n):
-                                A[r0 + a, c0 + c] += (cM * Mi[a, c] + cB * Cq[c, a]
-                                                      + cC * Cq[a, c])
+                        if bsp != 0:
+                            for a in range(n):
+                                for c in range(si[bsp + 2 * a], si[bsp + 2 * a + 1]):
+                                    A[r0 + a, c0 + c] += (cM * Mi[a, c] + cB * Cq[c, a]
+                                                          + cC * Cq[a, c])
+                        else:
+                            for a in range(n):
+                                for c in range(n):
+                                    A[r0 + a, c0 + c] += (cM * Mi[a, c] + cB * Cq[c, a]
+                                                          + cC * Cq[a, c])
                     if has_force and not sparse_fv:
-                        cB = b[i] * L[nu, i] * Ld[mu, i]
-                        for a in range(n):
-                            for c in range(n):
-                                A[r0 + a, c0 + c] += cB * Fv[a, c]
+                        add_block(A, r0, c0, b[i] * L[nu, i] * Ld[mu, i], Fv, n, n, si, bsp)
 
     if m > 0:
         qd = qi
@@ -525,9 +581,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                 cl = Lc[mu, j]
                 if cl != 0.0:
                     c0 = (mu - 1) * n
-                    for a in range(m):
-                        for c in range(n):
-                            A[row + a, c0 + c] = cl * Gj[a, c]
+                    _set_block(A, row, c0, cl, Gj, m, n, si, gsp)
             if j < J:
                 _at(md, ws, h, tabs.d[j])
                 for a in range(n):
@@ -545,7 +599,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                     fd_constraint_hessian(fns[CJAC], qd, eta, prm, Hc, fa, ws.Gp, ws.Gm, n, m)
                 if n > _MASS_ROWS_SMALL:
                     for a in range(n):
-                        lo, hi = _span(Hc, a, n)
+                        lo, hi = _row_span(Hc, a, n, si, bsp)
                         for nu in range(s):
                             for mu in range(1, s + 1):
                                 cc = Lc[nu, j] * Lc[mu, j]
@@ -568,9 +622,14 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                 cl = Lc[nu, j]
                 if cl != 0.0:
                     r0 = nu * n
-                    for a in range(n):
+                    if gsp != 0:  # G's rows by their spans: the transposed block by columns
                         for c in range(m):
-                            A[r0 + a, col + c] = -cl * Gj[c, a]
+                            for a in range(si[gsp + 2 * c], si[gsp + 2 * c + 1]):
+                                A[r0 + a, col + c] = -cl * Gj[c, a]
+                    else:
+                        for a in range(n):
+                            for c in range(m):
+                                A[r0 + a, col + c] = -cl * Gj[c, a]
 
 
 # ----------------------------------------------------------------------------- predictor, full Newton

@@ -52,7 +52,7 @@ from .._numba import byref, erased, hot, hot_inline, njit, only_if, own, ptr
 from .drive import run, step_hook
 from .layout import specialize as layout_specialize
 from .layout import (CHESS, CJAC, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_MJAC, F_MASSFN, F_TIME,
-                     F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SI_A,
+                     F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SI_A, SI_BSPAN, SI_GSPAN,
                      SI_A_KL, SI_A_KU, SI_A_PERM, SI_S, SINGULAR, SOLVE_BANDED, SOLVE_DENSE,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, P_CJAC, P_CON,
                      P_FORCE, P_KGRAD, P_MASS, P_PGRAD, ModelData, Samples, is_timed,
@@ -61,8 +61,8 @@ from .banded import (band_factor, band_ld, band_solve, band_solve_transposed, gm
                      gmg_solve)
 # inlined: with the sizes as constants (sized_twin) the factorisations and solves unroll
 from .linalg import lu_factor_small, lu_solve_small
-from .step import (fd_constraint_hessian, fd_momentum_jacobian, assemble, end_momentum,
-                   jacobian_rate, linear_force)
+from .step import (add_block, fd_constraint_hessian, fd_momentum_jacobian, assemble,
+                   end_momentum, jacobian_rate, linear_force)
 
 __all__ = ["PointWork", "TangentWork", "extended_tables", "make_point_work",
            "make_tangent_work", "point", "point_terms", "linearise", "push", "pull",
@@ -97,6 +97,10 @@ Sparsity = namedtuple("Sparsity", [
     # of P_X (n rows), supersets from the step's Newton pattern: their products then cost
     # O(nnz), not O(N n) (banded plans only; empty: dense)
     "tptr", "tcol", "xptr", "xcol",
+    # each row's span of non-zeros, (lo, hi) pairs (:func:`fastvi.structure.spans`), of
+    # the coordinates' coupling (n rows: H_η, C_q) and of G (m rows: G, H_v, and G M⁻¹ of
+    # a diagonal mass): the projection's products then cost O(nnz) (banded plans only)
+    "bspan", "gspan",
 ])
 
 #: the linearised step (:func:`linearise`) and the tangent state of the directions
@@ -187,12 +191,12 @@ def make_sparsity(band=None, patterns=None):
     z = np.zeros(0, dtype=np.int64)
     perm, kl, ku = (z, 0, 0) if band is None else band
     p = patterns or {}
-    if band is None:  # the patterns of R_q, P_q, P_X serve the banded factorisation only
-        p = {k: v for k, v in p.items() if k[0] == "g"}
+    if band is None:  # the patterns of R_q, P_q, P_X and the spans serve banded plans only
+        p = {k: v for k, v in p.items() if k in ("gptr", "gcol", "gsta", "grow")}
     get = lambda k: p.get(k, z)  # noqa: E731
     return Sparsity(np.asarray(perm, dtype=np.int64), int(kl), int(ku), get("gptr"),
                     get("gcol"), get("gsta"), get("grow"), get("tptr"), get("tcol"),
-                    get("xptr"), get("xcol"))
+                    get("xptr"), get("xcol"), get("bspan"), get("gspan"))
 
 
 @njit
@@ -260,6 +264,21 @@ def step_band(ws):
 
 
 # ----------------------------------------------------------------------------- second derivatives
+@hot_inline
+def _clear_rows(B, rows, n, spans):
+    """``B ← 0`` (rows, n) over each row's span ``spans`` (empty: all of it). A callback
+    with a declared pattern writes only its non-zeros, and entries outside the spans are
+    never written: they keep the zeros of the allocation."""
+    if spans.shape[0] > 0:
+        for c in range(rows):
+            for a in range(spans[2 * c], spans[2 * c + 1]):
+                B[c, a] = 0.0
+    else:
+        for c in range(rows):
+            for a in range(n):
+                B[c, a] = 0.0
+
+
 @hot
 def _hessian(md, q, eta, out, pw, n, m):
     """``out = Σ_c η_c ∇²g_c(q)``: the callback, or the full Newton's differences of G."""
@@ -287,16 +306,19 @@ def point(md_, q, v, eta, pw_):
             fns[MJAC](ptr(q), ptr(v), ptr(prm), ptr(Cq))
         else:
             fd_momentum_jacobian(fns[MASS], q, v, prm, Cq, pw.qa, pw.Ma, n)
-    else:
+    elif flags[F_DIAG] != 0 and flags[F_AUGMENT] == 0:
+        # nothing writes M off its diagonal nor C_q (a constant mass, inverted by its
+        # reciprocals): the zeros of the allocation stay, and the diagonal is copied in O(n)
         for a in range(n):
+            M[a, a] = md.Mc[a, a]
+    else:
+        for a in range(n):  # M is factored in place (_factor_projection): copied anew
             for b in range(n):
                 M[a, b] = md.Mc[a, b]
                 Cq[a, b] = 0.0
     if m == 0:
         return
-    for c in range(m):
-        for a in range(n):
-            G[c, a] = 0.0  # a callback with a declared pattern writes only its non-zeros
+    _clear_rows(G, m, n, pw.sp.gspan)
     fns[CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
     _hessian(md, q, eta, pw.He, pw, n, m)
     if pw.sp.gsta.shape[0] > 0:
@@ -364,15 +386,13 @@ def _step_sizes(wx):
 
 
 @hot_inline
-def _start_jacobian(md, qk, wx, n, m):
+def _start_jacobian(md, qk, wx, sp, n, m):
     """``wx.G[0] = G(q_k)``: the extended step's first constraint point, as the step has it
     (at ``t_k`` for time-dependent constraints; leaves the time entry there)."""
     if md.flags[F_TIME] != 0:
         md.prm[md.flags[F_TSLOT]] = wx.time[0]
     G0 = wx.G[0]
-    for c in range(m):
-        for a in range(n):
-            G0[c, a] = 0.0  # a callback with a declared pattern writes only its non-zeros
+    _clear_rows(G0, m, n, sp.gspan)
     md.fns[CJAC](ptr(qk), ptr(qk), ptr(md.prm), ptr(G0))
 
 
@@ -400,7 +420,7 @@ def _theta_differences(md_, tx_, h, q1, P, tw_):
             prm[l] = th0 + sgn * dt
             linear_force(md, wx, tw.qk)
             if m > 0:
-                _start_jacobian(md, tw.qk, wx, n, m)
+                _start_jacobian(md, tw.qk, wx, tw.pt.sp, n, m)
             # a bool of run time: a literal would compile `assemble` once more for its type
             st = assemble(md_, tx_, h, tw.qk, tw.pk, wxp, N < 0)
             if st != OK:
@@ -770,7 +790,7 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
     wx.time[0] = time[0]
     wx.time[1] = time[1]
     if m > 0:
-        _start_jacobian(md, tw.qk, wx, n, m)
+        _start_jacobian(md, tw.qk, wx, tw.pt.sp, n, m)
     # the matrix too, asked by a bool of run time: a literal would compile `assemble` once
     # more for its type
     st = assemble(md_, tx_, h, tw.qk, tw.pk, byref(wx), N > 0)
@@ -786,9 +806,7 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
         for nu in range(s + 1):
             cl = tx.Lc[nu, 0]
             if cl != 0.0:
-                for a in range(n):
-                    for b in range(n):
-                        A[nu * n + a, tcol + b] -= cl * Hs[a, b]
+                add_block(A, nu * n, tcol, -cl, Hs, n, n, wx.si, wx.si[SI_BSPAN])
     sp = tw.pt.sp
     banded = sp.perm.shape[0] > 0
     if sp.tptr.shape[0] > 0:  # over the patterns: O(nnz)
@@ -855,10 +873,16 @@ def _factor_projection(md, tw, wx, pw, sp, n, m):
             for a in range(n):
                 if not (M[a, a] != 0.0):
                     return SINGULAR_MASS
-            for a in range(n):
-                inv = 1.0 / M[a, a]
+            gs = sp.gspan
+            if gs.shape[0] > 0:  # G's pattern: the rest of Y keeps its zeros
                 for c in range(m):
-                    Yg[c, a] = G[c, a] * inv
+                    for a in range(gs[2 * c], gs[2 * c + 1]):
+                        Yg[c, a] = G[c, a] * (1.0 / M[a, a])
+            else:
+                for a in range(n):
+                    inv = 1.0 / M[a, a]
+                    for c in range(m):
+                        Yg[c, a] = G[c, a] * inv
             si = tw.ws.si
             if si[SI_S] != SOLVE_DENSE:  # the step's own plan for G M⁻¹ Gᵀ (banded.py)
                 if _projection_factor(wx, G, md.Mc, m, tw.pivm) != 0:
@@ -983,9 +1007,7 @@ def _grouped_hv(ws, md, q, v, pw, n, m):
     group's sum is that of the one constraint whose pattern holds b, and the others add
     zeros there. The rows of :func:`point` for ``m`` Hessians in O(n²) each."""
     sp, Hv, Hs, e = pw.sp, pw.Hv, pw.Hs, pw.e
-    for c in range(m):
-        for b in range(n):
-            Hv[c, b] = 0.0
+    _clear_rows(Hv, m, n, sp.gspan)
     for k in range(sp.gsta.shape[0] - 1):
         for i in range(m):
             e[i] = 0.0
@@ -1086,13 +1108,54 @@ def _tq_row(tw, i, x, acc, n):
 
 
 @hot_inline
-def _minus_product(out, x, A, y, n):
-    """``out = x − A y`` (n,)."""
-    for a in range(n):
-        acc = x[a]
-        for b in range(n):
-            acc -= A[a, b] * y[b]
-        out[a] = acc
+def _minus_product(out, x, A, y, n, spans):
+    """``out = x − A y`` (n,), over the rows' spans of ``A`` (empty: all of it)."""
+    if spans.shape[0] > 0:
+        for a in range(n):
+            acc = x[a]
+            for b in range(spans[2 * a], spans[2 * a + 1]):
+                acc -= A[a, b] * y[b]
+            out[a] = acc
+    else:
+        for a in range(n):
+            acc = x[a]
+            for b in range(n):
+                acc -= A[a, b] * y[b]
+            out[a] = acc
+
+
+@hot_inline
+def _minus_transposed_g(z, G, w, m, n, spans):
+    """``z −= Gᵀ w``: by the rows' spans of G (empty: all of it) scattered row by row, so
+    that each entry takes its terms in the order of the dense sum."""
+    if spans.shape[0] > 0:
+        for e in range(m):
+            for a in range(spans[2 * e], spans[2 * e + 1]):
+                z[a] -= G[e, a] * w[e]
+    else:
+        for a in range(n):
+            acc = z[a]
+            for e in range(m):
+                acc -= G[e, a] * w[e]
+            z[a] = acc
+
+
+@hot_inline
+def _transposed_product(out, A, y, n, spans):
+    """``out −= Aᵀ y`` (n,) for a matrix ``A`` whose pattern is symmetric, over the rows'
+    spans (empty: all of it): column ``a`` of ``A`` has row ``a``'s span."""
+    if spans.shape[0] > 0:
+        for a in range(n):
+            acc = 0.0
+            for b in range(spans[2 * a], spans[2 * a + 1]):
+                acc += A[b, a] * y[b]
+            out[a] -= acc
+    else:
+        for a in range(n):
+            acc = 0.0
+            for b in range(n):
+                acc += A[b, a] * y[b]
+            out[a] -= acc
 
 
 @hot
@@ -1115,6 +1178,7 @@ def push(tw_):
     G, He, Hv, Cq, Yg = pw.G, pw.He, pw.Hv, pw.Cq, tw.Yg
     z, u, w = tw.z, tw.u, tw.w
     sp = pw.sp
+    gs = sp.gspan
     sparse = sp.tptr.shape[0] > 0
     bad = False
     for c in range(tw.dq.shape[0]):
@@ -1137,20 +1201,23 @@ def push(tw_):
                 for j in range(N):
                     acc -= PX[a, j] * y[j]
             dP[c, a] = acc
-        _minus_product(z, tw.dP[c], He, dq1, n)
+        _minus_product(z, tw.dP[c], He, dq1, n, sp.bspan)
         if m > 0:
-            _minus_product(u, z, Cq, dq1, n)
-            for e in range(m):
-                acc = 0.0
-                for a in range(n):
-                    acc += Yg[e, a] * u[a] + Hv[e, a] * dq1[a]
-                w[e] = acc
-            _solve_projection(tw, w, m, False)
-            for a in range(n):
-                acc = z[a]
+            _minus_product(u, z, Cq, dq1, n, sp.bspan)
+            if gs.shape[0] > 0:
                 for e in range(m):
-                    acc -= G[e, a] * w[e]
-                z[a] = acc
+                    acc = 0.0
+                    for a in range(gs[2 * e], gs[2 * e + 1]):
+                        acc += Yg[e, a] * u[a] + Hv[e, a] * dq1[a]
+                    w[e] = acc
+            else:
+                for e in range(m):
+                    acc = 0.0
+                    for a in range(n):
+                        acc += Yg[e, a] * u[a] + Hv[e, a] * dq1[a]
+                    w[e] = acc
+            _solve_projection(tw, w, m, False)
+            _minus_transposed_g(z, G, w, m, n, gs)
         for a in range(n):
             x = z[a]
             for l in range(npar):
@@ -1187,32 +1254,40 @@ def pull(md_, tx_, h, tw_, q1, v1, eta, lq, lp, lth):
     for a in range(n):
         zb[a] = lp[a]
         dq1b[a] = lq[a]
+    bs, gs = pw.sp.bspan, pw.sp.gspan
     if m > 0:
         for e in range(m):  # w̄ = −G λp, then S⁻ᵀ w̄
+            lo, hi = (gs[2 * e], gs[2 * e + 1]) if gs.shape[0] > 0 else (0, n)
             acc = 0.0
-            for a in range(n):
+            for a in range(lo, hi):
                 acc -= G[e, a] * lp[a]
             wb[e] = acc
         _solve_projection(tw, wb, m, True)
-        for a in range(n):  # ū = Yᵀ w̄ ; δq1 gains H_vᵀ w̄
-            acc = 0.0
-            acc2 = 0.0
+        if gs.shape[0] > 0:
+            # ū = Yᵀ w̄ ; δq1 gains H_vᵀ w̄: scattered row by row, so that each entry
+            # gathers its terms in the order of the dense sums below
+            for a in range(n):
+                u[a] = 0.0
+                dq1b[a] = 0.0
             for e in range(m):
-                acc += Yg[e, a] * wb[e]
-                acc2 += Hv[e, a] * wb[e]
-            u[a] = acc
-            dq1b[a] += acc2
+                for a in range(gs[2 * e], gs[2 * e + 1]):
+                    u[a] += Yg[e, a] * wb[e]
+                    dq1b[a] += Hv[e, a] * wb[e]
+            for a in range(n):
+                dq1b[a] = lq[a] + dq1b[a]
+        else:
+            for a in range(n):  # ū = Yᵀ w̄ ; δq1 gains H_vᵀ w̄
+                acc = 0.0
+                acc2 = 0.0
+                for e in range(m):
+                    acc += Yg[e, a] * wb[e]
+                    acc2 += Hv[e, a] * wb[e]
+                u[a] = acc
+                dq1b[a] += acc2
         for a in range(n):  # u = z − C_q δq1
-            acc = 0.0
-            for b in range(n):
-                acc += Cq[b, a] * u[b]
             zb[a] += u[a]
-            dq1b[a] -= acc
-    for a in range(n):  # z = δP − H_η δq1
-        acc = 0.0
-        for b in range(n):
-            acc += He[b, a] * zb[b]
-        dq1b[a] -= acc
+        _transposed_product(dq1b, Cq, u, n, bs)
+    _transposed_product(dq1b, He, zb, n, bs)  # z = δP − H_η δq1
     # δP = P_q δq + P_θ θ − P_X y ;  δq1 = δq − y_s
     for l in range(npar):
         acc = 0.0

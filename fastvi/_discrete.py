@@ -29,7 +29,7 @@ from .results import Result
 from .status import Status
 from .tables import Method
 
-__all__ = ["Run", "refuse", "prepare", "directions", "param_indices", "tangent_work",
+__all__ = ["Run", "refuse", "prepare", "checked_model", "directions", "param_indices", "tangent_work",
            "initial_tangent", "theta_derivative", "velocity_derivatives", "finish"]
 
 
@@ -102,9 +102,7 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
     does, and refusing what ``what`` — the caller's name — does not differentiate) and
     allocate its kernels' arguments."""
     started = time.perf_counter()
-    if not isinstance(model, Model):
-        raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
-    n = model.n
+    n = checked_model(model).n
     q0 = valid.vector(q0, "q0", n)
     v0 = valid.vector(v0, "v0", n)
     prm = valid.params(params, model).copy()
@@ -134,8 +132,10 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
     # the structured paths of the linearised step are compiled for structured workspaces
     # only (_numba.only_if): a model whose plan keeps every solve dense gets none of them
     patterns = structure.plan(model, meth, prm, solver).patterns if ws.structured else {}
+    flags = md.flags
+    diagonal = bool(flags[lay.F_DIAG] and not flags[lay.F_MASSFN] and not flags[lay.F_AUGMENT])
     sparsity = make_sparsity(step_band(ws), structure.linearisation_patterns(
-        patterns["G"], patterns["newton"], meth.s, meth.J) if patterns else None)
+        patterns["G"], patterns["newton"], meth.s, meth.J, diagonal) if patterns else None)
     specialize = valid.optional_flag(specialize, "specialize")
     # the stages compiled for the model's sizes when integrate has compiled them: the same
     # steps bit for bit, at half the cost
@@ -185,14 +185,21 @@ def theta_derivative(f, prm: np.ndarray, l: int) -> np.ndarray:
     return acc / (12.0 * dt)
 
 
-def directions(wrt, n: int, k: int, param_index) -> tuple[np.ndarray, list[str]]:
+def checked_model(model) -> Model:
+    """``model``, or a TypeError that names it."""
+    if not isinstance(model, Model):
+        raise TypeError(f"`model` must be a fastvi.Model, got {type(model).__name__}")
+    return model
+
+
+def directions(wrt, n: int, k: int, param_index, fixed=()) -> tuple[np.ndarray, list[str]]:
     """``(D, labels)``: the raw directions (d, 2n + k) in ``(δq0, δv0, δθ)`` of ``wrt`` — a
     sequence of the names ``"q0"``, ``"v0"``, ``"params"`` (``param_index`` the parameters
-    of ``"params"``, default all) or an array (2n + k, d) of directions — and a label for
-    each."""
+    of ``"params"``, default all but the model's ``fixed`` ones) or an array (2n + k, d) of
+    directions — and a label for each."""
     if isinstance(wrt, str):
         wrt = (wrt,)
-    idx = list(range(k)) if param_index is None else param_indices(param_index, k)
+    idx = param_indices(param_index, k, fixed)
     if isinstance(wrt, np.ndarray) or (isinstance(wrt, (list, tuple)) and wrt
                                        and not isinstance(wrt[0], str)):
         D = np.asarray(wrt, dtype=float)
@@ -202,6 +209,10 @@ def directions(wrt, n: int, k: int, param_index) -> tuple[np.ndarray, list[str]]
             raise ValueError(f"`wrt` as an array must hold finite directions (δq0, δv0, δθ) as "
                              f"columns, shape ({2 * n + k}, d) for n = {n}, k = {k}; got shape "
                              f"{D.shape}")
+        for l in fixed:
+            if np.any(D[2 * n + l] != 0.0):
+                raise ValueError(f"`wrt` moves params[{l}], which the model marks fixed "
+                                 f"({_FIXED}): set row {2 * n + l} of the directions to zero")
         return np.ascontiguousarray(D.T), [f"direction[{i}]" for i in range(D.shape[1])]
     rows, labels = [], []
     names = list(wrt)
@@ -229,7 +240,16 @@ def directions(wrt, n: int, k: int, param_index) -> tuple[np.ndarray, list[str]]
     return np.array(rows), labels
 
 
-def param_indices(param_index, k: int) -> list[int]:
+#: why a fixed parameter has no derivative, for the errors that name one
+_FIXED = ("`Model.fixed_params`: data its callbacks read, such as an index, not a quantity; "
+          "it has no derivative")
+
+
+def param_indices(param_index, k: int, fixed=()) -> list[int]:
+    """The parameters to differentiate by: ``param_index`` checked against the ``k``
+    parameters and the model's ``fixed`` ones, or (None) every parameter but those."""
+    if param_index is None:
+        return [l for l in range(k) if l not in fixed]
     idx = np.atleast_1d(np.asarray(param_index))
     if idx.size == 0:
         return []
@@ -241,6 +261,9 @@ def param_indices(param_index, k: int) -> list[int]:
             raise ValueError(f"`param_index` entry {int(i)} is out of range for k = {k} parameters")
         if int(i) in out:
             raise ValueError(f"`param_index` lists parameter {int(i)} twice")
+        if int(i) in fixed:
+            raise ValueError(f"`param_index` names params[{int(i)}], which the model marks "
+                             f"fixed ({_FIXED}); leave it out")
         out.append(int(i))
     return out
 

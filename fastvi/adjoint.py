@@ -160,7 +160,8 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
         ``cotangent(result) -> (dJ_dq, dJ_dv)``, (K, n) each at the samples of
         ``result`` (a :class:`fastvi.Result`); ``dJ_dv`` may be None.
     param_index : sequence of int, optional
-        The parameters to differentiate (default: all ``k``).
+        The parameters to differentiate (default: all ``k`` but ``model.fixed_params``,
+        which cannot be named).
     initial_state : callable, optional
         ``initial_state(params) -> (q0, v0)``, as in :func:`fastvi.sensitivity`.
     checkpoint_every : int, optional
@@ -184,6 +185,9 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     """
     disc.refuse(unsupported, "fastvi.adjoint")
     progress = valid.flag(progress, "progress")
+    # checked before the run: a bad index is reported without compiling or integrating
+    pidx = disc.param_indices(param_index, disc.checked_model(model).params.shape[0],
+                              model.fixed_params)
     run = disc.prepare(model, q0, v0, h=h, t_end=t_end, n_steps=n_steps, t0=t0, t_span=t_span,
                        method=method, save_every=save_every, tol=tol, max_iter=max_iter,
                        newton=newton, params=params, solver=solver, check=check,
@@ -219,7 +223,6 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
             break
     loop_time = time.perf_counter() - t_loop
     result = disc.finish(run, int(status), loop_time, 0.0, "the adjoint")
-    pidx = list(range(k)) if param_index is None else disc.param_indices(param_index, k)
     Lq, Lp, direct = _cotangents(run, result, cotangent, pidx)
     tw = disc.tangent_work(run, 0, pidx)  # no forward directions: pull contracts R_θ
     lq, lp, lth = np.zeros(n), np.zeros(n), np.zeros(max(len(pidx), 1))

@@ -92,7 +92,10 @@ class TrajectoryFit:
             raise TypeError(f"`observe` must be callable, got {observe!r}")
         self.model = model
         self.params = valid.params(params, model).copy()
-        self.param_index = disc.param_indices(param_index, self.params.shape[0])
+        if param_index is None:
+            raise TypeError("`param_index` is required: name the parameters to fit")
+        self.param_index = disc.param_indices(param_index, self.params.shape[0],
+                                              model.fixed_params)
         if not self.param_index:
             raise ValueError("`param_index` is empty: name the parameters to fit")
         self.data = np.asarray(data, dtype=float)

@@ -502,6 +502,13 @@ class Model:
         sensitivities and the adjoint uses them instead of differences in θ
         (``docs/custom-model.md``, "Derivatives by the parameters"). Not for a
         ``time_dependent`` model with constraints.
+    fixed_params : sequence of int, optional
+        Entries of ``params`` that are data the callbacks read rather than quantities:
+        indices, counts, kinds (a tree's parent of each body, a mechanism's joint table).
+        The derivatives by the parameters (:func:`fastvi.sensitivity`,
+        :func:`fastvi.adjoint`, :class:`fastvi.TrajectoryFit`) leave them out by default,
+        and naming one there is an error: a difference in such an entry changes what the
+        model is, not a quantity of it.
     name : str, optional
         A label used in summaries and error messages.
 
@@ -556,11 +563,14 @@ class Model:
         constraint_time_derivative: Callable | None = None,
         constraint_jacobian_pattern=None,
         param_derivatives=None,
+        fixed_params=(),
         name: str | None = None,
     ):
         self.n = _as_int(n, "n", 1)
         self.m = _as_int(m, "m", 0)
         self.params = _as_params(params)
+        #: entries of ``params`` the derivatives leave out (sorted indices)
+        self.fixed_params = _as_fixed(fixed_params, self.params.shape[0])
         self.name = name or "model"
         self.recipe = None  # set by the scenes: pickled as this recipe
         self.drawing = None  # a fastvi.drawing.Drawing (the scenes set one)
@@ -715,7 +725,8 @@ class Model:
         kwargs = dict(params=self.params, mass=self._mass_arg, name=self.name,
                       time_dependent=self.time_dependent,
                       constraint_jacobian_pattern=self.constraint_jacobian_pattern,
-                      param_derivatives=self._param_arg(), **funcs)
+                      param_derivatives=self._param_arg(), fixed_params=self.fixed_params,
+                      **funcs)
         return (_model_from_kwargs, (self.n, self.m, kwargs))
 
     # ------------------------------------------------------------------ compiled form
@@ -1016,6 +1027,20 @@ def _evaluate(direct, q, v, p, shape):
 
 def _model_from_kwargs(n, m, kwargs):
     return Model(n, m, **kwargs)
+
+
+def _as_fixed(fixed, k: int) -> tuple:
+    """``fixed_params`` as sorted unique indices into the ``k`` parameters."""
+    idx = np.atleast_1d(np.asarray(fixed if fixed is not None else (), dtype=object))
+    out = set()
+    for i in idx:
+        if isinstance(i, (bool, np.bool_)) or not isinstance(i, (int, np.integer)):
+            raise TypeError(f"`fixed_params` must be parameter indices (ints), got {fixed!r}")
+        if not 0 <= int(i) < k:
+            raise ValueError(f"`fixed_params` entry {int(i)} is out of range for k = {k} "
+                             "parameters")
+        out.add(int(i))
+    return tuple(sorted(out))
 
 
 def _is_zero(x) -> bool:

@@ -203,8 +203,9 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
         ``param_index``, in the order named; or the columns of an array of raw directions
         ``(δq0, δv0, δθ)`` (all ``k`` parameters).
     param_index : sequence of int, optional
-        The parameters of ``"params"`` (default: all ``k``). Parameters are the entries of
-        the parameter vector the model's callbacks read; a constant mass matrix is not one.
+        The parameters of ``"params"`` (default: all ``k`` but ``model.fixed_params``, which
+        cannot be named). Parameters are the entries of the parameter vector the model's
+        callbacks read; a constant mass matrix is not one.
     initial_state : callable, optional
         ``initial_state(params) -> (q0, v0)``: where the initial state itself depends on the
         parameters (initial angles of rods whose lengths are fitted). Its derivative, by
@@ -247,12 +248,14 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     """
     disc.refuse(unsupported, "fastvi.sensitivity")
     progress = valid.flag(progress, "progress")
+    # checked before the run: a bad `wrt` is reported without compiling or integrating
+    D, labels = disc.directions(wrt, disc.checked_model(model).n, model.params.shape[0],
+                                param_index, model.fixed_params)
     run = disc.prepare(model, q0, v0, h=h, t_end=t_end, n_steps=n_steps, t0=t0, t_span=t_span,
                        method=method, save_every=save_every, tol=tol, max_iter=max_iter,
                        newton=newton, params=params, solver=solver, check=check,
                        monitor=monitor, what="the sensitivity", specialize=specialize)
     n, k = model.n, run.prm.shape[0]
-    D, labels = disc.directions(wrt, n, k, param_index)
     dq0, dp0, pidx, dth = disc.initial_tangent(run, D, initial_state)
     meth = run.meth
     d = D.shape[0]

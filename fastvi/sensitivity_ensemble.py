@@ -214,7 +214,7 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
             for i in range(N)]
     first = runs[0]
     meth, m, k = first.meth, model.m, P.shape[1]
-    D, labels = disc.directions(wrt, n, k, param_index)
+    D, labels = disc.directions(wrt, n, k, param_index, model.fixed_params)
     d = D.shape[0]
     tangents = [disc.initial_tangent(r, D) for r in runs]
     pidx = tangents[0][2]

@@ -309,6 +309,78 @@ def test_errors_name_what_is_not_defined(double_pendulum, dp_start):
                        n_steps=5)
 
 
+def test_fixed_parameters_are_left_out_and_naming_one_is_an_error():
+    """A tree keeps each body's parent in ``params`` (what the callbacks read): a difference
+    there changes the tree's shape, and the linearised step would find G M⁻¹ Gᵀ singular.
+    The derivatives leave such entries out; naming one is an error before any run."""
+    tree = fastvi.scenes.tree(2, 2)
+    N = 5
+    par = list(range(2 * N + 1, 3 * N + 1))
+    assert tree.fixed_params == tuple(par)
+    from fastvi.scenes.tree import parents
+
+    assert np.array_equal(tree.params[par], parents(2, 2))
+    q0, v0 = tree.initial_state(np.linspace(0.2, 0.6, N))
+    k, n = tree.params.size, tree.n
+    D, labels = fastvi._discrete.directions(("params",), n, k, None, tree.fixed_params)
+    assert labels == [f"params[{l}]" for l in range(k) if l not in par]
+    # errors come before the run: these calls compile nothing
+    with pytest.raises(ValueError, match=r"names params\[12\], which the model marks fixed"):
+        fastvi.sensitivity(tree, q0, v0, h=0.01, n_steps=2, wrt=("params",), param_index=[0, 12])
+    with pytest.raises(ValueError, match=r"names params\[11\].*leave it out"):
+        fastvi.adjoint(tree, q0, v0, lambda r: (r.q, None), h=0.01, n_steps=2, param_index=[11])
+    raw = np.zeros((2 * n + k, 1))
+    raw[2 * n + 13, 0] = 1.0
+    with pytest.raises(ValueError, match=r"moves params\[13\]"):
+        fastvi.sensitivity(tree, q0, v0, h=0.01, n_steps=2, wrt=raw)
+    with pytest.raises(ValueError, match="marks fixed"):
+        fastvi.TrajectoryFit(tree, np.zeros((3, 1)), lambda r: r.q[:, :1], param_index=[14],
+                             h=0.01, q0=q0, v0=v0)
+    with pytest.raises(ValueError, match="out of range"):
+        fastvi.Model(1, params=(1.0,), mass=[1.0], potential=circle_V, potential_grad=circle_dV,
+                     fixed_params=[1])
+    with pytest.raises(TypeError, match="parameter indices"):
+        fastvi.Model(1, params=(1.0,), mass=[1.0], potential=circle_V, potential_grad=circle_dV,
+                     fixed_params=[0.0])
+    import pickle
+
+    assert pickle.loads(pickle.dumps(tree)).fixed_params == tree.fixed_params
+    # a mechanism's tables: the header and every record's kind and bodies are fixed, its
+    # geometry and loads are not
+    from fastvi.bodies import packing, scenes
+
+    top = scenes.heavy_top()
+    fixed = set(top.fixed_params)
+    assert set(range(packing.HEADER)) <= fixed and len(fixed) < top.params.size // 4
+    rows = int(top.params[packing.H_ROWS])
+    assert rows + packing.R_KIND in fixed and rows + packing.R_C0 not in fixed
+
+
+def test_a_trees_derivatives_by_its_quantities_match_differences_of_runs():
+    """The tree's parameters but the parents (fixed): lengths and masses (which move its
+    potential), g and the damping, against central differences of whole runs; the adjoint
+    by the same default parameters is the transpose (⟨λ, δx⟩ = δJ)."""
+    tree = fastvi.scenes.tree(2, 2, damping=0.2)
+    q0, v0 = tree.initial_state(np.linspace(0.3, 0.9, 5), np.linspace(0.5, -0.5, 5))
+    method = "P2L-Q3G"
+    S = fastvi.sensitivity(tree, q0, v0, h=0.05, n_steps=N_FD, method=method, wrt=("params",))
+    free = [l for l in range(tree.params.size) if l not in tree.fixed_params]
+    assert S.labels == [f"params[{l}]" for l in free]
+    worst = 0.0
+    for j, l in enumerate(free):
+        e = np.zeros(tree.params.size)
+        e[l] = 3e-7 * max(1.0, abs(tree.params[l]))
+        fd = (_end(tree, q0, v0, tree.params + e, method)
+              - _end(tree, q0, v0, tree.params - e, method)) / (2 * e[l])
+        an = np.concatenate([S.dq[-1, :, j], S.dv[-1, :, j]])
+        worst = max(worst, np.abs(an - fd).max() / max(1.0, np.abs(fd).max()))
+    assert worst < 2e-7  # the differences' own error is ≈ 1e-9
+    A = fastvi.adjoint(tree, q0, v0, lambda r: (r.q, r.v), h=0.05, n_steps=N_FD, method=method)
+    assert A.param_index == free
+    forward = sum(np.einsum("kn,knd->d", x, y) for x, y in ((S.result.q, S.dq), (S.result.v, S.dv)))
+    assert np.allclose(A.grad_params, forward, rtol=1e-11, atol=0)
+
+
 def nan_potential_grad_by_params(q, p, out):
     out[:, :] = np.nan
 

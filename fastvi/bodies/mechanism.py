@@ -451,8 +451,9 @@ class Mechanism:
         cols = [pk.row_columns(records[a]) for a in range(m)]
         rows = np.array([a for a in range(m) for _ in cols[a]], dtype=np.int64)
         pattern = (rows, np.array([c for cs in cols for c in cs], dtype=np.int64)) if m else None
-        return Model(n, m, params=pk.pack(n, linear, records, loads), mass=mdiag, name=name,
-                     time_dependent=timed, constraint_jacobian_pattern=pattern,
+        params = pk.pack(n, linear, records, loads)
+        return Model(n, m, params=params, mass=mdiag, name=name, time_dependent=timed,
+                     constraint_jacobian_pattern=pattern, fixed_params=pk.structural(params),
                      **cb.model_callbacks(timed, springs, forced))
 
     def __repr__(self) -> str:

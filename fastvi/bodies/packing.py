@@ -171,6 +171,20 @@ def pack(n: int, linear: np.ndarray, rows: np.ndarray, loads: np.ndarray) -> np.
     return p
 
 
+def structural(params: np.ndarray) -> list[int]:
+    """The entries of a parameter vector that say what the mechanism is rather than a
+    quantity of it — the header, and each row's and load record's kind and bodies — for
+    ``Model(fixed_params=...)``: the derivatives by the parameters leave them out."""
+    out = list(range(HEADER))
+    start, m = int(params[H_ROWS]), int(params[H_M])
+    for r in range(m):
+        out += range(start + r * ROW_W + R_KIND, start + r * ROW_W + R_NB + 1)
+    start = int(params[H_LOADS])
+    for r in range((params.shape[0] - start) // LOAD_W):
+        out += range(start + r * LOAD_W + L_KIND, start + r * LOAD_W + L_NB + 1)
+    return out
+
+
 def rows_of(params: np.ndarray) -> np.ndarray:
     """The row table (m, ROW_W) of a parameter vector (a view)."""
     start, m = int(params[H_ROWS]), int(params[H_M])

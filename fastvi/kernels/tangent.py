@@ -556,8 +556,11 @@ def _at_constraint_point(md_, tx_, h, tw_, j, slot):
     n, m, s, _ = _step_sizes(wx)
     _at_point(md, wx, h, tx.d[j])
     _point_of(tw.qk, wx.X, tx.Lc, j, s + 1, n, wx.qi)
-    for kk in range((md.prm.shape[0] - 1) * m * n):
-        o[kk] = 0.0  # a derivative of a patterned Jacobian may write its non-zeros only
+    # a derivative of a patterned Jacobian may write its non-zeros only; the k × m of ∂g/∂θ
+    # alone for the constraint (not the k × m × n of ∂G/∂θ: O(N³) for a chain)
+    size = (md.prm.shape[0] - 1) * m * (n if slot == P_CJAC else 1)
+    for kk in range(size):
+        o[kk] = 0.0
     tw.pd.fns[slot](ptr(wx.qi), ptr(wx.qi), ptr(md.prm), ptr(o))
 
 
@@ -639,19 +642,29 @@ def _theta_projection(md_, tw_, q1, v1, eta):
     if m == 0:
         return
     _projection_terms(md_, tw_, q1, v1)
+    gth = tw.pd.given[P_CJAC] != 0  # G_θ: its terms are zero without it
     for ii in range(npar):
         l = pidx[ii]
         base = l * m * n
-        for a in range(n):
-            acc = 0.0
-            for c in range(m):
-                acc += o[base + c * n + a] * eta[c]
-            u[a] = acc
-        for c in range(m):
-            acc = 0.0
+        if gth:
             for a in range(n):
-                acc += o[base + c * n + a] * v1[a] - Yg[c, a] * (thP[l, a] + u[a])
-            w[c] = acc
+                acc = 0.0
+                for c in range(m):
+                    acc += o[base + c * n + a] * eta[c]
+                u[a] = acc
+            for c in range(m):
+                acc = 0.0
+                for a in range(n):
+                    acc += o[base + c * n + a] * v1[a] - Yg[c, a] * (thP[l, a] + u[a])
+                w[c] = acc
+        else:
+            for a in range(n):
+                u[a] = 0.0
+            for c in range(m):
+                acc = 0.0
+                for a in range(n):
+                    acc -= Yg[c, a] * thP[l, a]
+                w[c] = acc
         _solve_projection(tw, w, m, False)
         for a in range(n):
             acc = -u[a]
@@ -672,9 +685,9 @@ def _projection_terms(md_, tw_, q1, v1):
             thP[pidx[ii], a] = 0.0
     if pd.given[P_MASS] != 0:
         _mass_times(pd.fns[P_MASS], q1, v1, md.prm, pidx, o, thP, n)
-    for kk in range((md.prm.shape[0] - 1) * m * n):
-        o[kk] = 0.0
-    if pd.given[P_CJAC] != 0:
+    if pd.given[P_CJAC] != 0:  # else G_θ = 0 and its terms are skipped
+        for kk in range((md.prm.shape[0] - 1) * m * n):
+            o[kk] = 0.0
         pd.fns[P_CJAC](ptr(q1), ptr(q1), ptr(md.prm), ptr(o))
 
 
@@ -707,10 +720,11 @@ def _theta_pull(md_, tx_, h, tw_, q1, v1, eta, yb, zb, wb, u, lth):
             l = pidx[ii]
             base = l * m * n
             acc = 0.0
-            for c in range(m):
-                for a in range(n):
-                    g = o[base + c * n + a]
-                    acc += g * (wb[c] * v1[a] - eta[c] * zb[a])
+            if given[P_CJAC] != 0:  # else G_θ = 0
+                for c in range(m):
+                    for a in range(n):
+                        g = o[base + c * n + a]
+                        acc += g * (wb[c] * v1[a] - eta[c] * zb[a])
             for a in range(n):
                 acc -= u[a] * thP[l, a]
             lth[ii] += acc

@@ -103,6 +103,13 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
     allocate its kernels' arguments."""
     started = time.perf_counter()
     n = checked_model(model).n
+    if model.mass_singular:
+        # the step solves with M + Gᵀ W G; its derivative (the projection's, and the initial
+        # tangent's metric) is written for an invertible M
+        raise ValueError(
+            f"{what} of model {model.name!r} is not available: its constant mass matrix is "
+            "singular (a body with a zero principal inertia, such as a rod or a lamina). "
+            "fastvi.integrate runs it; the derivatives need an invertible mass matrix")
     q0 = valid.vector(q0, "q0", n)
     v0 = valid.vector(v0, "v0", n)
     prm = valid.params(params, model).copy()

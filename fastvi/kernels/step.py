@@ -37,7 +37,7 @@ from numba.core import sigutils, types
 from numba.core.ccallback import CFunc
 
 from .._launch import _key
-from .._numba import CalledAs, byref, hot, hot_inline, own, ptr, quiet
+from .._numba import CalledAs, byref, hot, hot_inline, only_if, own, ptr, quiet
 from .banded import (gt_times, mech_impulses_structured, mech_rows_sparse, newton_banded,
                      project_structured, schur_structured)
 from .layout import (FD_T, FD_T_POINTS, CHESS, CJAC, CON, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_FJQ,
@@ -421,6 +421,18 @@ def _clear(B, n, si, sp):
 
 
 @hot
+def _spans_at(ws_):
+    """``(si[SI_BSPAN], si[SI_GSPAN])`` of a structured workspace; ``(0, 0)``, a constant,
+    for a small model's (``_numba.only_if``): its assembly then compiles to the dense loops
+    alone, as before the spans, and keeps them unrolled in the sized step."""
+    ws = own(ws_)
+    return ws.si[SI_BSPAN], ws.si[SI_GSPAN]
+
+
+_spans_at = only_if(_spans_at, "structured", (0, 0))
+
+
+@hot
 def newton_matrix(md_, tabs_, h, qk, ws_):
     r"""``ws.A = ∂R/∂X`` at the unknowns ``ws.X``: the exact derivative of :func:`residual`
     as it computes ``R``, with ``ws.G[0 … J]`` as it leaves them.
@@ -457,7 +469,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
     N = sn + J * m
     inv_h = 1.0 / h
     si = ws.si
-    bsp, gsp = si[SI_BSPAN], si[SI_GSPAN]
+    bsp, gsp = _spans_at(ws_)
     if bsp != 0:
         for nu in range(s):
             for mu in range(s):

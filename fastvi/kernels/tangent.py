@@ -1122,16 +1122,17 @@ def _tq_row(tw, i, x, acc, n):
 
 
 @hot_inline
-def _minus_product(out, x, A, y, n, spans):
-    """``out = x − A y`` (n,), over the rows' spans of ``A`` (empty: all of it)."""
+def _minus_product(out, x, A, y, rows, n, spans):
+    """``out = x − A y`` (rows,) for ``A`` (rows, n), over the rows' spans of ``A`` (empty:
+    all of it)."""
     if spans.shape[0] > 0:
-        for a in range(n):
+        for a in range(rows):
             acc = x[a]
             for b in range(spans[2 * a], spans[2 * a + 1]):
                 acc -= A[a, b] * y[b]
             out[a] = acc
     else:
-        for a in range(n):
+        for a in range(rows):
             acc = x[a]
             for b in range(n):
                 acc -= A[a, b] * y[b]
@@ -1215,9 +1216,9 @@ def push(tw_):
                 for j in range(N):
                     acc -= PX[a, j] * y[j]
             dP[c, a] = acc
-        _minus_product(z, tw.dP[c], He, dq1, n, sp.bspan)
+        _minus_product(z, tw.dP[c], He, dq1, n, n, sp.bspan)
         if m > 0:
-            _minus_product(u, z, Cq, dq1, n, sp.bspan)
+            _minus_product(u, z, Cq, dq1, n, n, sp.bspan)
             if gs.shape[0] > 0:
                 for e in range(m):
                     acc = 0.0
@@ -1271,11 +1272,8 @@ def pull(md_, tx_, h, tw_, q1, v1, eta, lq, lp, lth):
     bs, gs = pw.sp.bspan, pw.sp.gspan
     if m > 0:
         for e in range(m):  # w̄ = −G λp, then S⁻ᵀ w̄
-            lo, hi = (gs[2 * e], gs[2 * e + 1]) if gs.shape[0] > 0 else (0, n)
-            acc = 0.0
-            for a in range(lo, hi):
-                acc -= G[e, a] * lp[a]
-            wb[e] = acc
+            wb[e] = 0.0
+        _minus_product(wb, wb, G, lp, m, n, gs)
         _solve_projection(tw, wb, m, True)
         if gs.shape[0] > 0:
             # ū = Yᵀ w̄ ; δq1 gains H_vᵀ w̄: scattered row by row, so that each entry

@@ -55,7 +55,7 @@ from .layout import specialize as layout_specialize
 from .linalg import (augmented_mass, invert, invert_unpivoted, lu_factor, lu_factor_small,
                      lu_solve, lu_solve_small)
 
-__all__ = ["make_workspace", "assemble", "newton_matrix", "add_block", "residual", "linear_force", "step", "step_kernel",
+__all__ = ["make_workspace", "assemble", "newton_matrix", "add_block", "plan_spans", "residual", "linear_force", "step", "step_kernel",
            "take_step", "step_once", "cached_cfunc",
            "end_momentum", "velocity_residual", "hidden_residual", "constraint_rate",
            "jacobian_rate"]
@@ -421,7 +421,7 @@ def _clear(B, n, si, sp):
 
 
 @hot
-def _spans_at(ws_):
+def plan_spans(ws_):
     """``(si[SI_BSPAN], si[SI_GSPAN])`` of a structured workspace; ``(0, 0)``, a constant,
     for a small model's (``_numba.only_if``): its assembly then compiles to the dense loops
     alone, as before the spans, and keeps them unrolled in the sized step."""
@@ -429,7 +429,7 @@ def _spans_at(ws_):
     return ws.si[SI_BSPAN], ws.si[SI_GSPAN]
 
 
-_spans_at = only_if(_spans_at, "structured", (0, 0))
+plan_spans = only_if(plan_spans, "structured", (0, 0))
 
 
 @hot
@@ -469,7 +469,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
     N = sn + J * m
     inv_h = 1.0 / h
     si = ws.si
-    bsp, gsp = _spans_at(ws_)
+    bsp, gsp = plan_spans(ws_)
     if bsp != 0:
         for nu in range(s):
             for mu in range(s):

@@ -52,7 +52,7 @@ from .._numba import byref, erased, hot, hot_inline, njit, only_if, own, ptr
 from .drive import run, step_hook
 from .layout import specialize as layout_specialize
 from .layout import (CHESS, CJAC, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_MJAC, F_MASSFN, F_TIME,
-                     F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SI_A, SI_BSPAN, SI_GSPAN,
+                     F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SI_A,
                      SI_A_KL, SI_A_KU, SI_A_PERM, SI_S, SINGULAR, SOLVE_BANDED, SOLVE_DENSE,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, P_CJAC, P_CON,
                      P_FORCE, P_KGRAD, P_MASS, P_PGRAD, ModelData, Samples, is_timed,
@@ -62,7 +62,7 @@ from .banded import (band_factor, band_ld, band_solve, band_solve_transposed, gm
 # inlined: with the sizes as constants (sized_twin) the factorisations and solves unroll
 from .linalg import lu_factor_small, lu_solve_small
 from .step import (add_block, fd_constraint_hessian, fd_momentum_jacobian, assemble,
-                   end_momentum, jacobian_rate, linear_force)
+                   end_momentum, jacobian_rate, linear_force, plan_spans)
 
 __all__ = ["PointWork", "TangentWork", "extended_tables", "make_point_work",
            "make_tangent_work", "point", "point_terms", "linearise", "push", "pull",
@@ -820,7 +820,7 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
         for nu in range(s + 1):
             cl = tx.Lc[nu, 0]
             if cl != 0.0:
-                add_block(A, nu * n, tcol, -cl, Hs, n, n, wx.si, wx.si[SI_BSPAN])
+                add_block(A, nu * n, tcol, -cl, Hs, n, n, wx.si, plan_spans(byref(wx))[0])
     sp = tw.pt.sp
     banded = sp.perm.shape[0] > 0
     if sp.tptr.shape[0] > 0:  # over the patterns: O(nnz)

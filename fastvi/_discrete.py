@@ -139,8 +139,7 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
     # the structured paths of the linearised step are compiled for structured workspaces
     # only (_numba.only_if): a model whose plan keeps every solve dense gets none of them
     patterns = structure.plan(model, meth, prm, solver).patterns if ws.structured else {}
-    flags = md.flags
-    diagonal = bool(flags[lay.F_DIAG] and not flags[lay.F_MASSFN] and not flags[lay.F_AUGMENT])
+    diagonal = bool(lay.reciprocal_mass.py_func(md.flags))
     sparsity = make_sparsity(step_band(ws), structure.linearisation_patterns(
         patterns["G"], patterns["newton"], meth.s, meth.J, diagonal) if patterns else None)
     specialize = valid.optional_flag(specialize, "specialize")

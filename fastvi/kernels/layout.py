@@ -341,6 +341,14 @@ def linear_potential(md):
     return md.flags[F_LINPOT] != 0 and not (is_timed(md) and md.flags[F_TIME] != 0)
 
 
+@hot_inline
+def reciprocal_mass(flags):
+    """Whether the mass matrix is constant, diagonal and invertible (the model's ``flags``):
+    ``M⁻¹`` is then the reciprocals of its diagonal, ``G M⁻¹`` has G's pattern and
+    ``∂(M v)/∂q`` is zero. Python calls it as ``reciprocal_mass.py_func``."""
+    return flags[F_DIAG] != 0 and flags[F_MASSFN] == 0 and flags[F_AUGMENT] == 0
+
+
 #: the shape of each workspace field in terms of the sizes (and ``N = s n + J m``,
 #: ``mm = max(m, 1)``, ``Jm = max(J m, 1)``), and which are int64; ``dims`` is the sizes.
 #: One table for the two ways a workspace is made: in NumPy by :func:`make_workspace`

@@ -56,7 +56,7 @@ from .layout import (CHESS, CJAC, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_MJAC, F_MA
                      SI_A_KL, SI_A_KU, SI_A_PERM, SI_S, SINGULAR, SOLVE_BANDED, SOLVE_DENSE,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, P_CJAC, P_CON,
                      P_FORCE, P_KGRAD, P_MASS, P_PGRAD, ModelData, Samples, is_timed,
-                     make_workspace, sizes, with_plan, workspace_for)
+                     make_workspace, reciprocal_mass, sizes, with_plan, workspace_for)
 from .banded import (band_factor, band_ld, band_solve, band_solve_transposed, gmg_factor,
                      gmg_solve)
 # inlined: with the sizes as constants (sized_twin) the factorisations and solves unroll
@@ -306,7 +306,7 @@ def point(md_, q, v, eta, pw_):
             fns[MJAC](ptr(q), ptr(v), ptr(prm), ptr(Cq))
         else:
             fd_momentum_jacobian(fns[MASS], q, v, prm, Cq, pw.qa, pw.Ma, n)
-    elif flags[F_DIAG] != 0 and flags[F_AUGMENT] == 0:
+    elif reciprocal_mass(flags):
         # nothing writes M off its diagonal nor C_q (a constant mass, inverted by its
         # reciprocals): the zeros of the allocation stay, and the diagonal is copied in O(n)
         for a in range(n):
@@ -881,7 +881,7 @@ def _factor_projection(md, tw, wx, pw, sp, n, m):
     ``tw.Yg``. Returns a status code."""
     if m > 0:
         M, G, Yg, S = pw.M, pw.G, tw.Yg, tw.S
-        if md.flags[F_DIAG] != 0 and md.flags[F_MASSFN] == 0 and md.flags[F_AUGMENT] == 0:
+        if reciprocal_mass(md.flags):
             # G M⁻¹ by the reciprocals, as the LU of a diagonal M would (bit for bit), in
             # O(m n) instead of O(n³ + m n²): the large mechanisms' case
             for a in range(n):

@@ -403,6 +403,8 @@ class _Callbacks:
         self.pattern = {}
         if model.constraint_jacobian_pattern is not None:
             self.pattern["constraint_jacobian"] = model.constraint_jacobian_pattern.ravel()
+        for slot, mask in model.param_patterns.items() if by_params else ():
+            self.pattern[_theta(slot)] = mask.ravel()
         n, m = self.n, self.m
         self.pad = n * n + 2 * n + GUARD_MARGIN
         self.layout, self.buf, self.size = {}, {}, {}
@@ -547,8 +549,10 @@ class _Callbacks:
             if off.size:
                 idx = [self._index(slot, int(i)) for i in off[:4]]
                 more = f" and {off.size - 4} more" if off.size > 4 else ""
+                declared = (f"param_patterns[{slot[:-2]!r}]" if slot.endswith("/θ")
+                            else f"{slot}_pattern")
                 problem = (f"`{slot}` wrote non-zeros at {', '.join(map(str, idx))}{more}, outside the "
-                           f"model's `{slot}_pattern` ({int(mask.sum())} entries declared): add the "
+                           f"model's `{declared}` ({int(mask.sum())} entries declared): add the "
                            "entries to the pattern, or fix the function", int(off[0]))
         if problem is None:
             unset = np.flatnonzero((a0[:size] == GUARD_FILL[0]) & (a1[:size] == GUARD_FILL[1]))

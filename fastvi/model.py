@@ -70,7 +70,9 @@ slot (:data:`PARAM_SLOTS`)   function: the arguments of that callback        ``o
 ``force``                    ``(t, q, v, params, out)``: ``∂F/∂θ_l``         (k, n)
 ===========================  ==============================================  ================
 
-``0`` declares a callback independent of θ. When they cover every callback θ enters
+``0`` declares a callback independent of θ; ``Model(param_patterns=...)`` declares where a
+derivative of ``kinetic_grad``, ``potential_grad``, ``force`` or ``constraint`` may be
+non-zero, and such a derivative writes only those entries. When they cover every callback θ enters
 (:attr:`Model.param_derivatives_exact`), the linearised step uses them instead of
 five-point differences of the whole step in each θ_l; they are compiled on first use
 (:meth:`Model.param_derivative_data`), never by a plain integration.
@@ -93,7 +95,7 @@ from numba import carray, types
 from ._numba import njit, ptr
 from .kernels import layout as lay
 from .kernels.layout import SECOND as _SECOND
-from .kernels.layout import FD_T, FD_T_POINTS, PARAM_SLOTS, SLOTS
+from .kernels.layout import FD_T, FD_T_POINTS, PARAM_SLOTS, PATTERNED_PARAM_SLOTS, SLOTS
 
 __all__ = ["Model", "CALLBACK_SIGNATURE", "SLOTS", "PARAM_SLOTS"]
 
@@ -502,6 +504,16 @@ class Model:
         sensitivities and the adjoint uses them instead of differences in θ
         (``docs/custom-model.md``, "Derivatives by the parameters"). Not for a
         ``time_dependent`` model with constraints.
+    param_patterns : mapping, optional
+        ``{slot: pattern}``: the entries of a derivative by θ that may be non-zero, for the
+        slots whose derivative is an (k, n) or (k, m) array (``"kinetic_grad"``,
+        ``"potential_grad"``, ``"force"``, ``"constraint"``) and given as a function in
+        ``param_derivatives``. A pattern is a boolean array of that shape or a pair
+        ``(l, a)`` of index arrays. The kernels then read only those entries, and the
+        function need write **only those** (as with ``constraint_jacobian_pattern``): a
+        parameter of a large mechanism usually moves a few coordinates' forces, and the
+        dense ``(k, n)`` output per call is what made the adjoint by every parameter of a
+        chain cost O(N²) a step. :meth:`check` reports a non-zero written outside it.
     fixed_params : sequence of int, optional
         Entries of ``params`` that are data the callbacks read rather than quantities:
         indices, counts, kinds (a tree's parent of each body, a mechanism's joint table).
@@ -563,6 +575,7 @@ class Model:
         constraint_time_derivative: Callable | None = None,
         constraint_jacobian_pattern=None,
         param_derivatives=None,
+        param_patterns=None,
         fixed_params=(),
         name: str | None = None,
     ):
@@ -643,9 +656,16 @@ class Model:
                 hint = ", 0 (∇V does not depend on q)" if key == "potential_hessian" else ""
                 raise TypeError(f"`{key}` must be a function{hint} or None, got {fn!r}")
         self._functions = {k: v for k, v in funcs.items() if v is not None}
-        self.constraint_jacobian_pattern = _as_pattern(constraint_jacobian_pattern, self.m, self.n)
+        if constraint_jacobian_pattern is not None and self.m == 0:
+            raise ValueError("`constraint_jacobian_pattern` was given but m = 0: a model without "
+                             "constraints has no G")
+        self.constraint_jacobian_pattern = _as_pattern(constraint_jacobian_pattern, (self.m, self.n),
+                                                       "constraint_jacobian_pattern")
         #: the derivatives by θ given as functions, and the slots declared 0
         self._param_functions, self._param_zero = self._param_derivatives(param_derivatives)
+        #: {slot: boolean (k,) + output shape}: the entries of a derivative by θ that may be
+        #: non-zero (``param_patterns``)
+        self.param_patterns = self._param_patterns(param_patterns)
         self._compiled = None
         self._param_data = None
         #: :meth:`check` compared the derivatives by θ with differences, and they passed
@@ -689,6 +709,26 @@ class Model:
                                 f"not depend on θ), got {fn!r}")
         return functions, frozenset(zero)
 
+    def _param_patterns(self, given):
+        """Validate ``param_patterns``: ``{slot: boolean array (k,) + output shape}``."""
+        name = "param_patterns"
+        if given is None:
+            return {}
+        if not isinstance(given, Mapping):
+            raise TypeError(f"`{name}` must be a mapping {{slot: pattern}}, got "
+                            f"{type(given).__name__}")
+        patterns = {}
+        for slot, pattern in given.items():
+            if slot not in PATTERNED_PARAM_SLOTS:
+                raise ValueError(f"`{name}` has the slot {slot!r}; a pattern is for "
+                                 f"{', '.join(PATTERNED_PARAM_SLOTS)}")
+            if slot not in self._param_functions:
+                raise ValueError(f"`{name}[{slot!r}]` was given but `param_derivatives` has no "
+                                 f"function for {slot!r}: give it, or remove the pattern")
+            shape = (self.params.shape[0],) + self.output_shape(slot)
+            patterns[slot] = _as_pattern(pattern, shape, f"{name}[{slot!r}]")
+        return patterns
+
     # ------------------------------------------------------------------ pickling as a recipe
     def __reduce__(self):
         # Compiled cfuncs cannot travel between processes; a model travels as the recipe
@@ -725,7 +765,8 @@ class Model:
         kwargs = dict(params=self.params, mass=self._mass_arg, name=self.name,
                       time_dependent=self.time_dependent,
                       constraint_jacobian_pattern=self.constraint_jacobian_pattern,
-                      param_derivatives=self._param_arg(), fixed_params=self.fixed_params,
+                      param_derivatives=self._param_arg(), param_patterns=self.param_patterns,
+                      fixed_params=self.fixed_params,
                       **funcs)
         return (_model_from_kwargs, (self.n, self.m, kwargs))
 
@@ -824,7 +865,8 @@ class Model:
 
     def param_derivative_data(self):
         """The model's derivatives by θ as the linearised step reads them, a
-        :class:`fastvi.kernels.layout.ParamData` ``(fns, given, exact)``.
+        :class:`fastvi.kernels.layout.ParamData` ``(fns, given, exact, fptr, fidx, cptr,
+        cidx)``, the last four the rows of :attr:`param_patterns` the kernels read.
 
         ``fns`` holds the compiled derivatives in :data:`PARAM_SLOTS` order (the no-op of an
         absent callback where the model has none or declared ``0``), with the numba type of
@@ -843,8 +885,28 @@ class Model:
             fns = _wrap_all(PARAM_SLOTS, self._param_functions, self._param_kind, self.n, self.m, k)
             given = np.array([int(slot in self._param_functions) for slot in PARAM_SLOTS],
                              dtype=np.int64)
-            self._param_data = lay.ParamData(fns, given, int(self.param_derivatives_exact))
+            self._param_data = lay.ParamData(fns, given, int(self.param_derivatives_exact),
+                                             *self._param_rows())
         return self._param_data
+
+    def _param_rows(self):
+        """``(fptr, fidx, cptr, cidx)``: per parameter ``l``, the coordinates ``a`` where
+        ``∂F/∂θ_l`` may be non-zero (``fidx[fptr[l]:fptr[l + 1]]``, the union over the given
+        ``kinetic_grad``, ``potential_grad`` and ``force``), and the constraints where
+        ``∂g/∂θ_l`` may be (``cidx``). Empty ``ptr``: dense, where a given derivative has
+        no pattern (:attr:`param_patterns`) or none is given."""
+        empty = (np.zeros(0, dtype=np.int64),) * 2
+
+        def rows(slots):
+            given = [slot for slot in slots if slot in self._param_functions]
+            if not given or any(slot not in self.param_patterns for slot in given):
+                return empty
+            mask = np.logical_or.reduce([self.param_patterns[slot] for slot in given])
+            ptr = np.zeros(mask.shape[0] + 1, dtype=np.int64)
+            ptr[1:] = np.cumsum(mask.sum(axis=1))
+            return ptr, np.nonzero(mask)[1].astype(np.int64)
+
+        return rows(("kinetic_grad", "potential_grad", "force")) + rows(("constraint",))
 
     def param_derivative_value(self, slot: str, q, v=None, params=None, t: float = 0.0):
         """The derivative by θ of the callback ``slot`` (a name of :data:`PARAM_SLOTS`) at
@@ -1057,29 +1119,30 @@ def _scene_from_recipe(scene, kwargs, params):
     return model
 
 
-def _as_pattern(pattern, m: int, n: int):
-    """``constraint_jacobian_pattern`` as an (m, n) boolean array (None stays None)."""
-    name = "constraint_jacobian_pattern"
+def _as_pattern(pattern, shape: tuple, name: str):
+    """A pattern of non-zeros ``name`` as a boolean array of ``shape`` (None stays None):
+    given as such an array, or as a pair of index arrays ``(rows, cols)`` into the first
+    dimension and the rest (flattened)."""
     if pattern is None:
         return None
-    if m == 0:
-        raise ValueError(f"`{name}` was given but m = 0: a model without constraints has no G")
+    rows_n, cols_n = shape[0], int(np.prod(shape[1:]))
     if isinstance(pattern, tuple) and len(pattern) == 2:
         rows, cols = (np.asarray(x) for x in pattern)
         if rows.shape != cols.shape or rows.ndim != 1 or not (
                 np.issubdtype(rows.dtype, np.integer) and np.issubdtype(cols.dtype, np.integer)):
             raise ValueError(f"`{name}` as (rows, cols) needs two 1-D integer arrays of one length, "
                              f"got shapes {rows.shape} and {cols.shape}")
-        if rows.size and (rows.min() < 0 or rows.max() >= m or cols.min() < 0 or cols.max() >= n):
-            raise ValueError(f"`{name}`: an index is outside G's shape ({m}, {n}) (rows in 0…{m - 1}, "
-                             f"columns in 0…{n - 1})")
-        mask = np.zeros((m, n), dtype=bool)
+        if rows.size and (rows.min() < 0 or rows.max() >= rows_n or cols.min() < 0
+                          or cols.max() >= cols_n):
+            raise ValueError(f"`{name}`: an index is outside the shape ({rows_n}, {cols_n}) (rows "
+                             f"in 0…{rows_n - 1}, columns in 0…{cols_n - 1})")
+        mask = np.zeros((rows_n, cols_n), dtype=bool)
         mask[rows, cols] = True
-        return mask
+        return mask.reshape(shape)
     mask = np.asarray(pattern)
-    if mask.dtype != bool or mask.shape != (m, n):
-        raise ValueError(f"`{name}` must be an ({m}, {n}) boolean array or a pair (rows, cols) of "
-                         f"index arrays, got {mask.dtype} array of shape {mask.shape}")
+    if mask.dtype != bool or mask.shape != tuple(shape):
+        raise ValueError(f"`{name}` must be a {tuple(shape)} boolean array or a pair (rows, cols) "
+                         f"of index arrays, got {mask.dtype} array of shape {mask.shape}")
     return np.array(mask)
 
 

@@ -95,7 +95,7 @@ def test_an_unset_entry_of_the_pattern_is_named():
 @pytest.mark.parametrize("bad, match", [
     (np.ones((N, 2 * N + 1), dtype=bool), "boolean array"),
     (np.ones((N, 2 * N)), "boolean array"),
-    ((np.array([0, N]), np.array([0, 1])), "outside G's shape"),
+    ((np.array([0, N]), np.array([0, 1])), "outside the shape"),
     ((np.array([0.0]), np.array([1.0])), "integer arrays"),
 ])
 def test_bad_pattern_arguments_are_named(bad, match):

@@ -75,8 +75,14 @@ PARAM_SLOTS = ("mass", "kinetic_grad", "potential_grad", "constraint", "constrai
 #: callbacks in :data:`PARAM_SLOTS` order (a no-op where the model has none or declared
 #: zero), ``given`` (int64, one per slot) 1 where ``fns`` holds a derivative, and ``exact``
 #: 1 when they cover every callback of the model that θ can enter — else the kernels take
-#: five-point differences in θ of the whole step
-ParamData = namedtuple("ParamData", ["fns", "given", "exact"])
+#: five-point differences in θ of the whole step. ``fptr``, ``fidx`` (int64): per parameter
+#: ``l`` the coordinates ``fidx[fptr[l]:fptr[l + 1]]`` where ``∂F/∂θ_l`` (the derivatives of
+#: ``kinetic_grad``, ``potential_grad`` and ``force``) may be non-zero, and ``cptr``,
+#: ``cidx`` the constraints where ``∂g/∂θ_l`` may be: the kernels read only those entries
+#: (``Model(param_patterns=...)``); an empty ``ptr`` reads every entry
+ParamData = namedtuple("ParamData", ["fns", "given", "exact", "fptr", "fidx", "cptr", "cidx"])
+#: the slots of :data:`PARAM_SLOTS` whose derivative by θ may be given a pattern of non-zeros
+PATTERNED_PARAM_SLOTS = ("kinetic_grad", "potential_grad", "constraint", "force")
 
 # ----------------------------------------------------------------------------- differences in time
 #: eps^(1/5): the relative step of the five-point difference in time (error ~ eps^(4/5)) by

@@ -503,33 +503,54 @@ def _theta_at_quadrature(md_, tx_, h, tw_, i):
             off = (nu - 1) * n
             for a in range(n):
                 vi[a] += cd * X[off + a]
+    fp, fi = pd.fptr, pd.fidx
     for ii in range(pidx.shape[0]):
         l = pidx[ii]
-        for a in range(n):
-            thF[l, a] = 0.0
+        lo, hi = _entries(fp, l, n)
+        for e in range(lo, hi):
+            thF[l, _entry(fi, fp, e)] = 0.0
     if given[P_PGRAD] != 0:
-        _add_by_theta(fns[P_PGRAD], qi, qi, prm, pidx, o, thF, n, -1.0)
+        _add_by_theta(fns[P_PGRAD], qi, qi, prm, pidx, o, thF, n, -1.0, fp, fi)
     if given[P_KGRAD] != 0:
-        _add_by_theta(fns[P_KGRAD], qi, vi, prm, pidx, o, thF, n, 1.0)
+        _add_by_theta(fns[P_KGRAD], qi, vi, prm, pidx, o, thF, n, 1.0, fp, fi)
     if given[P_FORCE] != 0:
-        _add_by_theta(fns[P_FORCE], qi, vi, prm, pidx, o, thF, n, 1.0)
-    if given[P_MASS] != 0:
+        _add_by_theta(fns[P_FORCE], qi, vi, prm, pidx, o, thF, n, 1.0, fp, fi)
+    if given[P_MASS] != 0:  # else thP is never read
         _mass_times(fns[P_MASS], qi, vi, prm, pidx, o, thP, n)
-    else:
-        for ii in range(pidx.shape[0]):
-            l = pidx[ii]
-            for a in range(n):
-                thP[l, a] = 0.0
 
 
 @hot_inline
-def _add_by_theta(fn, q, v, prm, pidx, o, out, n, sign):
-    """``out[l] += sign · ∂f/∂θ_l`` for ``l`` in ``pidx``, ``f`` an (n,) callback whose
-    derivative by θ is ``fn``."""
+def _entries(ptr, l, size):
+    """The range of the entries of parameter ``l`` in a :class:`.layout.ParamData` pattern
+    ``ptr`` (``0 … size`` where it is dense: an empty ``ptr``)."""
+    if ptr.shape[0] == 0:
+        return 0, size
+    return ptr[l], ptr[l + 1]
+
+
+@hot_inline
+def _entry(idx, ptr, e):
+    """Entry ``e`` of a range of :func:`_entries`: ``idx[e]``, or ``e`` where dense."""
+    return e if ptr.shape[0] == 0 else idx[e]
+
+
+@hot_inline
+def _add_by_theta(fn, q, v, prm, pidx, o, out, n, sign, fp, fi):
+    """``out[l] += sign · ∂f/∂θ_l`` for ``l`` in ``pidx`` over the pattern ``fp``, ``fi``,
+    ``f`` an (n,) callback whose derivative by θ is ``fn``."""
+    if fp.shape[0] > 0:
+        # the pattern is the union over the callbacks: a callback writes its own entries
+        # only, and `o` still holds the last one's
+        for ii in range(pidx.shape[0]):
+            l = pidx[ii]
+            for e in range(fp[l], fp[l + 1]):
+                o[l * n + fi[e]] = 0.0
     fn(ptr(q), ptr(v), ptr(prm), ptr(o))
     for ii in range(pidx.shape[0]):
         l = pidx[ii]
-        for a in range(n):
+        lo, hi = _entries(fp, l, n)
+        for e in range(lo, hi):
+            a = _entry(fi, fp, e)
             out[l, a] += sign * o[l * n + a]
 
 
@@ -557,10 +578,12 @@ def _at_constraint_point(md_, tx_, h, tw_, j, slot):
     _at_point(md, wx, h, tx.d[j])
     _point_of(tw.qk, wx.X, tx.Lc, j, s + 1, n, wx.qi)
     # a derivative of a patterned Jacobian may write its non-zeros only; the k × m of ∂g/∂θ
-    # alone for the constraint (not the k × m × n of ∂G/∂θ: O(N³) for a chain)
-    size = (md.prm.shape[0] - 1) * m * (n if slot == P_CJAC else 1)
-    for kk in range(size):
-        o[kk] = 0.0
+    # alone for the constraint (not the k × m × n of ∂G/∂θ: O(N³) for a chain), and nothing
+    # for a constraint with a pattern by θ, of which the kernels read the entries it writes
+    if slot == P_CJAC or tw.pd.cptr.shape[0] == 0:
+        size = (md.prm.shape[0] - 1) * m * (n if slot == P_CJAC else 1)
+        for kk in range(size):
+            o[kk] = 0.0
     tw.pd.fns[slot](ptr(wx.qi), ptr(wx.qi), ptr(md.prm), ptr(o))
 
 
@@ -575,6 +598,7 @@ def _theta_exact(md_, tx_, h, tw_):
     J = sizes(wx)[4]
     given, X = pd.given, wx.X
     Rk, o, thF, thP, pidx = tw.Rk, tw.tho, tw.thF, tw.thP, tw.pidx
+    fp, fi, cp, ci = pd.fptr, pd.fidx, pd.cptr, pd.cidx
     npar = pidx.shape[0]
     b, L, Ld, Lc = tx.b, tx.L, tx.Ld, tx.Lc
     for ii in range(npar):
@@ -590,15 +614,23 @@ def _theta_exact(md_, tx_, h, tw_):
                 row = nu * n
                 for ii in range(npar):
                     l = pidx[ii]
-                    for a in range(n):
-                        Rk[ii, row + a] += cl * thF[l, a] + cd * thP[l, a]
+                    if given[P_MASS] != 0:
+                        for a in range(n):
+                            Rk[ii, row + a] += cl * thF[l, a] + cd * thP[l, a]
+                    else:
+                        lo, hi = _entries(fp, l, n)
+                        for e in range(lo, hi):
+                            a = _entry(fi, fp, e)
+                            Rk[ii, row + a] += cl * thF[l, a]
     if m > 0 and given[P_CON] != 0:
         for j in range(1, J + 1):
             _at_constraint_point(md_, tx_, h, tw_, j, P_CON)
             row = sx * n + (j - 1) * m
             for ii in range(npar):
                 l = pidx[ii]
-                for c in range(m):
+                lo, hi = _entries(cp, l, m)
+                for e in range(lo, hi):
+                    c = _entry(ci, cp, e)
                     Rk[ii, row + c] += o[l * m + c]
     if m > 0 and given[P_CJAC] != 0:
         # −Σ_j ℓ_ν(d_j) (∂G_j/∂θ)ᵀ η_j
@@ -706,6 +738,7 @@ def _theta_pull(md_, tx_, h, tw_, q1, v1, eta, yb, zb, wb, u, lth):
     J = sizes(wx)[4]
     given, X = pd.given, wx.X
     o, thF, thP, pidx, mu, cF, cP = tw.tho, tw.thF, tw.thP, tw.pidx, tw.mu, tw.z, tw.zb
+    fp, fi, cp, ci = pd.fptr, pd.fidx, pd.cptr, pd.cidx
     npar = pidx.shape[0]
     b, L, Ld, Lc = tx.b, tx.L, tx.Ld, tx.Lc
     for kk in range(N):  # with P's rows, every row of the extended step
@@ -745,7 +778,9 @@ def _theta_pull(md_, tx_, h, tw_, q1, v1, eta, yb, zb, wb, u, lth):
             for ii in range(npar):
                 l = pidx[ii]
                 acc = 0.0
-                for a in range(n):
+                lo, hi = _entries(fp, l, n)
+                for e in range(lo, hi):
+                    a = _entry(fi, fp, e)
                     acc += cF[a] * thF[l, a]
                 if given[P_MASS] != 0:
                     for a in range(n):
@@ -758,7 +793,9 @@ def _theta_pull(md_, tx_, h, tw_, q1, v1, eta, yb, zb, wb, u, lth):
             for ii in range(npar):
                 l = pidx[ii]
                 acc = 0.0
-                for c in range(m):
+                lo, hi = _entries(cp, l, m)
+                for e in range(lo, hi):
+                    c = _entry(ci, cp, e)
                     acc += mu[row + c] * o[l * m + c]
                 lth[ii] += acc
     if m > 0 and given[P_CJAC] != 0:

@@ -101,11 +101,12 @@ def constraint_hessian(q, eta, p, out):
             out[2 * i + 3, 2 * i + 1] = e
 
 
+# the derivatives by θ write only the entries of `param_patterns`: a dense (k, n) output
+# would cost O(N²) a call
 def potential_grad_by_params(q, p, out):
     """``∂(∇V)/∂θ``: at each ``y_i``, ``g`` by ``m_i`` and ``m_i`` by ``g``; zero by the
     lengths (and by a damping coefficient after ``g``)."""
     nb = q.shape[0] // 2
-    out[:, :] = 0.0
     for i in range(nb):
         out[i, 2 * i + 1] = p[2 * nb]
         out[2 * nb, 2 * i + 1] = p[i]
@@ -114,16 +115,26 @@ def potential_grad_by_params(q, p, out):
 def constraint_by_params(q, p, out):
     """``∂g/∂θ``: ``∂g_i/∂l_i = −l_i``, zero otherwise."""
     nb = q.shape[0] // 2
-    out[:, :] = 0.0
     for i in range(nb):
         out[nb + i, i] = -p[nb + i]
 
 
 def param_derivatives(damping: float = 0.0) -> dict:
     """The chain's derivatives by ``params = (m_1 … m_N, l_1 … l_N, g[, c])`` (``Model``'s
-    ``param_derivatives``): the constant mass matrix is data, ``G`` does not depend on θ."""
+    ``param_derivatives``, with :func:`param_patterns`): the constant mass matrix is data,
+    ``G`` does not depend on θ."""
     return dict(potential_grad=potential_grad_by_params, constraint=constraint_by_params,
                 constraint_jacobian=0, **damping_.param_derivatives(damping))
+
+
+def param_patterns(N: int, damping: float = 0.0) -> dict:
+    """``(l, entry)`` of the non-zeros of :func:`param_derivatives` (``Model``'s
+    ``param_patterns``): ``∂(∇V)/∂θ`` at ``y_i`` by ``m_i`` and by ``g``, ``∂g_i/∂l_i``,
+    and ``∂F/∂c`` everywhere."""
+    i = np.arange(N)
+    k = 2 * N + 1 + (1 if damping else 0)
+    return dict(potential_grad=(np.concatenate([i, np.full(N, 2 * N)]), np.tile(2 * i + 1, 2)),
+                constraint=(N + i, i), **damping_.param_patterns(damping, k, 2 * N))
 
 
 def pattern(N: int):
@@ -251,6 +262,7 @@ def chain(N: int, m=1.0, l=1.0, g: float = 9.81, damping: float = 0.0) -> Model:
         constraint=constraint, constraint_jacobian=constraint_jacobian,
         constraint_hessian=constraint_hessian, constraint_jacobian_pattern=pattern(N),
         name=f"chain{N}" + ("-damped" if c else ""), param_derivatives=param_derivatives(c),
+        param_patterns=param_patterns(N, c),
         **damping_.options(c),
     )
     lengths = np.array(ls)

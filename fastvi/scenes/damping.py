@@ -9,6 +9,8 @@ Its derivative by the parameters is ``∂F/∂c = −v`` and zero by every other
 
 from __future__ import annotations
 
+import numpy as np
+
 
 def force(t, q, v, p, out):
     c = p[p.shape[0] - 1]
@@ -28,17 +30,25 @@ def jacobian_v(t, q, v, p, out):
 
 
 def force_by_params(t, q, v, p, out):
-    """``out[l] = ∂F/∂θ_l``: ``−v`` for the last parameter ``c``, zero for the others."""
+    """``out[l] = ∂F/∂θ_l``: ``−v`` for the last parameter ``c``, zero for the others (the
+    entries of :func:`param_patterns`, the only ones written)."""
     last = p.shape[0] - 1
-    out[:, :] = 0.0
     for a in range(q.shape[0]):
         out[last, a] = -v[a]
 
 
 def param_derivatives(damping) -> dict:
     """The ``param_derivatives`` entries of the force of a scene with ``damping`` (none for
-    ``0``): merge them into the scene's own."""
+    ``0``): merge them into the scene's own, with :func:`param_patterns`."""
     return {"force": force_by_params} if damping else {}
+
+
+def param_patterns(damping, k: int, n: int) -> dict:
+    """The ``param_patterns`` entry of the force of a scene with ``damping`` and ``k``
+    parameters, ``n`` coordinates: the row of ``c`` (none for ``0``)."""
+    if not damping:
+        return {}
+    return {"force": (np.full(n, k - 1), np.arange(n))}
 
 
 def options(damping) -> dict:

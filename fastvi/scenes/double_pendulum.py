@@ -16,6 +16,7 @@ from . import damping as damping_
 from ..drawing import cartesian
 from ._common import attach, check_positive
 from .chain import param_derivatives as _chain_param_derivatives
+from .chain import param_patterns as _chain_param_patterns
 
 # params = (m1, m2, l1, l2, g): the layout of a 2-link `chain`, whose derivatives by the
 # parameters (∇V by m1, m2, g; g by l1, l2; G by none) this scene shares
@@ -122,6 +123,7 @@ def double_pendulum(m1: float = 1.0, m2: float = 1.0, l1: float = 1.0, l2: float
         4, 2, params=(m1, m2, l1, l2, g) + ((c,) if c else ()), mass=np.diag([m1, m1, m2, m2]),
         potential=potential, potential_grad=potential_grad, potential_hessian=0, constraint=_g,
         constraint_jacobian=_G, constraint_hessian=_ddg, param_derivatives=_chain_param_derivatives(c),
+        param_patterns=_chain_param_patterns(2, c),
         name="double_pendulum" + ("-damped" if c else ""), **damping_.options(c),
     )
 

@@ -23,6 +23,7 @@ from .chain import (constraint as _g, constraint_hessian as _ddg,
                     constraint_jacobian as _G, potential as _V, potential_grad as _dV)
 from .chain import pattern as _chain_pattern
 from .chain import param_derivatives as _chain_param_derivatives
+from .chain import param_patterns as _chain_param_patterns
 from .chain import angles as _chain_angles
 from .chain import drawing as _chain_drawing
 from .chain import state_from_angles as _chain_state
@@ -80,7 +81,8 @@ def triple_pendulum(m=(1.0, 1.0, 1.0), l=(1.0, 1.0, 1.0), g: float = 9.81) -> Mo
         6, 3, params=(*m, *l, g), mass=np.diag([m[0], m[0], m[1], m[1], m[2], m[2]]),
         potential=_V, potential_grad=_dV, potential_hessian=0, constraint=_g,
         constraint_jacobian=_G, constraint_hessian=_ddg, constraint_jacobian_pattern=_chain_pattern(3),
-        param_derivatives=_chain_param_derivatives(), name="triple_pendulum",
+        param_derivatives=_chain_param_derivatives(), param_patterns=_chain_param_patterns(3),
+        name="triple_pendulum",
     )
 
     def initial_state(theta1, theta2, theta3, omega1=0.0, omega2=0.0, omega3=0.0):

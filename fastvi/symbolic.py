@@ -38,7 +38,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from .model import PARAM_SLOTS, SLOTS, Model
+from .model import PARAM_SLOTS, PATTERNED_PARAM_SLOTS, SLOTS, Model
 
 __all__ = ["model_from_lagrangian", "velocities", "SymbolicModel"]
 
@@ -106,6 +106,10 @@ class SymbolicModel(Model):
     constraint_jacobian_pattern : ndarray (m, n) of bool, optional
         The structural non-zeros of ``G``, which the generated ``constraint_jacobian`` writes
         alone (see :class:`fastvi.Model`).
+    param_patterns : mapping, optional
+        The structural non-zeros of the generated derivatives by θ of ``kinetic_grad``,
+        ``potential_grad`` and ``constraint``, which they write alone (``Model``'s
+        ``param_patterns``).
 
     Attributes
     ----------
@@ -115,7 +119,8 @@ class SymbolicModel(Model):
     """
 
     def __init__(self, source: str, n: int, m: int, *, params=(), mass=None, name: str = "symbolic",
-                 coordinates=(), param_names=(), constraint_jacobian_pattern=None):
+                 coordinates=(), param_names=(), constraint_jacobian_pattern=None,
+                 param_patterns=None):
         namespace = _load(source, name)
         funcs = {slot: namespace[slot] for slot in SLOTS if slot in namespace}
         by_params = {slot: namespace[_BY_PARAMS.format(slot)] for slot in PARAM_SLOTS
@@ -124,7 +129,8 @@ class SymbolicModel(Model):
             mass = funcs.pop("mass")
         super().__init__(n, m, params=params, mass=mass, name=name,
                          constraint_jacobian_pattern=constraint_jacobian_pattern,
-                         param_derivatives=by_params or None, **funcs)
+                         param_derivatives=by_params or None, param_patterns=param_patterns,
+                         **funcs)
         self.source = source
         self.coordinates = tuple(coordinates)
         self.param_names = tuple(param_names)
@@ -135,7 +141,8 @@ class SymbolicModel(Model):
         return (_rebuild, (self.source, self.n, self.m, dict(
             params=self.params, mass=self.mass_matrix_constant, name=self.name,
             coordinates=self.coordinates, param_names=self.param_names,
-            constraint_jacobian_pattern=self.constraint_jacobian_pattern)))
+            constraint_jacobian_pattern=self.constraint_jacobian_pattern,
+            param_patterns=self.param_patterns)))
 
 
 #: the name in generated source of the derivative by the parameters of a callback
@@ -193,6 +200,9 @@ class _Writer:
         self.replace = replace
         self.printer = PythonCodePrinter({"fully_qualified_modules": True})
         self.blocks: list[str] = []
+        #: {slot: boolean (k, size)}: the structural non-zeros of the derivatives by θ of
+        #: vector callbacks, the only entries their functions write (Model's param_patterns)
+        self.param_patterns: dict = {}
 
     def _expr(self, e):
         return self.printer.doprint(e)
@@ -236,8 +246,13 @@ class _Writer:
         if all(e == 0 for _, e in derived):
             self.blocks.append(f"# {slot} does not depend on the parameters\n{name} = 0")
             return
+        patterned = slot in PATTERNED_PARAM_SLOTS
+        if patterned:  # a vector callback: entry i of row l is derived[l * size + i]
+            nonzero = [sp.sympify(e).xreplace(self.replace) != 0 for _, e in derived]
+            self.param_patterns[slot] = np.array(nonzero, dtype=bool).reshape(len(psyms), *shape)
         self.function(name, args, derived, (len(psyms),) + tuple(shape),
-                      f"∂({slot})/∂θ_l in out[l]")
+                      f"∂({slot})/∂θ_l in out[l]" + (" (the entries of its pattern)" if patterned else ""),
+                      zeroed=patterned)
 
 
 def _vector_outputs(exprs):
@@ -451,7 +466,8 @@ def model_from_lagrangian(q, T, V=0, constraints=(), *, v=None, params=None, nam
     source = header + "\n\n" + "\n\n\n".join(w.blocks) + "\n"
     model = SymbolicModel(source, n, m, params=pvals, mass=mass_const, name=name,
                           coordinates=[s.name for s in qs], param_names=[s.name for s in psyms],
-                          constraint_jacobian_pattern=pattern if m else None)
+                          constraint_jacobian_pattern=pattern if m else None,
+                          param_patterns=w.param_patterns or None)
     if compile:
         model.kernel_arguments()
     return model

@@ -114,6 +114,21 @@ def test_symbolic_constrained_model_generates_constraint_derivatives(curve):
     assert curve.check(q, v, n_random=1).ok
 
 
+def test_symbolic_derivatives_by_the_parameters_declare_their_structural_non_zeros(curve, spring_pendulum):
+    rng = np.random.default_rng(4)
+    for model, slots in ((curve, {"potential_grad", "constraint"}),
+                         (spring_pendulum, {"kinetic_grad", "potential_grad"})):
+        assert set(model.param_patterns) == slots
+        q, v = rng.uniform(0.3, 1.2, model.n), rng.uniform(-1.0, 1.0, model.n)
+        for slot, mask in model.param_patterns.items():
+            assert (np.abs(fd_by_params(model, slot, q, v)) > 1e-9).tolist() == mask.tolist(), slot
+            body = model.source.split(f"def {slot}_by_params")[1].split("\ndef ")[0]
+            assert "= 0.0" not in body  # writes the pattern only, no zero fill
+        back = pickle.loads(pickle.dumps(model))
+        assert {s: m.tolist() for s, m in back.param_patterns.items()} == \
+            {s: m.tolist() for s, m in model.param_patterns.items()}
+
+
 def test_symbolic_model_declares_zero_where_no_callback_moves_with_the_parameters():
     x, y = sp.symbols("x y")
     m, g = sp.symbols("m g", positive=True)

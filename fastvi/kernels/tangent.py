@@ -506,9 +506,12 @@ def _theta_at_quadrature(md_, tx_, h, tw_, i):
     fp, fi = pd.fptr, pd.fidx
     for ii in range(pidx.shape[0]):
         l = pidx[ii]
-        lo, hi = _entries(fp, l, n)
-        for e in range(lo, hi):
-            thF[l, _entry(fi, fp, e)] = 0.0
+        if fp.shape[0] > 0:
+            for e in range(fp[l], fp[l + 1]):
+                thF[l, fi[e]] = 0.0
+        else:
+            for a in range(n):
+                thF[l, a] = 0.0
     if given[P_PGRAD] != 0:
         _add_by_theta(fns[P_PGRAD], qi, qi, prm, pidx, o, thF, n, -1.0, fp, fi)
     if given[P_KGRAD] != 0:
@@ -538,20 +541,30 @@ def _entry(idx, ptr, e):
 def _add_by_theta(fn, q, v, prm, pidx, o, out, n, sign, fp, fi):
     """``out[l] += sign · ∂f/∂θ_l`` for ``l`` in ``pidx`` over the pattern ``fp``, ``fi``,
     ``f`` an (n,) callback whose derivative by θ is ``fn``."""
+    # a callback with a pattern writes its own entries only, and `o` still holds the last
+    # callback's: the entries read are zeroed first. The dense loops stay apart: compiled
+    # for the sizes, they unroll
     if fp.shape[0] > 0:
-        # the pattern is the union over the callbacks: a callback writes its own entries
-        # only, and `o` still holds the last one's
         for ii in range(pidx.shape[0]):
             l = pidx[ii]
             for e in range(fp[l], fp[l + 1]):
                 o[l * n + fi[e]] = 0.0
-    fn(ptr(q), ptr(v), ptr(prm), ptr(o))
-    for ii in range(pidx.shape[0]):
-        l = pidx[ii]
-        lo, hi = _entries(fp, l, n)
-        for e in range(lo, hi):
-            a = _entry(fi, fp, e)
-            out[l, a] += sign * o[l * n + a]
+        fn(ptr(q), ptr(v), ptr(prm), ptr(o))
+        for ii in range(pidx.shape[0]):
+            l = pidx[ii]
+            for e in range(fp[l], fp[l + 1]):
+                a = fi[e]
+                out[l, a] += sign * o[l * n + a]
+    else:
+        for ii in range(pidx.shape[0]):
+            l = pidx[ii]
+            for a in range(n):
+                o[l * n + a] = 0.0
+        fn(ptr(q), ptr(v), ptr(prm), ptr(o))
+        for ii in range(pidx.shape[0]):
+            l = pidx[ii]
+            for a in range(n):
+                out[l, a] += sign * o[l * n + a]
 
 
 @hot_inline
@@ -778,10 +791,12 @@ def _theta_pull(md_, tx_, h, tw_, q1, v1, eta, yb, zb, wb, u, lth):
             for ii in range(npar):
                 l = pidx[ii]
                 acc = 0.0
-                lo, hi = _entries(fp, l, n)
-                for e in range(lo, hi):
-                    a = _entry(fi, fp, e)
-                    acc += cF[a] * thF[l, a]
+                if fp.shape[0] > 0:
+                    for e in range(fp[l], fp[l + 1]):
+                        acc += cF[fi[e]] * thF[l, fi[e]]
+                else:
+                    for a in range(n):
+                        acc += cF[a] * thF[l, a]
                 if given[P_MASS] != 0:
                     for a in range(n):
                         acc += cP[a] * thP[l, a]

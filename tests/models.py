@@ -272,3 +272,13 @@ def damped_double_pendulum_by_differences(damping=0.3):
         constraint_hessian=chain.constraint_hessian, constraint_jacobian_pattern=chain.pattern(2),
         name="double_pendulum-by-differences",
         **damping_.options(damping))
+
+
+# time-dependent spring: V = ½ k1 x² + ½ k2 (y − a sin t)², params = (k1, k2, a, …)
+def td_potential(t, q, p):
+    return 0.5 * p[0] * q[0] ** 2 + 0.5 * p[1] * (q[1] - p[2] * np.sin(t)) ** 2
+
+
+def td_potential_grad(t, q, p, out):
+    out[0] = p[0] * q[0]
+    out[1] = p[1] * (q[1] - p[2] * np.sin(t))

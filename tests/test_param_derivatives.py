@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import fastvi
+from tests.models import td_potential, td_potential_grad
 from fastvi.check import ModelCheckError
 from fastvi.kernels.layout import PARAM_SLOTS
 from fastvi.scenes import chain, double_pendulum, pendulum, triple_pendulum
@@ -146,15 +147,6 @@ def test_symbolic_model_declares_zero_where_no_callback_moves_with_the_parameter
 
 # ----------------------------------------------------------------------------- user models
 # params = (k1, k2, a, c): V = ½ k1 x² + ½ k2 (y − a sin t)², F = −c (x², 1) ⊙ v
-def td_potential(t, q, p):
-    return 0.5 * p[0] * q[0] ** 2 + 0.5 * p[1] * (q[1] - p[2] * np.sin(t)) ** 2
-
-
-def td_potential_grad(t, q, p, out):
-    out[0] = p[0] * q[0]
-    out[1] = p[1] * (q[1] - p[2] * np.sin(t))
-
-
 def td_potential_grad_by_params(t, q, p, out):
     out[:, :] = 0.0
     out[0, 0] = q[0]

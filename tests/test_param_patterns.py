@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import fastvi
+from tests.models import td_potential, td_potential_grad
 from fastvi.check import ModelCheckError
 from fastvi.model import PATTERN_MIN_ENTRIES
 
@@ -97,15 +98,6 @@ def test_the_patterns_read_by_the_kernels_are_the_union_of_the_slots():
 
 
 # ----------------------------------------------------------------------------- the check
-def td_potential(t, q, p):
-    return 0.5 * p[0] * q[0] ** 2 + 0.5 * p[1] * (q[1] - p[2] * np.sin(t)) ** 2
-
-
-def td_potential_grad(t, q, p, out):
-    out[0] = p[0] * q[0]
-    out[1] = p[1] * (q[1] - p[2] * np.sin(t))
-
-
 def td_potential_grad_by_params(t, q, p, out):
     out[0, 0] = q[0]
     out[1, 1] = q[1] - p[2] * np.sin(t)

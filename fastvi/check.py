@@ -822,9 +822,13 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
     if m:
         each_state("constraint_jacobian", lambda k, qk, vk: _pattern_note(model, _compare(
             "constraint_jacobian", k, cb("constraint_jacobian", qk), _fd(lambda x: cb("constraint", x), qk), rtol)))
-    if has("force_jacobian_q"):
+    if has("force_jacobian_q") or model.force_independent_of_q:
+        # force_jacobian_q=0 declares ∂F/∂q = 0: compared like a callback returning zeros
+        declared = model.force_independent_of_q
         each_state("force_jacobian_q", lambda k, qk, vk: _compare(
-            "force_jacobian_q", k, cb("force_jacobian_q", qk, vk), _fd(lambda x: cb("force", x, vk), qk), rtol))
+            "force_jacobian_q", k, np.zeros((n, n)) if declared else cb("force_jacobian_q", qk, vk),
+            _fd(lambda x: cb("force", x, vk), qk), rtol,
+            "declared 0 (force independent of q)" if declared else ""))
     if has("force_jacobian_v"):
         each_state("force_jacobian_v", lambda k, qk, vk: _compare(
             "force_jacobian_v", k, cb("force_jacobian_v", qk, vk), _fd(lambda x: cb("force", qk, x), vk), rtol))

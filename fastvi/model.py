@@ -472,6 +472,9 @@ class Model:
         ``force_jacobian_q(t, q, v, params, out)``: ``∂F/∂q``, and ``force_jacobian_v``:
         ``∂F/∂v`` (n, n), entry [a, b] = ∂F_a/∂q_b (∂v_b). Finite differences otherwise.
         Like the other second derivatives they only enter Newton's matrix.
+        ``force_jacobian_q=0`` declares a force independent of q (viscous damping): the
+        Newton matrix then has no ∂F/∂q block, which for a large mechanism saves an
+        ``n × n`` output per quadrature point. :meth:`check` verifies it.
     time_dependent : bool, default False
         The potential and the constraints depend on time: every potential and constraint
         callback then takes the time first — ``potential(t, q, params)``,
@@ -591,6 +594,10 @@ class Model:
         self.linear_potential = _is_zero(potential_hessian)
         if self.linear_potential:
             potential_hessian = None
+        #: ∂F/∂q = 0 was declared (``force_jacobian_q=0``): the force depends on t and v only
+        self.force_independent_of_q = _is_zero(force_jacobian_q)
+        if self.force_independent_of_q:
+            force_jacobian_q = None
         funcs = dict(
             kinetic_grad=kinetic_grad,
             potential=potential,
@@ -610,6 +617,9 @@ class Model:
             raise TypeError(f"`time_dependent` must be True or False, got {time_dependent!r}")
         self.time_dependent = bool(time_dependent)
         if force is None:
+            if self.force_independent_of_q:
+                raise ValueError("`force_jacobian_q=0` was given without `force`; pass the force "
+                                 "itself too")
             for key in ("force_jacobian_q", "force_jacobian_v"):
                 if funcs[key] is not None:
                     raise ValueError(f"`{key}` was given without `force`; pass the force itself too")
@@ -762,6 +772,8 @@ class Model:
         funcs = {k: v for k, v in self._functions.items() if k != "mass"}
         if self.linear_potential:
             funcs["potential_hessian"] = 0
+        if self.force_independent_of_q:
+            funcs["force_jacobian_q"] = 0
         kwargs = dict(params=self.params, mass=self._mass_arg, name=self.name,
                       time_dependent=self.time_dependent,
                       constraint_jacobian_pattern=self.constraint_jacobian_pattern,
@@ -823,6 +835,7 @@ class Model:
             flags[lay.F_EX_GT] = int("constraint_time_derivative" in self._functions)
             flags[lay.F_TSLOT] = k
             flags[lay.F_LINPOT] = int(self.linear_potential)
+            flags[lay.F_FORCE_Q0] = int(self.force_independent_of_q)
             self._compiled = (cfs, flags, Mc)
         return self._compiled
 
@@ -967,12 +980,13 @@ class Model:
         ValueError
             ``slot`` is not a name of :data:`SLOTS`, or the model was not given that
             callback (:attr:`callbacks`; the kernels difference or skip it). A declared
-            ``potential_hessian=0`` gives zeros.
+            ``potential_hessian=0`` or ``force_jacobian_q=0`` gives zeros.
         """
         if slot not in SLOTS:
             raise ValueError(f"`slot` must be one of {', '.join(SLOTS)}, got {slot!r}")
-        if slot == "potential_hessian" and self.linear_potential:
-            return np.zeros((self.n, self.n))  # declared: ∇V does not depend on q
+        if (slot == "potential_hessian" and self.linear_potential
+                or slot == "force_jacobian_q" and self.force_independent_of_q):
+            return np.zeros((self.n, self.n))  # declared: ∇V (F) does not depend on q
         if slot not in self._functions:
             hint = " (its mass is constant: see `mass_matrix`)" if slot == "mass" else ""
             raise ValueError(f"the model has no `{slot}` callback{hint}; it has "

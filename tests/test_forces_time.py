@@ -6,6 +6,8 @@ pendulum in angles, Kapitza's pendulum in its angle), and the exact kinematics o
 driven slider–crank. Orders are log–log slopes in the asymptotic range.
 """
 
+import importlib
+import pickle
 from pathlib import Path
 
 import numpy as np
@@ -79,6 +81,57 @@ def test_exact_force_jacobians_give_the_same_trajectory_as_differences():
     b = fastvi.integrate(_oscillator(True), [1.0], [0.0], h=0.05, n_steps=200, newton="full")
     assert np.max(np.abs(a.q - b.q)) < 1e-13
     assert b.stats["newton_iterations"] <= a.stats["newton_iterations"]
+
+
+def _q_force(t, q, v, p, out):
+    out[0] = -p[1] * v[0] - 0.2 * q[0] ** 3  # moves with q
+
+
+def _chain_with_zero_block(N, c, force_jacobian_q):
+    """``chain(N, damping=c)`` with ``force_jacobian_q`` as given (declared or a callback)."""
+    CH, D = (importlib.import_module(f"fastvi.scenes.{m}") for m in ("chain", "damping"))
+    scene = fastvi.scenes.chain(N, damping=c)
+    return fastvi.Model(
+        2 * N, N, params=scene.params, mass=np.ones(2 * N), potential=CH.potential,
+        potential_grad=CH.potential_grad, potential_hessian=0, constraint=CH.constraint,
+        constraint_jacobian=CH.constraint_jacobian, constraint_hessian=CH.constraint_hessian,
+        constraint_jacobian_pattern=CH.pattern(N), force=D.force,
+        force_jacobian_q=force_jacobian_q, force_jacobian_v=D.jacobian_v), scene
+
+
+def _zero_block(t, q, v, p, out):
+    out[:, :] = 0.0
+
+
+@pytest.mark.parametrize("N", [2, 12])  # dense blocks, and the spans of a large model
+def test_a_force_declared_independent_of_q_changes_no_bit(N):
+    declared, scene = _chain_with_zero_block(N, 0.3, 0)
+    given, _ = _chain_with_zero_block(N, 0.3, _zero_block)
+    assert declared.force_independent_of_q and "force_jacobian_q" not in declared.callbacks
+    assert scene.force_independent_of_q  # the damping force declares it
+    q0, v0 = scene.initial_state(np.linspace(0.4, 1.0, N))
+    runs = [fastvi.integrate(model, q0, v0, h=0.01, n_steps=100, newton="full")
+            for model in (declared, given)]
+    assert np.array_equal(runs[0].q, runs[1].q) and np.array_equal(runs[0].p, runs[1].p)
+    S = [fastvi.sensitivity(model, q0, v0, h=0.01, n_steps=40, save_every=20, wrt=("q0",))
+         for model in (declared, given)]
+    assert np.array_equal(S[0].dq, S[1].dq)
+
+
+def test_a_false_force_jacobian_q_declaration_is_named():
+    model = fastvi.Model(1, params=(4.0, 0.3), mass=np.eye(1), potential=_V, potential_grad=_dV,
+                         force=_q_force, force_jacobian_q=0)
+    assert np.array_equal(model.callback_value("force_jacobian_q", [0.5]), np.zeros((1, 1)))
+    with pytest.raises(fastvi.ModelCheckError) as err:
+        model.check([0.5], [0.1])
+    assert err.value.callback == "force_jacobian_q"
+    with pytest.raises(ValueError, match="force_jacobian_q=0.*without `force`"):
+        fastvi.Model(1, params=(4.0,), mass=np.eye(1), potential=_V, potential_grad=_dV,
+                     force_jacobian_q=0)
+    ok = fastvi.Model(1, params=(4.0, 0.3), mass=np.eye(1), potential=_V, potential_grad=_dV,
+                      force=_force, force_jacobian_q=0)
+    assert ok.check([0.5], [0.1]).ok
+    assert pickle.loads(pickle.dumps(ok)).force_independent_of_q
 
 
 # ----------------------------------------------------------------------------- damped double pendulum

@@ -123,7 +123,10 @@ F_LINPOT = 14
 #: uses M̄ = M + Gᵀ W G (:func:`augmented_mass`), which agrees with M on ker G, so the
 #: converged step is that of M itself
 F_AUGMENT = 15
-FLAGS_SIZE = 16
+#: the force does not depend on q (``force_jacobian_q=0``: viscous damping): the Newton
+#: matrix has no ∂F/∂q block, and no callback fills an n × n block of zeros for it
+F_FORCE_Q0 = 16
+FLAGS_SIZE = 17
 #: flag index of each optional second derivative, in SECOND order
 F_EXACT = (F_EX_PHESS, F_EX_CHESS, F_EX_KHESS, F_EX_MJAC)
 

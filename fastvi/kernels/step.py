@@ -41,8 +41,8 @@ from .._numba import CalledAs, byref, hot, hot_inline, only_if, own, ptr, quiet
 from .banded import (gt_times, mech_impulses_structured, mech_rows_sparse, newton_banded,
                      project_structured, schur_structured)
 from .layout import (FD_T, FD_T_POINTS, CHESS, CJAC, CON, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_FJQ,
-                     F_EX_FJV, F_EX_GT, F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_LINPOT, F_M,
-                     F_MASSFN, F_TIME, F_TSLOT, FJQ, FJV, FORCE, GT, H_FG, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
+                     F_EX_FJV, F_EX_GT, F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_FORCE_Q0,
+                     F_LINPOT, F_M, F_MASSFN, F_TIME, F_TSLOT, FJQ, FJV, FORCE, GT, H_FG, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
                      NEEDS_FULL_NEWTON, NEWTON_FAILED, NEWTON_FULL, NONFINITE, OK, PGRAD, PHESS,
                      POT, KHESS, S_FULL,
                      S_G, S_GV, S_ITERS, S_RES, S_WORK, S_WORK_F, SI_A, SI_BSPAN, SI_GCOL,
@@ -529,8 +529,9 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                     fd_momentum_jacobian(fns[MASS], qi, vi, prm, Cq, fa, Ma, n)
             if has_force:
                 # ∂F_nc/∂q joins the force block, ∂F_nc/∂v the mixed block (docs/method.md §11)
-                _jacobian(md, flags[F_EX_FJQ], FJQ, FORCE, _FD_Q, qi, vi, Hc, fa, F, Pm, n)
-                add_block(Aq, 0, 0, 1.0, Hc, n, n, si, bsp)
+                if flags[F_FORCE_Q0] == 0:
+                    _jacobian(md, flags[F_EX_FJQ], FJQ, FORCE, _FD_Q, qi, vi, Hc, fa, F, Pm, n)
+                    add_block(Aq, 0, 0, 1.0, Hc, n, n, si, bsp)
                 _jacobian(md, flags[F_EX_FJV], FJV, FORCE, _FD_V, qi, vi, Fv, Ma[0], fa, F, n)
             # a block of zeros (a linear potential and a force of v alone: viscous damping)
             # adds nothing: skipping it leaves A as it was

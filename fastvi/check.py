@@ -403,6 +403,9 @@ class _Callbacks:
         self.pattern = {}
         if model.constraint_jacobian_pattern is not None:
             self.pattern["constraint_jacobian"] = model.constraint_jacobian_pattern.ravel()
+        if model.force_jacobian_pattern is not None:
+            for slot in ("force_jacobian_q", "force_jacobian_v"):
+                self.pattern[slot] = model.force_jacobian_pattern.ravel()
         for slot, mask in model.param_patterns.items() if by_params else ():
             self.pattern[_theta(slot)] = mask.ravel()
         n, m = self.n, self.m
@@ -550,6 +553,7 @@ class _Callbacks:
                 idx = [self._index(slot, int(i)) for i in off[:4]]
                 more = f" and {off.size - 4} more" if off.size > 4 else ""
                 declared = (f"param_patterns[{slot[:-2]!r}]" if slot.endswith("/θ")
+                            else "force_jacobian_pattern" if slot.startswith("force_jacobian")
                             else f"{slot}_pattern")
                 problem = (f"`{slot}` wrote non-zeros at {', '.join(map(str, idx))}{more}, outside the "
                            f"model's `{declared}` ({int(mask.sum())} entries declared): add the "

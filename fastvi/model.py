@@ -475,6 +475,13 @@ class Model:
         ``force_jacobian_q=0`` declares a force independent of q (viscous damping): the
         Newton matrix then has no ∂F/∂q block, which for a large mechanism saves an
         ``n × n`` output per quadrature point. :meth:`check` verifies it.
+    force_jacobian_pattern : array_like, optional
+        The entries of ``∂F/∂q`` and ``∂F/∂v`` that may be non-zero: an (n, n) boolean
+        array, or a pair ``(rows, cols)`` of index arrays (a damping force's diagonal). The
+        kernels zero what they read before each call, so ``force_jacobian_q`` and
+        ``force_jacobian_v`` need write **only the entries of the pattern** (every one of
+        them) instead of an ``n × n`` output per quadrature point. :meth:`check` names a
+        non-zero written outside it.
     time_dependent : bool, default False
         The potential and the constraints depend on time: every potential and constraint
         callback then takes the time first — ``potential(t, q, params)``,
@@ -574,6 +581,7 @@ class Model:
         force: Callable | None = None,
         force_jacobian_q: Callable | None = None,
         force_jacobian_v: Callable | None = None,
+        force_jacobian_pattern=None,
         time_dependent: bool = False,
         constraint_time_derivative: Callable | None = None,
         constraint_jacobian_pattern=None,
@@ -617,9 +625,9 @@ class Model:
             raise TypeError(f"`time_dependent` must be True or False, got {time_dependent!r}")
         self.time_dependent = bool(time_dependent)
         if force is None:
-            if self.force_independent_of_q:
-                raise ValueError("`force_jacobian_q=0` was given without `force`; pass the force "
-                                 "itself too")
+            if self.force_independent_of_q or force_jacobian_pattern is not None:
+                which = "force_jacobian_q=0" if self.force_independent_of_q else "force_jacobian_pattern"
+                raise ValueError(f"`{which}` was given without `force`; pass the force itself too")
             for key in ("force_jacobian_q", "force_jacobian_v"):
                 if funcs[key] is not None:
                     raise ValueError(f"`{key}` was given without `force`; pass the force itself too")
@@ -671,6 +679,8 @@ class Model:
                              "constraints has no G")
         self.constraint_jacobian_pattern = _as_pattern(constraint_jacobian_pattern, (self.m, self.n),
                                                        "constraint_jacobian_pattern")
+        self.force_jacobian_pattern = _as_pattern(force_jacobian_pattern, (self.n, self.n),
+                                                  "force_jacobian_pattern")
         #: the derivatives by θ given as functions, and the slots declared 0
         self._param_functions, self._param_zero = self._param_derivatives(param_derivatives)
         #: {slot: boolean (k,) + output shape}: the entries of a derivative by θ that may be
@@ -777,6 +787,7 @@ class Model:
         kwargs = dict(params=self.params, mass=self._mass_arg, name=self.name,
                       time_dependent=self.time_dependent,
                       constraint_jacobian_pattern=self.constraint_jacobian_pattern,
+                      force_jacobian_pattern=self.force_jacobian_pattern,
                       param_derivatives=self._param_arg(), param_patterns=self.param_patterns,
                       fixed_params=self.fixed_params,
                       **funcs)
@@ -836,6 +847,7 @@ class Model:
             flags[lay.F_TSLOT] = k
             flags[lay.F_LINPOT] = int(self.linear_potential)
             flags[lay.F_FORCE_Q0] = int(self.force_independent_of_q)
+            flags[lay.F_FJ_PATTERN] = int(self.force_jacobian_pattern is not None)
             self._compiled = (cfs, flags, Mc)
         return self._compiled
 

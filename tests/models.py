@@ -271,7 +271,7 @@ def damped_double_pendulum_by_differences(damping=0.3):
         constraint=chain.constraint, constraint_jacobian=chain.constraint_jacobian,
         constraint_hessian=chain.constraint_hessian, constraint_jacobian_pattern=chain.pattern(2),
         name="double_pendulum-by-differences",
-        **damping_.options(damping))
+        **damping_.options(damping, 4))
 
 
 # time-dependent spring: V = ½ k1 x² + ½ k2 (y − a sin t)², params = (k1, k2, a, …)

@@ -87,28 +87,38 @@ def _q_force(t, q, v, p, out):
     out[0] = -p[1] * v[0] - 0.2 * q[0] ** 3  # moves with q
 
 
-def _chain_with_zero_block(N, c, force_jacobian_q):
-    """``chain(N, damping=c)`` with ``force_jacobian_q`` as given (declared or a callback)."""
+def _damped_chain(N, c, declared):
+    """``chain(N, damping=c)``: its force's Jacobians declared as the scene does
+    (``force_jacobian_q=0`` and the diagonal ``force_jacobian_pattern``), or written whole
+    by callbacks without a declaration."""
     CH, D = (importlib.import_module(f"fastvi.scenes.{m}") for m in ("chain", "damping"))
     scene = fastvi.scenes.chain(N, damping=c)
+    force = (D.options(c, 2 * N) if declared else
+             dict(force=D.force, force_jacobian_q=_zero_block, force_jacobian_v=_dense_damping_v))
     return fastvi.Model(
         2 * N, N, params=scene.params, mass=np.ones(2 * N), potential=CH.potential,
         potential_grad=CH.potential_grad, potential_hessian=0, constraint=CH.constraint,
         constraint_jacobian=CH.constraint_jacobian, constraint_hessian=CH.constraint_hessian,
-        constraint_jacobian_pattern=CH.pattern(N), force=D.force,
-        force_jacobian_q=force_jacobian_q, force_jacobian_v=D.jacobian_v), scene
+        constraint_jacobian_pattern=CH.pattern(N), **force), scene
 
 
 def _zero_block(t, q, v, p, out):
     out[:, :] = 0.0
 
 
+def _dense_damping_v(t, q, v, p, out):
+    out[:, :] = 0.0
+    for a in range(q.shape[0]):
+        out[a, a] = -p[p.shape[0] - 1]
+
+
 @pytest.mark.parametrize("N", [2, 12])  # dense blocks, and the spans of a large model
-def test_a_force_declared_independent_of_q_changes_no_bit(N):
-    declared, scene = _chain_with_zero_block(N, 0.3, 0)
-    given, _ = _chain_with_zero_block(N, 0.3, _zero_block)
+def test_the_damping_forces_declarations_change_no_bit(N):
+    declared, scene = _damped_chain(N, 0.3, True)
+    given, _ = _damped_chain(N, 0.3, False)
     assert declared.force_independent_of_q and "force_jacobian_q" not in declared.callbacks
-    assert scene.force_independent_of_q  # the damping force declares it
+    assert scene.force_independent_of_q and scene.force_jacobian_pattern is not None
+    assert np.array_equal(scene.force_jacobian_pattern, np.eye(2 * N, dtype=bool))
     q0, v0 = scene.initial_state(np.linspace(0.4, 1.0, N))
     runs = [fastvi.integrate(model, q0, v0, h=0.01, n_steps=100, newton="full")
             for model in (declared, given)]
@@ -132,6 +142,48 @@ def test_a_false_force_jacobian_q_declaration_is_named():
                       force=_force, force_jacobian_q=0)
     assert ok.check([0.5], [0.1]).ok
     assert pickle.loads(pickle.dumps(ok)).force_independent_of_q
+
+
+def _damping_v_off_pattern(t, q, v, p, out):
+    out[0, 0] = -p[1]
+    out[0, 1] = 0.1  # outside the diagonal pattern
+    out[1, 1] = -p[1]
+
+
+def _two_dof(**force):
+    return fastvi.Model(2, params=(4.0, 0.3), mass=np.eye(2), potential=_free_V,
+                        potential_grad=_free_dV, force=_force2, **force)
+
+
+def _free_V(q, p):
+    return 0.5 * p[0] * (q[0] ** 2 + q[1] ** 2)
+
+
+def _free_dV(q, p, out):
+    out[0] = p[0] * q[0]
+    out[1] = p[0] * q[1]
+
+
+def _force2(t, q, v, p, out):
+    out[0] = -p[1] * v[0]
+    out[1] = -p[1] * v[1]
+
+
+def test_a_force_jacobian_pattern_is_checked_and_pickled():
+    D = importlib.import_module("fastvi.scenes.damping")
+    diagonal = (np.arange(2), np.arange(2))
+    ok = _two_dof(force_jacobian_q=0, force_jacobian_v=D.jacobian_v, force_jacobian_pattern=diagonal)
+    assert ok.check([0.5, -0.2], [0.1, 0.3]).ok
+    back = pickle.loads(pickle.dumps(ok))
+    assert np.array_equal(back.force_jacobian_pattern, np.eye(2, dtype=bool))
+    bad = _two_dof(force_jacobian_v=_damping_v_off_pattern, force_jacobian_pattern=diagonal)
+    with pytest.raises(fastvi.ModelCheckError, match="outside the model's `force_jacobian_pattern`"):
+        bad.check([0.5, -0.2], [0.1, 0.3])
+    with pytest.raises(ValueError, match="force_jacobian_pattern.*without `force`"):
+        fastvi.Model(1, params=(4.0,), mass=np.eye(1), potential=_V, potential_grad=_dV,
+                     force_jacobian_pattern=np.ones((1, 1), dtype=bool))
+    with pytest.raises(ValueError, match=r"force_jacobian_pattern.*\(2, 2\) boolean"):
+        _two_dof(force_jacobian_pattern=np.ones((2, 3), dtype=bool))
 
 
 # ----------------------------------------------------------------------------- damped double pendulum

@@ -55,7 +55,7 @@ def dense_chain(N, c):
         param_derivatives=dict(potential_grad=dense_potential_grad_by_params,
                                constraint=dense_constraint_by_params, constraint_jacobian=0,
                                force=dense_force_by_params),
-        **DAMPING.options(c), name=f"dense-chain{N}")
+        **DAMPING.options(c, 2 * N), name=f"dense-chain{N}")
 
 
 @pytest.mark.parametrize("N", [3, 12])  # read densely, and over the patterns

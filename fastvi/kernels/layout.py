@@ -126,7 +126,10 @@ F_AUGMENT = 15
 #: the force does not depend on q (``force_jacobian_q=0``: viscous damping): the Newton
 #: matrix has no ∂F/∂q block, and no callback fills an n × n block of zeros for it
 F_FORCE_Q0 = 16
-FLAGS_SIZE = 17
+#: the force's Jacobians write only the entries of ``force_jacobian_pattern``: the kernels
+#: zero the block they read before each call
+F_FJ_PATTERN = 17
+FLAGS_SIZE = 18
 #: flag index of each optional second derivative, in SECOND order
 F_EXACT = (F_EX_PHESS, F_EX_CHESS, F_EX_KHESS, F_EX_MJAC)
 

@@ -41,8 +41,8 @@ from .._numba import CalledAs, byref, hot, hot_inline, only_if, own, ptr, quiet
 from .banded import (gt_times, mech_impulses_structured, mech_rows_sparse, newton_banded,
                      project_structured, schur_structured)
 from .layout import (FD_T, FD_T_POINTS, CHESS, CJAC, CON, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_FJQ,
-                     F_EX_FJV, F_EX_GT, F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FORCE, F_FORCE_Q0,
-                     F_LINPOT, F_M, F_MASSFN, F_TIME, F_TSLOT, FJQ, FJV, FORCE, GT, H_FG, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
+                     F_EX_FJV, F_EX_GT, F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FJ_PATTERN, F_FORCE,
+                     F_FORCE_Q0, F_LINPOT, F_M, F_MASSFN, F_TIME, F_TSLOT, FJQ, FJV, FORCE, GT, H_FG, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
                      NEEDS_FULL_NEWTON, NEWTON_FAILED, NEWTON_FULL, NONFINITE, OK, PGRAD, PHESS,
                      POT, KHESS, S_FULL,
                      S_G, S_GV, S_ITERS, S_RES, S_WORK, S_WORK_F, SI_A, SI_BSPAN, SI_GCOL,
@@ -500,6 +500,10 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
 
     if has_mass or has_force or flags[F_LINPOT] == 0:
         Mi, Fv = ws.Mi, ws.Fv
+        # ∂F/∂q = 0 by declaration (a linear potential, a constant mass and a force of v
+        # alone: viscous damping): the block is neither formed nor scanned
+        q_free = (flags[F_LINPOT] != 0 and not has_mass
+                  and not (has_force and flags[F_FORCE_Q0] == 0))
         for i in range(r):
             _at(md, ws, h, tabs.c[i])
             for a in range(n):
@@ -512,12 +516,13 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                 qi[a] = qa
                 vi[a] = va * inv_h
             # ∂F/∂q = T_qq − V_qq (+ ∂F_nc/∂q); F, Pm, fa are spent scratch of the residual
-            if flags[F_LINPOT] != 0:
-                _clear(Aq, n, si, bsp)
-            else:
-                _jacobian(md, flags[F_EX_PHESS], PHESS, PGRAD, _FD_HESSIAN, qi, qi, Aq, fa, F,
-                          Pm, n)
-            _set_block(Aq, 0, 0, -1.0, Aq, n, n, si, bsp)  # −x exactly, as −0.0 for 0.0
+            if not q_free:
+                if flags[F_LINPOT] != 0:
+                    _clear(Aq, n, si, bsp)
+                else:
+                    _jacobian(md, flags[F_EX_PHESS], PHESS, PGRAD, _FD_HESSIAN, qi, qi, Aq, fa,
+                              F, Pm, n)
+                _set_block(Aq, 0, 0, -1.0, Aq, n, n, si, bsp)  # −x exactly, as −0.0 for 0.0
             if has_mass:
                 fns[MASS](ptr(qi), ptr(qi), ptr(prm), ptr(Mi))
                 _jacobian(md, flags[F_EX_KHESS], KHESS, KGRAD, _FD_HESSIAN, qi, vi, Hc, fa, F,
@@ -529,13 +534,18 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                     fd_momentum_jacobian(fns[MASS], qi, vi, prm, Cq, fa, Ma, n)
             if has_force:
                 # ∂F_nc/∂q joins the force block, ∂F_nc/∂v the mixed block (docs/method.md §11)
+                # with a pattern they write its entries only: what is read is zeroed first
+                patterned = flags[F_FJ_PATTERN] != 0
                 if flags[F_FORCE_Q0] == 0:
+                    if patterned:
+                        _clear(Hc, n, si, bsp)
                     _jacobian(md, flags[F_EX_FJQ], FJQ, FORCE, _FD_Q, qi, vi, Hc, fa, F, Pm, n)
                     add_block(Aq, 0, 0, 1.0, Hc, n, n, si, bsp)
+                if patterned:
+                    _clear(Fv, n, si, bsp)
                 _jacobian(md, flags[F_EX_FJV], FJV, FORCE, _FD_V, qi, vi, Fv, Ma[0], fa, F, n)
-            # a block of zeros (a linear potential and a force of v alone: viscous damping)
-            # adds nothing: skipping it leaves A as it was
-            force_q = _nonzero(Aq, n, si, bsp)
+            # a block of zeros adds nothing: skipping it leaves A as it was
+            force_q = not q_free and _nonzero(Aq, n, si, bsp)
             w = h * b[i]
             # a large model's blocks are sparse (a damping force's F_v is diagonal, a chain's
             # Hessians are banded): each row's span of non-zeros, found once and added to

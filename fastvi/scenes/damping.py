@@ -19,8 +19,8 @@ def force(t, q, v, p, out):
 
 
 def jacobian_v(t, q, v, p, out):
+    """``∂F/∂v = −c I``: the diagonal, its ``force_jacobian_pattern``, alone."""
     c = p[p.shape[0] - 1]
-    out[:, :] = 0.0
     for a in range(q.shape[0]):
         out[a, a] = -c
 
@@ -47,13 +47,15 @@ def param_patterns(damping, k: int, n: int) -> dict:
     return {"force": (np.full(n, k - 1), np.arange(n))}
 
 
-def options(damping) -> dict:
-    """The ``Model`` keyword arguments of a scene with ``damping`` (none for ``0``)."""
+def options(damping, n: int) -> dict:
+    """The ``Model`` keyword arguments of a scene with ``damping`` and ``n`` coordinates
+    (none for ``0``)."""
     if not damping:
         return {}
     # ∂F/∂q = 0 declared, not a callback: an n × n block of zeros a quadrature point was
     # most of a large chain's exact Newton matrix
-    return dict(force=force, force_jacobian_q=0, force_jacobian_v=jacobian_v)
+    return dict(force=force, force_jacobian_q=0, force_jacobian_v=jacobian_v,
+                force_jacobian_pattern=(np.arange(n), np.arange(n)))
 
 
 def check(damping) -> float:

@@ -150,7 +150,7 @@ def tree(branches: int = 3, links: int = 3, m=1.0, l=1.0, g: float = 9.81, dampi
         mass=np.repeat(ms, 2), potential=_V, potential_grad=_dV, potential_hessian=0,
         constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
         constraint_jacobian_pattern=pattern(branches, links),
-        name=f"tree{branches}x{links}" + ("-damped" if c else ""), **damping_.options(c),
+        name=f"tree{branches}x{links}" + ("-damped" if c else ""), **damping_.options(c, 2 * N),
         param_derivatives=damping_.param_derivatives(c),
         param_patterns=damping_.param_patterns(c, 3 * N + 1 + (1 if c else 0), 2 * N),
         fixed_params=range(2 * N + 1, 3 * N + 1),  # the parents: the tree's shape, not a quantity

@@ -123,6 +123,14 @@ def test_the_damping_forces_declarations_change_no_bit(N):
     runs = [fastvi.integrate(model, q0, v0, h=0.01, n_steps=100, newton="full")
             for model in (declared, given)]
     assert np.array_equal(runs[0].q, runs[1].q) and np.array_equal(runs[0].p, runs[1].p)
+
+
+# a structured model's linearised step compiles for a minute: N = 12 is a slow study
+@pytest.mark.parametrize("N", [2, pytest.param(12, marks=pytest.mark.slow)])
+def test_the_damping_forces_declarations_change_no_derivative_bit(N):
+    declared, scene = _damped_chain(N, 0.3, True)
+    given, _ = _damped_chain(N, 0.3, False)
+    q0, v0 = scene.initial_state(np.linspace(0.4, 1.0, N))
     S = [fastvi.sensitivity(model, q0, v0, h=0.01, n_steps=40, save_every=20, wrt=("q0",))
          for model in (declared, given)]
     assert np.array_equal(S[0].dq, S[1].dq)

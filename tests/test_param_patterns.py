@@ -58,10 +58,17 @@ def dense_chain(N, c):
         **DAMPING.options(c, 2 * N), name=f"dense-chain{N}")
 
 
-@pytest.mark.parametrize("N", [3, 12])  # read densely, and over the patterns
-def test_derivatives_over_the_patterns_are_the_dense_ones_bit_for_bit(N):
+@pytest.mark.parametrize("N, read", [
+    (3, "dense"),
+    (3, "patterns"),  # the threshold lowered: a small model read over its patterns
+    pytest.param(12, "patterns", marks=pytest.mark.slow),  # compiles a structured model's derivatives
+])
+def test_derivatives_over_the_patterns_are_the_dense_ones_bit_for_bit(N, read, monkeypatch):
+    if read == "patterns" and N * (2 * N + 2) * 2 < PATTERN_MIN_ENTRIES:
+        monkeypatch.setattr(fastvi.model, "PATTERN_MIN_ENTRIES", 0)
     patterned, dense = fastvi.scenes.chain(N, damping=0.3), dense_chain(N, 0.3)
     assert patterned.param_patterns and not dense.param_patterns
+    assert (patterned.param_derivative_data().fptr.size > 0) == (read == "patterns")
     assert np.array_equal(patterned.params, dense.params)
     q0, v0 = patterned.initial_state(np.linspace(0.3, 0.9, N))
     run = dict(h=0.01, n_steps=60, save_every=20)

@@ -20,7 +20,9 @@ that is zero outside the pattern and writes only the pattern's entries; the guar
 then requires every entry *of the pattern* to be set, takes the entries outside it that
 the callback left alone as the zeros the kernels provide, and names any non-zero written
 there. The comparison of ``G`` with finite differences of ``g`` says so when its worst
-entry lies outside the pattern (the pattern misses a non-zero).
+entry lies outside the pattern (the pattern misses a non-zero). G's pattern implies that of
+``constraint_hessian`` (the pairs of coordinates that share a constraint), which is handed
+an ``out`` zeroed over it and may leave any entry of it unset.
 
 **Derivatives.** A variational integrator with a wrong gradient is not unstable, it is
 *silently wrong*: it conserves the energy of a different Lagrangian. :func:`check_model` (also
@@ -343,15 +345,18 @@ def _intact(f, u, start, end, src, length, fill):
 
 
 @njit
-def guarded_call(fn, f, u, q, v, p, lay, fill):
+def guarded_call(fn, f, u, q, v, p, lay, fill, zero):
     """Evaluate ``fn`` with its ``out``, ``q``, ``v``, ``params`` inside the guarded buffer
-    ``f`` (``u`` is the same memory as uint64) and say whether it wrote exactly the
-    declared output: ``_OK``, ``_UNSET`` (a declared entry still holds the fill), or
+    ``f`` (``u`` is the same memory as uint64), ``out`` zero at the flat entries ``zero``
+    (what the kernels zero for it) and the fill elsewhere, and say whether it wrote exactly
+    the declared output: ``_OK``, ``_UNSET`` (a declared entry still holds the fill), or
     ``_OUTSIDE`` (a guard or an input changed). Compiled, so a guarded evaluation costs
     about what a plain one does (the dispatch from Python dominates both)."""
     size, nq, nv, npar, qs, vs, ps = lay[0], lay[1], lay[2], lay[3], lay[4], lay[5], lay[6]
     for i in range(u.shape[0]):
         u[i] = fill
+    for i in zero:
+        f[i] = 0.0
     for i in range(nq):
         f[qs + i] = q[i]
     for i in range(nv):
@@ -366,6 +371,9 @@ def guarded_call(fn, f, u, q, v, p, lay, fill):
         if u[i] == fill:
             return _UNSET
     return _OK
+
+
+_NOTHING_ZEROED = np.zeros(0, dtype=np.int64)
 
 
 class _Callbacks:
@@ -403,6 +411,13 @@ class _Callbacks:
         self.pattern = {}
         if model.constraint_jacobian_pattern is not None:
             self.pattern["constraint_jacobian"] = model.constraint_jacobian_pattern.ravel()
+        # ... and slots handed an `out` zeroed over their pattern too, which write only their
+        # non-zeros there: the constraint Hessian, whose pattern (implied by G's) holds
+        # entries that vanish all the same (a chain's ∂²g/∂x∂y)
+        self.zeroed = {}  # slot: the flat entries handed zeroed
+        if model.constraint_hessian_pattern is not None:
+            self.pattern["constraint_hessian"] = model.constraint_hessian_pattern.ravel()
+            self.zeroed["constraint_hessian"] = np.flatnonzero(self.pattern["constraint_hessian"])
         if model.force_jacobian_pattern is not None:
             for slot in ("force_jacobian_q", "force_jacobian_v"):
                 self.pattern[slot] = model.force_jacobian_pattern.ravel()
@@ -430,7 +445,8 @@ class _Callbacks:
         # the entry point below takes these as C-contiguous float64 vectors without checking
         q = np.ascontiguousarray(q, dtype=np.float64)
         v = q if v is None else np.ascontiguousarray(v, dtype=np.float64)
-        args = (self.fn[slot], f, u, q, v[:lay[2]], self.p, lay, GUARD_FILL[fill])
+        args = (self.fn[slot], f, u, q, v[:lay[2]], self.p, lay, GUARD_FILL[fill],
+                self.zeroed.get(slot, _NOTHING_ZEROED))
         if _ENTRY:
             status = _ENTRY[0](*args)
         else:
@@ -454,10 +470,11 @@ class _Callbacks:
         size = self.size[slot]
         out, bits = f[:size], u[:size]
         off = ~mask
-        out[off & (bits == fill)] = 0.0
+        zeroed = slot in self.zeroed
+        out[(True if zeroed else off) & (bits == fill)] = 0.0
         if np.any(out[off] != 0.0):
             return _OFF_PATTERN
-        return _UNSET if np.any(bits[mask] == fill) else _OK
+        return _UNSET if not zeroed and np.any(bits[mask] == fill) else _OK
 
     def at(self, slot: str, t: float, q: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
         """``self(slot, q, v)`` at time ``t`` (the check's own time is restored after)."""
@@ -554,12 +571,19 @@ class _Callbacks:
                 more = f" and {off.size - 4} more" if off.size > 4 else ""
                 declared = (f"param_patterns[{slot[:-2]!r}]" if slot.endswith("/θ")
                             else "force_jacobian_pattern" if slot.startswith("force_jacobian")
+                            else "constraint_jacobian_pattern" if slot == "constraint_hessian"
                             else f"{slot}_pattern")
-                problem = (f"`{slot}` wrote non-zeros at {', '.join(map(str, idx))}{more}, outside the "
-                           f"model's `{declared}` ({int(mask.sum())} entries declared): add the "
+                where = ("the pairs of coordinates that share a constraint in the model's "
+                         f"`{declared}`" if slot == "constraint_hessian" else
+                         f"the model's `{declared}`")
+                problem = (f"`{slot}` wrote non-zeros at {', '.join(map(str, idx))}{more}, outside "
+                           f"{where} ({int(mask.sum())} entries declared): add the "
                            "entries to the pattern, or fix the function", int(off[0]))
         if problem is None:
-            unset = np.flatnonzero((a0[:size] == GUARD_FILL[0]) & (a1[:size] == GUARD_FILL[1]))
+            left = (a0[:size] == GUARD_FILL[0]) & (a1[:size] == GUARD_FILL[1])
+            if mask is not None:  # what the kernels zero, the callback may leave
+                left &= False if slot in self.zeroed else mask
+            unset = np.flatnonzero(left)
             if unset.size:
                 problem = (self._unset(slot, unset), int(unset[0]))
         if problem is None:

@@ -128,7 +128,8 @@ def events(model, ev, q, v, params, t: float) -> None:
         where = f"`events[{e}]`"
         for qq, vv in ((probe_q, probe_v), (q, v)):
             with quiet():
-                status = check_.guarded_call(fn, f, u, qq, vv, p, lay, check_.GUARD_FILL[0])
+                status = check_.guarded_call(fn, f, u, qq, vv, p, lay, check_.GUARD_FILL[0],
+                                               check_._NOTHING_ZEROED)
             if status == check_._OUTSIDE:
                 raise EventFunctionError(
                     f"{where} {_what_changed(f, u, lay, qq, vv, p)} (n = {n}). Event functions must "

@@ -502,7 +502,11 @@ class Model:
         solves use it instead of detecting it (:mod:`fastvi.structure`). :meth:`check` (and
         the automatic check of the first integration) verifies it: a non-zero written
         outside the pattern, or a derivative ``∂g_a/∂q_b`` that finite differences find
-        non-zero where the pattern says zero, is reported naming the entry.
+        non-zero where the pattern says zero, is reported naming the entry. It implies the
+        pattern of ``Σ_c η_c ∇²g_c``: the entries ``(a, b)`` of two coordinates that share
+        a constraint (``∂²g_c/∂q_a∂q_b`` vanishes unless g_c depends on both), which
+        ``constraint_hessian`` is handed zeroed and need write alone
+        (:attr:`constraint_hessian_pattern`).
     param_derivatives : mapping, optional
         Exact derivatives by the parameters θ = ``params`` of the callbacks θ can enter:
         ``{slot: function or 0}`` with slots from :data:`PARAM_SLOTS` (``"mass"``,
@@ -806,6 +810,18 @@ class Model:
         results carry the work of forces and time."""
         return self.time_dependent or self.has_force
 
+    @property
+    def constraint_hessian_pattern(self) -> np.ndarray | None:
+        """The entries of ``Σ_c η_c ∇²g_c`` that may be non-zero, (n, n) boolean, implied by
+        :attr:`constraint_jacobian_pattern` (None without it): ``(a, b)`` where one
+        constraint's pattern holds both coordinates. An exact ``constraint_hessian`` is
+        handed an ``out`` zeroed there and need write only those entries."""
+        P = self.constraint_jacobian_pattern
+        if P is None:
+            return None
+        Pi = P.astype(np.int64)
+        return (Pi.T @ Pi) > 0
+
     def _kind(self, slot: str) -> str:
         if slot in _ALWAYS_TIMED or (self.time_dependent and slot in _TIME_AWARE):
             return slot + "@t"
@@ -848,6 +864,7 @@ class Model:
             flags[lay.F_LINPOT] = int(self.linear_potential)
             flags[lay.F_FORCE_Q0] = int(self.force_independent_of_q)
             flags[lay.F_FJ_PATTERN] = int(self.force_jacobian_pattern is not None)
+            flags[lay.F_CH_PATTERN] = int(self.constraint_hessian_pattern is not None)
             self._compiled = (cfs, flags, Mc)
         return self._compiled
 

@@ -44,14 +44,28 @@ def dense_force_by_params(t, q, v, p, out):
         out[p.shape[0] - 1, a] = -v[a]
 
 
+def dense_constraint_hessian(q, eta, p, out):
+    nb = q.shape[0] // 2
+    out[:, :] = 0.0
+    for i in range(nb):
+        d = eta[i] + (eta[i + 1] if i + 1 < nb else 0.0)
+        out[2 * i, 2 * i] = d
+        out[2 * i + 1, 2 * i + 1] = d
+        if i + 1 < nb:
+            for a in range(2):
+                out[2 * i + a, 2 * i + 2 + a] = -eta[i + 1]
+                out[2 * i + 2 + a, 2 * i + a] = -eta[i + 1]
+
+
 def dense_chain(N, c):
-    """``chain(N, damping=c)`` with derivatives by θ that write every entry."""
+    """``chain(N, damping=c)`` with derivatives by θ, and a constraint Hessian, that write
+    every entry (the chain's Hessian writes those of coordinates that share a link alone)."""
     ms = np.ones(N)
     return fastvi.Model(
         2 * N, N, params=(*ms, *np.ones(N), 9.81, c), mass=np.repeat(ms, 2),
         potential=CH.potential, potential_grad=CH.potential_grad, potential_hessian=0,
         constraint=CH.constraint, constraint_jacobian=CH.constraint_jacobian,
-        constraint_hessian=CH.constraint_hessian, constraint_jacobian_pattern=CH.pattern(N),
+        constraint_hessian=dense_constraint_hessian, constraint_jacobian_pattern=CH.pattern(N),
         param_derivatives=dict(potential_grad=dense_potential_grad_by_params,
                                constraint=dense_constraint_by_params, constraint_jacobian=0,
                                force=dense_force_by_params),

@@ -9,8 +9,9 @@ from fastvi import structure
 from fastvi.check import ModelCheckError
 from fastvi.scenes import chain as chain_scene
 from fastvi.scenes import ladder
-from fastvi.scenes.chain import (constraint as _g, constraint_jacobian as _G, pattern,
-                                 potential as _V, potential_grad as _dV)
+from fastvi.scenes.chain import (constraint as _g, constraint_hessian as _ddg,
+                                 constraint_jacobian as _G, pattern, potential as _V,
+                                 potential_grad as _dV)
 from fastvi._numba import njit
 
 N = 5
@@ -51,6 +52,7 @@ def test_declared_pattern_passes_check_and_replaces_detection():
 
 
 _G_nb = njit(_G)
+chain_hessian = njit(_ddg)
 
 
 def _dense_G(q, p, out):
@@ -90,6 +92,34 @@ def test_an_unset_entry_of_the_pattern_is_named():
     q0, v0 = _state()
     with pytest.raises(ModelCheckError, match=r"never wrote entry \[0, %d\]" % (2 * N - 1)):
         model.check(q0, v0)
+
+
+def test_the_constraint_hessian_pattern_is_the_pairs_that_share_a_constraint():
+    assert fastvi.scenes.double_pendulum().constraint_hessian_pattern is None  # no G pattern
+    H = chain_scene(N).constraint_hessian_pattern
+    # link i joins bodies i − 1 and i: their four coordinates, x and y crossed included
+    bodies = np.repeat(np.arange(N), 2)
+    assert np.array_equal(H, np.abs(bodies[:, None] - bodies[None, :]) <= 1)
+
+
+def _hessian_beside_its_pattern(q, eta, p, out):
+    chain_hessian(q, eta, p, out)
+    out[0, 2 * N - 1] = 1.0  # body 0 and body N − 1 share no link
+
+
+def test_the_constraint_hessian_is_handed_zeros_and_named_outside_its_pattern():
+    q0, v0 = _state()
+    model = chain_scene(N)  # its Hessian writes the non-zeros alone
+    assert model.check(q0, v0).ok
+    tree = fastvi.scenes.tree(2, 2)  # and the tree's adds into them (+=)
+    assert tree.check(*tree.initial_state(np.full(tree.n // 2, 0.3))).ok
+    bad = fastvi.Model(2 * N, N, params=model.params, mass=np.eye(2 * N), potential=_V,
+                       potential_grad=_dV, constraint=_g, constraint_jacobian=_G,
+                       constraint_hessian=_hessian_beside_its_pattern,
+                       constraint_jacobian_pattern=pattern(N))
+    with pytest.raises(ModelCheckError, match=r"constraint_hessian` wrote non-zeros at \[0, %d\], "
+                       r"outside the pairs of coordinates that share a constraint" % (2 * N - 1)):
+        bad.check(q0, v0)
 
 
 @pytest.mark.parametrize("bad, match", [

@@ -51,6 +51,7 @@ __all__ = ["rk4", "BaselineResult", "acceleration", "make_workspace", "workspace
 from ..kernels.layout import CHESS as _CHESS
 from ..kernels.layout import CJAC as _CJAC
 from ..kernels.layout import CON as _CON
+from ..kernels.layout import F_CH_PATTERN as _F_CH_PATTERN
 from ..kernels.layout import F_EX_CHESS as _F_EXACT_CHESS
 from ..kernels.layout import F_EX_MJAC as _F_EXACT_MJAC
 from ..kernels.layout import F_M as _F_M
@@ -368,6 +369,10 @@ def acceleration(fns, flags, Mc, prm, q, v, a, ws):
                 for d in range(m):
                     unit[d] = 0.0
                 unit[c] = 1.0
+                if flags[_F_CH_PATTERN] != 0:  # it writes the shared coordinates' entries
+                    for i in range(n):
+                        for j in range(n):
+                            Hc[i, j] = 0.0
                 fns[_CHESS](ptr(q), ptr(unit), ptr(prm), ptr(Hc))
                 acc = 0.0
                 for i in range(n):

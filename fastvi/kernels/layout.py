@@ -129,7 +129,11 @@ F_FORCE_Q0 = 16
 #: the force's Jacobians write only the entries of ``force_jacobian_pattern``: the kernels
 #: zero the block they read before each call
 F_FJ_PATTERN = 17
-FLAGS_SIZE = 18
+#: ``constraint_hessian`` writes only the entries of the coordinates that share a constraint
+#: (a model with ``constraint_jacobian_pattern``): the kernels zero the block they read
+#: before each call, over its rows' spans where the plan has them
+F_CH_PATTERN = 18
+FLAGS_SIZE = 19
 #: flag index of each optional second derivative, in SECOND order
 F_EXACT = (F_EX_PHESS, F_EX_CHESS, F_EX_KHESS, F_EX_MJAC)
 

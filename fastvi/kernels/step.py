@@ -41,7 +41,8 @@ from .._numba import CalledAs, byref, hot, hot_inline, only_if, own, ptr, quiet
 from .banded import (gt_times, mech_impulses_structured, mech_rows_sparse, newton_banded,
                      project_structured, schur_structured)
 from .layout import (FD_T, FD_T_POINTS, CHESS, CJAC, CON, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_FJQ,
-                     F_EX_FJV, F_EX_GT, F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_FJ_PATTERN, F_FORCE,
+                     F_EX_FJV, F_EX_GT, F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_CH_PATTERN, F_FJ_PATTERN,
+                     F_FORCE,
                      F_FORCE_Q0, F_LINPOT, F_M, F_MASSFN, F_TIME, F_TSLOT, FJQ, FJV, FORCE, GT, H_FG, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
                      NEEDS_FULL_NEWTON, NEWTON_FAILED, NEWTON_FULL, NONFINITE, OK, PGRAD, PHESS,
                      POT, KHESS, S_FULL,
@@ -614,6 +615,8 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                     qd[a] = qa
                 eta = X[sn + j * m : sn + (j + 1) * m]
                 if flags[F_EX_CHESS] != 0:
+                    if flags[F_CH_PATTERN] != 0:  # it writes the shared coordinates' entries
+                        _clear(Hc, n, si, bsp)
                     fns[CHESS](ptr(qd), ptr(eta), ptr(prm), ptr(Hc))
                 elif ws.si[SI_HC_NG] != 0:  # large models: columns in groups
                     fd_constraint_hessian_grouped(fns[CJAC], qd, eta, prm, Hc, fa, Pm, ws.Gp,

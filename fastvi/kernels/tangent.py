@@ -51,7 +51,7 @@ from numba.core import types
 from .._numba import byref, erased, hot, hot_inline, njit, only_if, own, ptr
 from .drive import run, step_hook
 from .layout import specialize as layout_specialize
-from .layout import (CHESS, CJAC, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_MJAC, F_MASSFN, F_TIME,
+from .layout import (CHESS, CJAC, F_AUGMENT, F_CH_PATTERN, F_DIAG, F_EX_CHESS, F_EX_MJAC, F_MASSFN, F_TIME,
                      F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SI_A,
                      SI_A_KL, SI_A_KU, SI_A_PERM, SI_S, SINGULAR, SOLVE_BANDED, SOLVE_DENSE,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, P_CJAC, P_CON,
@@ -283,6 +283,8 @@ def _clear_rows(B, rows, n, spans):
 def _hessian(md, q, eta, out, pw, n, m):
     """``out = Σ_c η_c ∇²g_c(q)``: the callback, or the full Newton's differences of G."""
     if md.flags[F_EX_CHESS] != 0:
+        if md.flags[F_CH_PATTERN] != 0:  # it writes the shared coordinates' entries alone
+            _clear_rows(out, n, n, pw.sp.bspan)
         md.fns[CHESS](ptr(q), ptr(eta), ptr(md.prm), ptr(out))
     else:
         fd_constraint_hessian(md.fns[CJAC], q, eta, md.prm, out, pw.qa, pw.Gp, pw.Gm, n, m)

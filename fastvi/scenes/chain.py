@@ -86,9 +86,10 @@ def constraint_hessian(q, eta, p, out):
     ``−η_{i+1} I`` beside them."""
     # also the closed chain's (fastvi.scenes.closed_chain): its last link ties the last body
     # to a fixed point, so η has one entry more than there are bodies
+    # only the entries of coordinates that share a link: the kernels hand `out` zeroed there
+    # (the pattern G's implies) and never read the rest, so no O(n²) fill
     nb = q.shape[0] // 2
     m = eta.shape[0]
-    out[:, :] = 0.0
     for i in range(nb):
         d = eta[i] + (eta[i + 1] if i + 1 < m else 0.0)
         out[2 * i, 2 * i] = d

@@ -101,7 +101,7 @@ def _link_hessian(out, x, y, e):
 
 
 def _ddg(q, eta, p, out):
-    out[:, :] = 0.0
+    # the entries of coordinates that share a constraint alone: handed zeroed (G's pattern)
     for i in range(q.shape[0] // 4):
         o = 4 * i
         c = 3 * i

@@ -64,8 +64,8 @@ def _G(q, p, out):
 
 
 def _ddg(q, eta, p, out):
+    # the entries of coordinates that share a link alone: handed zeroed (G's pattern)
     nb = q.shape[0] // 2
-    out[:, :] = 0.0
     for i in range(nb):
         k = int(p[2 * nb + 1 + i])
         e = eta[i]

@@ -368,6 +368,8 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
         B = coupling(PG, pats["newton"], s)
         si[lay.SI_BSPAN] = put(spans(B | B.T))
         si[lay.SI_GSPAN] = put(spans(PG))
+        if model.force_jacobian_pattern is not None:
+            si[lay.SI_FSPAN] = put(spans(model.force_jacobian_pattern))
     flags = model.kernel_arguments()[1]
 
     def put_g_pattern():

@@ -195,12 +195,14 @@ SOLVE_DENSE, SOLVE_BANDED, SOLVE_SPARSE = 0, 1, 2
  # pairs with the columns lo … hi − 1, of the coupling of the coordinates (n rows: the
  # union of the Newton matrix's coordinate blocks and of Gᵀ G, symmetrised) and of G (m
  # rows). The exact Newton matrix is then assembled over these spans alone, and its
- # entries outside them are never written (they stay the zeros of the allocation)
- SI_BSPAN, SI_GSPAN) = range(35)
+ # entries outside them are never written (they stay the zeros of the allocation); and of
+ # the declared ``force_jacobian_pattern`` (n rows, 0: none), over which ∂F/∂v is added
+ # without scanning each row for its non-zeros
+ SI_BSPAN, SI_GSPAN, SI_FSPAN) = range(36)
 #: length of the header of ``ws.si``; with ``si[SI_SC]`` or ``si[SI_S]`` structured the
 #: kernels use the pattern of G (a diagonal constant mass is then required), as with
 #: ``si[SI_HC_NG]`` non-zero
-SI_HEADER = 35
+SI_HEADER = 36
 #: descriptor of a sparse LU in ``ws.si`` (sparse_lu.py): offsets in si of its arrays, for
 #: an N-row system in its fill-reducing order — position in the factor storage of each
 #: pivot; of each column's entries below the diagonal (pointers, rows, positions); of each

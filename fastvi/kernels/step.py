@@ -46,7 +46,7 @@ from .layout import (FD_T, FD_T_POINTS, CHESS, CJAC, CON, F_AUGMENT, F_DIAG, F_E
                      F_FORCE_Q0, F_LINPOT, F_M, F_MASSFN, F_TIME, F_TSLOT, FJQ, FJV, FORCE, GT, H_FG, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
                      NEEDS_FULL_NEWTON, NEWTON_FAILED, NEWTON_FULL, NONFINITE, OK, PGRAD, PHESS,
                      POT, KHESS, S_FULL,
-                     S_G, S_GV, S_ITERS, S_RES, S_WORK, S_WORK_F, SI_A, SI_BSPAN, SI_GCOL,
+                     S_G, S_GV, S_ITERS, S_RES, S_WORK, S_WORK_F, SI_A, SI_BSPAN, SI_FSPAN, SI_GCOL,
                      SI_GPTR, SI_GSPAN,
                      SI_HC_BCOL,
                      SI_HC_COLS, SI_HC_CPTR, SI_HC_NG, SI_HC_PPTR, SI_HC_ROWS, SI_S, SI_SC, SINGULAR,
@@ -423,14 +423,15 @@ def _clear(B, n, si, sp):
 
 @hot
 def plan_spans(ws_):
-    """``(si[SI_BSPAN], si[SI_GSPAN])`` of a structured workspace; ``(0, 0)``, a constant,
-    for a small model's (``_numba.only_if``): its assembly then compiles to the dense loops
-    alone, as before the spans, and keeps them unrolled in the sized step."""
+    """``(si[SI_BSPAN], si[SI_GSPAN], si[SI_FSPAN])`` of a structured workspace;
+    ``(0, 0, 0)``, a constant, for a small model's (``_numba.only_if``): its assembly then
+    compiles to the dense loops alone, as before the spans, and keeps them unrolled in the
+    sized step."""
     ws = own(ws_)
-    return ws.si[SI_BSPAN], ws.si[SI_GSPAN]
+    return ws.si[SI_BSPAN], ws.si[SI_GSPAN], ws.si[SI_FSPAN]
 
 
-plan_spans = only_if(plan_spans, "structured", (0, 0))
+plan_spans = only_if(plan_spans, "structured", (0, 0, 0))
 
 
 @hot
@@ -470,7 +471,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
     N = sn + J * m
     inv_h = 1.0 / h
     si = ws.si
-    bsp, gsp = plan_spans(ws_)
+    bsp, gsp, fsp = plan_spans(ws_)
     if bsp != 0:
         for nu in range(s):
             for mu in range(s):
@@ -505,6 +506,13 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
         # alone: viscous damping): the block is neither formed nor scanned
         q_free = (flags[F_LINPOT] != 0 and not has_mass
                   and not (has_force and flags[F_FORCE_Q0] == 0))
+        # a large model's blocks are sparse (a damping force's F_v is diagonal, a chain's
+        # Hessians are banded): each row's span of non-zeros, found once and added to
+        # every block. Each entry gets its terms in the dense loops' order: ∂F/∂q first,
+        # ∂F/∂v last, so F_v goes here only where no mass term comes between; over the
+        # declared pattern's spans where there is one, else over those it finds
+        sparse_fv = has_force and not has_mass and n > _MASS_ROWS_SMALL
+        fv_spans = fsp if sparse_fv else 0
         for i in range(r):
             _at(md, ws, h, tabs.c[i])
             for a in range(n):
@@ -543,16 +551,11 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                     _jacobian(md, flags[F_EX_FJQ], FJQ, FORCE, _FD_Q, qi, vi, Hc, fa, F, Pm, n)
                     add_block(Aq, 0, 0, 1.0, Hc, n, n, si, bsp)
                 if patterned:
-                    _clear(Fv, n, si, bsp)
+                    _clear(Fv, n, si, fv_spans if fv_spans != 0 else bsp)
                 _jacobian(md, flags[F_EX_FJV], FJV, FORCE, _FD_V, qi, vi, Fv, Ma[0], fa, F, n)
             # a block of zeros adds nothing: skipping it leaves A as it was
             force_q = not q_free and _nonzero(Aq, n, si, bsp)
             w = h * b[i]
-            # a large model's blocks are sparse (a damping force's F_v is diagonal, a chain's
-            # Hessians are banded): each row's span of non-zeros, found once and added to
-            # every block. Each entry gets its terms in the dense loops' order: ∂F/∂q first,
-            # ∂F/∂v last, so F_v goes here only where no mass term comes between.
-            sparse_fv = has_force and not has_mass and n > _MASS_ROWS_SMALL
             if n > _MASS_ROWS_SMALL:
                 if force_q:
                     for a in range(n):
@@ -564,7 +567,10 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                     force_q = False
                 if sparse_fv:
                     for a in range(n):
-                        lo, hi = _row_span(Fv, a, n, si, bsp)
+                        if fv_spans != 0:
+                            lo, hi = si[fv_spans + 2 * a], si[fv_spans + 2 * a + 1]
+                        else:
+                            lo, hi = _row_span(Fv, a, n, si, bsp)
                         for nu in range(s):
                             for mu in range(1, s + 1):
                                 cB = b[i] * L[nu, i] * Ld[mu, i]

@@ -189,7 +189,8 @@ def test_bad_input_is_rejected_by_name():
 def test_generated_constraint_jacobian_declares_its_pattern_and_writes_only_it():
     """A 12-link chain from SymPy (n = 24, m = 12): the pattern of G is the chain scene's, the
     generated callback never zero-fills its (m, n) output, and the trajectory (banded
-    solves, taking that pattern) equals the hand-written scene's to round-off."""
+    solves, taking that pattern) equals the hand-written scene's to round-off. Its constraint
+    Hessian, within the pattern G's implies, writes its non-zeros alone too."""
     N = 12
     xs = sp.symbols(f"x0:{2 * N}")
     g = sp.Symbol("g", positive=True)
@@ -203,8 +204,9 @@ def test_generated_constraint_jacobian_declares_its_pattern_and_writes_only_it()
     expected = np.zeros((N, 2 * N), dtype=bool)
     expected[rows, cols] = True
     assert np.array_equal(model.constraint_jacobian_pattern, expected)
-    src = model.source.split("def constraint_jacobian")[1].split("\ndef ")[0]
-    assert "out[:, :] = 0.0" not in src
+    for name in ("constraint_jacobian", "constraint_hessian"):  # neither fills its output
+        src = model.source.split(f"def {name}(")[1].split("\ndef ")[0]
+        assert "out[:, :] = 0.0" not in src
     assert pickle.loads(pickle.dumps(model)).constraint_jacobian_pattern.sum() == expected.sum()
     scene = fastvi.scenes.chain(N)
     q0, v0 = scene.initial_state(np.linspace(0.3, 1.2, N))

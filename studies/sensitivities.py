@@ -1,7 +1,7 @@
 r"""``python -m fastvi sensitivities``: the cost, order and structure of the derivatives of
 the discrete flow, and a parameter fit → the tables of ``docs/sensitivities.md``.
 
-Four measurements, each on the double pendulum (Cartesian, n = 4, m = 2):
+Measurements on the double pendulum (Cartesian, n = 4, m = 2), and on chains of links:
 
 * **cost**: the compiled loop's time of :func:`fastvi.sensitivity` for 1, 2n and 2n + k
   directions and of :func:`fastvi.adjoint`, against a plain :func:`fastvi.integrate` and
@@ -12,6 +12,8 @@ Four measurements, each on the double pendulum (Cartesian, n = 4, m = 2):
   log–log slope;
 * **symplecticity**: ``max |Yᵀ J Y − Zᵀ J Z|`` for a basis ``Z`` of the tangent space at
   the start and its image ``Y`` after ``--steps`` steps, over ``|Y|²``;
+* **by the number of parameters**: the adjoint by the initial state, and by it and every
+  parameter, of damped chains of 2 to 128 links against a plain run (``parameters_table``);
 * **fit**: the damping and the outer rod length of the damped pendulum fitted to its two
   angles with noise (σ = 0.01 rad, 101 samples over 5 s) by ``scipy.optimize.least_squares``
   with the exact Jacobian and with SciPy's finite differences, and by BFGS with the
@@ -343,6 +345,43 @@ def scaling_table(links=(8, 16, 32, 64, 128), steps: int = 200, h: float = 0.01,
     return "\n".join(out)
 
 
+def parameters_table(links=(2, 4, 8, 16, 32, 64, 128), steps: int = 2_000, h: float = 0.01,
+                     method: str = "P2L-Q3G", repeat: int = 5) -> str:
+    """The adjoint's gradient by the initial state, and by the initial state and every
+    parameter (k = 2N + 2: masses, lengths, g, c), of damped chains of N links, over a plain
+    run: the compiled loops' time, best of ``repeat``, everything compiled for the model's
+    sizes first (``specialize=True``)."""
+    import fastvi
+
+    out = [f"Damped chains (c = 0.3) of N links, `{method}`, h = {h}, {steps} steps, the "
+           f"compiled loops' time over a plain run, best of {repeat}:", "",
+           "| links N | n | k | plain step (µs) | adjoint by q0, v0 | by q0, v0 and θ | "
+           "a parameter, a step |", "|---|---|---|---|---|---|---|"]
+    for N in links:
+        ch = fastvi.scenes.chain(N, damping=0.3)
+        q0, v0 = chain_start(N)
+        run = dict(h=h, n_steps=steps, save_every=steps, method=method, specialize=True)
+        k = ch.params.size
+
+        def plain():
+            return fastvi.integrate(ch, q0, v0, **run).stats["integration_time"]
+
+        def adj(pidx):
+            def timed():
+                A = fastvi.adjoint(ch, q0, v0, lambda r: (np.ones((len(r.t), 2 * N)), None),
+                                   param_index=pidx, **run)
+                return A.result.stats["integration_time"] + A.stats["backward_time"]
+            return timed
+
+        plain(), adj([])(), adj(None)()  # compiled first: not timed
+        t0, a0, a1 = _best(plain, repeat), _best(adj([]), repeat), _best(adj(None), repeat)
+        solver = fastvi.structure.plan(ch, fastvi.tables.method(method)).solvers["newton"]
+        label = f"{N} (banded)" if solver == "banded" else f"{N}"
+        out.append(f"| {label} | {2 * N} | {k} | {t0 / steps * 1e6:.1f} | {a0 / t0:.2f} | "
+                   f"{a1 / t0:.2f} | {(a1 - a0) / steps / k * 1e6:.2f} µs |")
+    return "\n".join(out)
+
+
 def main(argv=None) -> int:
     parser = study_parser("python -m fastvi sensitivities", __doc__)
     parser.add_argument("--steps", type=int, default=10_000, help="steps of the cost and symplecticity runs")
@@ -362,6 +401,7 @@ def main(argv=None) -> int:
                        specialize=specialize)
     parts = [("Cost", cost_table(args.steps, args.repeat)), ("Adjoint memory", memory_table()),
              ("Large mechanisms", scaling_table()),
+             ("By the number of parameters", parameters_table(repeat=args.repeat)),
              ("Ensembles", ensemble_table()), ("Order", order_table()),
              ("Symplecticity", symplectic_table(args.steps)), ("Fit", fit_table())]
     text = "\n\n".join(f"## {title}\n\n{body}" for title, body in parts) + "\n"

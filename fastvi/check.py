@@ -471,7 +471,8 @@ class _Callbacks:
         out, bits = f[:size], u[:size]
         off = ~mask
         zeroed = slot in self.zeroed
-        out[(True if zeroed else off) & (bits == fill)] = 0.0
+        left = bits == fill
+        out[left if zeroed else off & left] = 0.0
         if np.any(out[off] != 0.0):
             return _OFF_PATTERN
         return _UNSET if not zeroed and np.any(bits[mask] == fill) else _OK
@@ -581,8 +582,10 @@ class _Callbacks:
                            "entries to the pattern, or fix the function", int(off[0]))
         if problem is None:
             left = (a0[:size] == GUARD_FILL[0]) & (a1[:size] == GUARD_FILL[1])
-            if mask is not None:  # what the kernels zero, the callback may leave
-                left &= False if slot in self.zeroed else mask
+            if slot in self.zeroed:  # what the kernels zero, the callback may leave
+                left[:] = False
+            elif mask is not None:
+                left &= mask
             unset = np.flatnonzero(left)
             if unset.size:
                 problem = (self._unset(slot, unset), int(unset[0]))

@@ -819,8 +819,8 @@ class Model:
         P = self.constraint_jacobian_pattern
         if P is None:
             return None
-        Pi = P.astype(np.int64)
-        return (Pi.T @ Pi) > 0
+        Pf = P.astype(np.float64)  # counts, exact in floats, by BLAS (an int product is not)
+        return (Pf.T @ Pf) > 0
 
     def _kind(self, slot: str) -> str:
         if slot in _ALWAYS_TIMED or (self.time_dependent and slot in _TIME_AWARE):
@@ -864,7 +864,7 @@ class Model:
             flags[lay.F_LINPOT] = int(self.linear_potential)
             flags[lay.F_FORCE_Q0] = int(self.force_independent_of_q)
             flags[lay.F_FJ_PATTERN] = int(self.force_jacobian_pattern is not None)
-            flags[lay.F_CH_PATTERN] = int(self.constraint_hessian_pattern is not None)
+            flags[lay.F_CH_PATTERN] = int(self.constraint_jacobian_pattern is not None)
             self._compiled = (cfs, flags, Mc)
         return self._compiled
 

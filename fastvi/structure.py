@@ -93,7 +93,7 @@ def detect_pattern(model, meth, prm=None, n_states: int = PATTERN_STATES, seed: 
     """Boolean non-zero patterns ``{"G": (m, n), "newton": (N, N)}``, the union over
     ``n_states`` random states (see the module docstring); ``G``'s is the model's
     ``constraint_jacobian_pattern`` where it declares one."""
-    from .kernels.step import assemble
+    from .kernels.step import assemble_at
 
     prm = model.params if prm is None else np.ascontiguousarray(prm, dtype=np.float64)
     rng = np.random.default_rng(seed)
@@ -113,7 +113,7 @@ def detect_pattern(model, meth, prm=None, n_states: int = PATTERN_STATES, seed: 
             ws.G[0, :m] = G0  # G at q_k: the step kernel sets it before Newton
         ws.X[:] = 0.1 * rng.standard_normal(N)
         with quiet():
-            assemble(md, tabs, 0.01, q, rng.standard_normal(n), ws, True)
+            assemble_at(md, tabs, 0.01, q, rng.standard_normal(n), ws, True)
         PA |= ws.A[:N, :N] != 0.0
         if m and declared is None:
             for j in range(J + 1):

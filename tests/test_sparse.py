@@ -8,7 +8,7 @@ import fastvi
 from fastvi import structure
 from fastvi.kernels import layout as lay
 from fastvi.kernels.banded import band_factor, band_ld, band_solve
-from fastvi.kernels.step import assemble, fd_constraint_hessian, fd_constraint_hessian_grouped
+from fastvi.kernels.step import assemble_at, fd_constraint_hessian, fd_constraint_hessian_grouped
 from fastvi.scenes import chain, double_pendulum
 from fastvi.scenes.chain import (constraint as _g, constraint_hessian as _ddg,
                                  constraint_jacobian as _G, pattern, potential as _V,
@@ -74,7 +74,7 @@ def test_detected_pattern_of_a_chain_is_its_structure():
     ws.X[:] = rng.standard_normal(ws.X.size)
     q = rng.standard_normal(12)
     ws.G[0] = model.constraint_jacobian_value(q)
-    assemble(md, P2.kernel_tables, 0.02, q, rng.standard_normal(12), ws, True)
+    assemble_at(md, P2.kernel_tables, 0.02, q, rng.standard_normal(12), ws, True)
     assert not np.any((ws.A != 0.0) & ~pats["newton"])
     assert pats["newton"].sum() < 0.3 * pats["newton"].size  # sparse: measured 17 %
 
@@ -277,6 +277,6 @@ def test_the_banded_plans_assembly_over_spans_is_the_dense_one_bit_for_bit(model
         for w in (ws, dense):
             w.X[:] = X
             w.G[0] = model.constraint_jacobian_value(q)
-            assert assemble(md, P2.kernel_tables, 0.02, q, p, w, True) == lay.OK
+            assert assemble_at(md, P2.kernel_tables, 0.02, q, p, w, True) == lay.OK
         assert np.array_equal(ws.A, dense.A)
         assert np.count_nonzero(ws.A) > 3 * ws.A.shape[0]  # something was assembled

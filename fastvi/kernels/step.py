@@ -56,7 +56,7 @@ from .layout import specialize as layout_specialize
 from .linalg import (augmented_mass, invert, invert_unpivoted, lu_factor, lu_factor_small,
                      lu_solve, lu_solve_small)
 
-__all__ = ["make_workspace", "assemble", "newton_matrix", "add_block", "plan_spans", "residual", "linear_force", "step", "step_kernel",
+__all__ = ["make_workspace", "assemble", "assemble_at", "newton_matrix", "add_block", "plan_spans", "residual", "linear_force", "step", "step_kernel",
            "take_step", "step_once", "cached_cfunc",
            "end_momentum", "velocity_residual", "hidden_residual", "constraint_rate",
            "jacobian_rate"]
@@ -327,6 +327,16 @@ def assemble(md_, tabs_, h, qk, pk, ws_, jac):
     if st == OK and jac:
         newton_matrix(md_, tabs_, h, qk, ws_)
     return st
+
+
+@hot
+def assemble_at(md, tabs, h, qk, pk, ws, jac):
+    """:func:`assemble` for a caller in Python (``structure.detect_pattern``, the tests).
+
+    The kernels hand ``assemble`` its tuples by pointer; called from Python with the tuples
+    themselves it would be typed, and compiled, a second time with its residual and Newton
+    matrix (half a minute). Passing them on by pointer here reuses the kernels' compile."""
+    return assemble(byref(md), byref(tabs), h, qk, pk, byref(ws), jac)
 
 
 @hot_inline

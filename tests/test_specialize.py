@@ -40,13 +40,21 @@ def test_specialized_double_pendulum_is_the_generic_trajectory_bit_for_bit():
     # and the run is a real one: energy bounded, constraints at round-off
     assert np.max(np.abs(sized.energy - sized.energy[0])) < 1e-3
     assert np.max(sized.constraint_residual) < 1e-13
-    # the full Newton variant goes through the same specialized kernel
-    full = fastvi.integrate(dp, q0, v0, newton="full", specialize=True, **kw)
-    _same(fastvi.integrate(dp, q0, v0, newton="full", specialize=False, **kw), full)
     # adaptive steps: the sized step inlines the predictor of a changing step length
     ka = dict(h=0.05, t_end=30.0, method="P2L-Q3G", save_every=3, adaptive=3.0)
     _same(fastvi.integrate(dp, q0, v0, specialize=False, **ka),
           fastvi.integrate(dp, q0, v0, specialize=True, **ka))
+
+
+@pytest.mark.slow
+def test_specialized_full_newton_is_the_generic_trajectory_bit_for_bit():
+    """The full Newton goes through the same specialized kernel (its sized assembly is a
+    compile of its own, some 12 s: ``make test-slow``)."""
+    dp = fastvi.scenes.double_pendulum()
+    q0, v0 = dp.initial_state(np.pi / 2, np.pi / 2)
+    kw = dict(h=0.01, n_steps=3000, method="P2L-Q3G", save_every=7, newton="full")
+    _same(fastvi.integrate(dp, q0, v0, specialize=False, **kw),
+          fastvi.integrate(dp, q0, v0, specialize=True, **kw))
 
 
 def test_none_uses_the_sized_stages_where_they_are_compiled_or_pay():

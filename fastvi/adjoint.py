@@ -18,7 +18,7 @@ from . import _discrete as disc
 from . import _validate as valid
 from ._launch import Launcher
 from ._numba import quiet
-from .kernels.adjoint import (make_checkpoints, make_records, recorder, run_adjoint,
+from .kernels.adjoint import (g_entries, make_checkpoints, make_records, recorder, run_adjoint,
                               run_checkpointed, sweeper)
 from .kernels import layout as lay
 from .kernels.tangent import point_terms
@@ -28,8 +28,9 @@ from .results import (Result, ResultBase, SavedResult, matching_model, result_ar
 
 __all__ = ["adjoint", "AdjointResult"]
 
-#: the default keeps every step's records (no segment retaken) while they take no more
-#: than this many bytes, and checkpoints every ⌈√N⌉ steps beyond
+#: the memory the default schedule gives the records and checkpoints: every step's records
+#: (nothing retaken) while they fit, else the longest segments that fit, else the
+#: segments of least memory
 KEEP_ALL_BYTES = 64 * 2**20
 
 #: the forward and backward loops, called through their compiled entry points (_launch.py)
@@ -141,12 +142,17 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     Newton matrix; the parameters' part contracts the cotangent with the model's
     derivatives by θ point by point (about 0.15 µs a parameter and step on the double
     pendulum), or, for a model without them, adds four residual evaluations a parameter
-    and step (five-point differences). The forward run records each step's converged unknowns for the sweep:
-    all of them while they take at most :data:`KEEP_ALL_BYTES` (64 MiB: 288 bytes a step
-    for a double pendulum with ``P2L-Q3G``, about 2.3 × 10⁵ steps), so that nothing is
-    solved twice. Beyond that memory stays ∝ √N: the forward run keeps its state every
-    ``checkpoint_every`` steps, and the sweep retakes each segment but the last from its
-    checkpoint (one more trajectory's worth of steps).
+    and step (five-point differences). The forward run records each step's converged
+    unknowns for the sweep: all of them while they take at most :data:`KEEP_ALL_BYTES`
+    (64 MiB: 288 bytes a step for a double pendulum with ``P2L-Q3G``, about 2.3 × 10⁵
+    steps), so that nothing is solved twice. A longer run is cut into segments of
+    ``checkpoint_every`` steps, the last ``N`` steps first: the forward run keeps its state
+    at the start of each, and the sweep takes the last segment from the records and
+    retakes each earlier one from its checkpoint — ``N − C`` steps solved twice for
+    segments of ``C``. By default ``C`` is the longest segment whose records and
+    checkpoints fit in :data:`KEEP_ALL_BYTES`; a run too long for it takes the segment of
+    least memory, ``C ≈ √(N c / r)`` for checkpoints of ``c`` bytes and records of ``r``
+    bytes a step (memory ∝ √N).
 
     Parameters
     ----------
@@ -165,9 +171,10 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     initial_state : callable, optional
         ``initial_state(params) -> (q0, v0)``, as in :func:`fastvi.sensitivity`.
     checkpoint_every : int, optional
-        Steps between checkpoints: ``N`` keeps every step, smaller values trade time for
-        memory (``∝ N / C + C``). Default: ``N`` within :data:`KEEP_ALL_BYTES`, else
-        ``⌈√N⌉``.
+        Steps between checkpoints ``C``: ``N`` keeps every step, smaller values trade time
+        (``N − C`` steps retaken) for memory (``∝ N / C + C``). Default: the largest ``C``
+        whose records and checkpoints take at most :data:`KEEP_ALL_BYTES`, else the ``C``
+        of least memory.
 
     Returns
     -------
@@ -195,13 +202,13 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     n, m, k = model.n, model.m, run.prm.shape[0]
     meth = run.meth
     N = meth.s * n + meth.J * m
+    g_size = g_entries(run.ws)
     if checkpoint_every is None:
-        C = run.total if run.total * _record_bytes(n, m, N) <= KEEP_ALL_BYTES else math.isqrt(
-            run.total - 1) + 1
+        C = _segment_length(run.total, n, m, N, g_size)
     else:
         C = valid.count(checkpoint_every, "checkpoint_every", 1)
     C = min(C, run.total)
-    ck = make_checkpoints(-(-run.total // C), n, m, N)
+    ck = make_checkpoints(-(-run.total // C), n, m, N, g_size)
     rec = make_records(C, n, m, N)
     info = run.info.copy()
     each = recorder(run.model_data, run.state, run.ws, info, rec)
@@ -261,6 +268,31 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
 def _record_bytes(n, m, N):
     """The bytes of one step's records (:func:`.kernels.adjoint.make_records`)."""
     return 8 * (5 * n + N + 2 + max(m, 1))
+
+
+def _checkpoint_bytes(n, N, g_size):
+    """The bytes of one checkpoint (:func:`.kernels.adjoint.make_checkpoints`)."""
+    return 8 * (4 + 3 * n + 2 * N + lay.H_SIZE + g_size)
+
+
+def _segment_length(total, n, m, N, g_size, budget=None):
+    """The default ``checkpoint_every`` of a run of ``total`` steps: the longest segment
+    whose records, with the checkpoints of all segments, take at most ``budget`` bytes
+    (:data:`KEEP_ALL_BYTES`), and never shorter than the segment of least memory.
+
+    The sweep retakes ``total − C`` steps, so the longest segment that fits is the
+    cheapest. Records of ``r`` bytes a step and checkpoints of ``c`` bytes take
+    ``(total / C) c + C r``, least at ``C = √(total c / r)``: the choice of a run too long
+    (or a model too large) for the budget, whose memory then grows like ``√total``."""
+    budget = KEEP_ALL_BYTES if budget is None else budget
+    rec, ck = _record_bytes(n, m, N), _checkpoint_bytes(n, N, g_size)
+    x = -(-total * ck // rec)
+    lightest = min(total, math.isqrt(x) + (math.isqrt(x) ** 2 < x))  # ⌈√x⌉
+    for count in range(1, -(-total // lightest) + 1):  # the fewest checkpoints first
+        C = min(total, (budget - count * ck) // rec)  # the longest with `count` checkpoints
+        if C >= max(lightest, -(-total // count)):  # ... and `count` segments cover the run
+            return C
+    return lightest
 
 
 def _cotangents(run, result, cotangent, pidx):

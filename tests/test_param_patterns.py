@@ -98,6 +98,10 @@ def test_derivatives_over_the_patterns_are_the_dense_ones_bit_for_bit(N, read, m
     assert np.abs(A[0].grad_params).max() > 0.0
     assert np.array_equal(A[0].grad_params, A[1].grad_params)
     assert np.array_equal(A[0].grad_q0, A[1].grad_q0)
+    # every step kept (the default here): the retaken segments, their checkpoints of G(q_k)
+    # over its pattern, changed no bit
+    kept = fastvi.adjoint(patterned, q0, v0, loss, **run)
+    assert kept.stats["segment"] == 60 and np.array_equal(kept.gradient, A[0].gradient)
 
 
 def test_the_patterns_read_by_the_kernels_are_the_union_of_the_slots():

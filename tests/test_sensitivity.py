@@ -203,7 +203,7 @@ def test_adjoint_gradient_equals_the_forward_derivative():
     K = N // every + 2
     Lq, Lv = rng.normal(size=(K, 4)), rng.normal(size=(K, 4))
     A = fastvi.adjoint(model, q0, v0, lambda r: (Lq, Lv), h=0.02, n_steps=N,
-                       save_every=every, checkpoint_every=7)  # 29 segments, the last short
+                       save_every=every, checkpoint_every=7)  # 29 segments, the first short
     assert A.stats["checkpoints"] == 29 and len(A.result.t) == K
     D = rng.normal(size=(14, 2))
     S = fastvi.sensitivity(model, q0, v0, h=0.02, n_steps=N, save_every=every, wrt=D)
@@ -216,6 +216,34 @@ def test_adjoint_gradient_equals_the_forward_derivative():
                           save_every=every)
     assert kept.stats["checkpoints"] == 1 and kept.stats["segment"] == N
     assert np.array_equal(np.concatenate([kept.grad_q0, kept.grad_v0, kept.grad_params]), grad)
+
+
+def test_adjoint_default_schedule_takes_the_longest_segments_that_fit(monkeypatch):
+    import sys
+
+    from fastvi.kernels.adjoint import make_checkpoints, make_records
+
+    module = sys.modules["fastvi.adjoint"]
+    model = fastvi.scenes.double_pendulum(damping=0.3)
+    q0, v0 = model.initial_state(0.9, -0.4, 0.3, 1.1)
+    n, m, N = 4, 2, 2 * 4 + 2 * 2  # P2L-Q3G: s = 2 stages of q, J = 2 of the impulses
+    rec, ck = make_records(1, n, m, N), make_checkpoints(1, n, m, N, m * n)
+    r, c = module._record_bytes(n, m, N), module._checkpoint_bytes(n, N, m * n)
+    assert (r, c) == (sum(a.nbytes for a in rec), sum(a.nbytes for a in ck))
+    cost = lambda res: (np.sin(res.q), res.v)  # noqa: E731
+    kw = dict(h=0.02, n_steps=200, save_every=3)
+    kept = fastvi.adjoint(model, q0, v0, cost, **kw)
+    assert kept.stats["segment"] == 200
+    # room for 90 steps' records and three checkpoints: segments of 20, 90 and 90 steps
+    monkeypatch.setattr(module, "KEEP_ALL_BYTES", 90 * r + 3 * c)
+    cut = fastvi.adjoint(model, q0, v0, cost, **kw)
+    assert (cut.stats["segment"], cut.stats["checkpoints"]) == (90, 3)
+    assert np.array_equal(cut.gradient, kept.gradient)  # 110 steps retaken, bit for bit
+    # no room even for the segment of least memory, ⌈√(200 c / r)⌉ = 17 steps: that one
+    monkeypatch.setattr(module, "KEEP_ALL_BYTES", 1024)
+    tiny = fastvi.adjoint(model, q0, v0, cost, **kw)
+    assert (tiny.stats["segment"], tiny.stats["checkpoints"]) == (17, 12)
+    assert np.array_equal(tiny.gradient, kept.gradient)
 
 
 def test_adjoint_with_a_configuration_dependent_mass():

@@ -8,12 +8,14 @@ the adjoint of step k (:func:`.tangent.pull`) maps ``λ_{k+1}`` to
 ``Λ(k)`` the cotangent of the sample at step k, if any: one transposed solve with the
 step's exact Newton matrix a step, whatever the number of parameters. The backward sweep
 needs each step's converged unknowns. :func:`run_checkpointed` keeps the step's state and
-the predictor's history every ``C`` steps, and records each segment's steps into
-:class:`Records` as it goes; :func:`run_adjoint` sweeps the segment the forward run
-recorded last as it is, and retakes every other segment of ``C`` steps from its
-checkpoint — the same steps, bit for bit — before sweeping it backwards. Memory is
-``∝ N / C + C`` and time one trajectory's worth of steps times ``1 − C / N`` more than
-the forward run: with ``C = N`` (every step kept) nothing is retaken.
+the predictor's history at the start of each segment of ``C`` steps, and records each
+segment's steps into :class:`Records` as it goes; :func:`run_adjoint` sweeps the segment the
+forward run recorded last as it is, and retakes every other segment from its checkpoint —
+the same steps, bit for bit — before sweeping it backwards. The segments end at
+``N, N − C, N − 2C, …``: the first one is the short one (:func:`_offset`), so that the
+segment the forward run leaves recorded is a whole one. Memory is ``∝ N / C + C`` and time
+``N − C`` steps more than the forward run: with ``C = N`` (every step kept) nothing is
+retaken.
 """
 
 from collections import namedtuple
@@ -23,18 +25,19 @@ import numpy as np
 import numba
 from numba.core import types
 
-from .._numba import byref, erased, hot, own
+from .._numba import byref, erased, hot, hot_inline, own
 from .._launch import _key
 from .drive import c_entry, run, step_hook
-from .layout import H_SIZE, I_FAILED, I_FIRST, I_STEPS, OK, sizes
+from .layout import H_SIZE, I_FAILED, I_FIRST, I_STEPS, OK, SI_GCOL, SI_GPTR, sizes
 from .tangent import linearise, pull, sized_twin
 
-__all__ = ["Checkpoints", "Records", "make_checkpoints", "make_records", "run_checkpointed",
+__all__ = ["Checkpoints", "Records", "g_entries", "make_checkpoints", "make_records", "run_checkpointed",
            "run_adjoint", "recorder", "sweeper", "Sweep"]
 
 #: what a step needs of the past to be retaken bit for bit: the state (rows q, p, v), the
 #: predictor's unknowns of the last two steps, the workspace's flags and step lengths, and
-#: G(q_k) (the step reuses the last one's); per checkpoint, with the step it starts
+#: G(q_k) (the step reuses the last one's), over G's pattern where the plan has one
+#: (:func:`g_entries`); per checkpoint, with the step it starts
 Checkpoints = namedtuple("Checkpoints", ["steps", "first", "state", "Xprev", "Xpp", "hold",
                                          "hist", "G0"])
 #: the steps of one segment: start (q_k, p_k), converged unknowns, times, end (q, v), end
@@ -44,12 +47,37 @@ Records = namedtuple("Records", ["qk", "pk", "X", "time", "q1", "v1", "eta", "P"
 Recording = namedtuple("Recording", ["rec", "k0"])
 
 
-def make_checkpoints(count, n, m, N):
+def g_entries(ws):
+    """The entries of G(q) a checkpoint keeps: those of G's pattern in the workspace's plan
+    (``ws.si``), else all ``m n``."""
+    n, m = sizes(ws)[:2]
+    gp = int(ws.si[SI_GPTR])
+    return int(ws.si[gp + m]) if gp != 0 else max(m, 1) * n
+
+
+def make_checkpoints(count, n, m, N, g_size):
     z = np.zeros
-    mm = max(m, 1)
     return Checkpoints(z(count, dtype=np.int64), z(count), z((count, 3, n)), z((count, N)),
                        z((count, N)), z((count, H_SIZE), dtype=np.int64), z((count, 2)),
-                       z((count, mm, n)))
+                       z((count, g_size)))
+
+
+@hot_inline
+def _g_pattern(ws, G0, out, to_workspace):
+    """Copy G(q_k) between the workspace's ``G0`` (m, n) and a checkpoint's ``out``
+    (:func:`g_entries`), over G's pattern where the plan has one: outside it G is zero."""
+    si = ws.si
+    gp = si[SI_GPTR]
+    e = 0
+    for c in range(G0.shape[0]):
+        lo, hi = (si[gp + c], si[gp + c + 1]) if gp != 0 else (0, G0.shape[1])
+        for k in range(lo, hi):
+            a = si[si[SI_GCOL] + k] if gp != 0 else k
+            if to_workspace:
+                G0[c, a] = out[e]
+            else:
+                out[e] = G0[c, a]
+            e += 1
 
 
 def make_records(C, n, m, N):
@@ -72,9 +100,7 @@ def _keep(ck, i, state, ws, info):
         ck.hold[i, k] = ws.hold[k]
     ck.hist[i, 0] = ws.hist[0]
     ck.hist[i, 1] = ws.hist[1]
-    for c in range(ws.G.shape[1]):
-        for a in range(ws.G.shape[2]):
-            ck.G0[i, c, a] = ws.G[0, c, a]
+    _g_pattern(ws, ws.G[0], ck.G0[i], False)
 
 
 @hot
@@ -91,9 +117,7 @@ def _restore(ck, i, state, ws, info):
         ws.hold[k] = ck.hold[i, k]
     ws.hist[0] = ck.hist[i, 0]
     ws.hist[1] = ck.hist[i, 1]
-    for c in range(ws.G.shape[1]):
-        for a in range(ws.G.shape[2]):
-            ws.G[0, c, a] = ck.G0[i, c, a]
+    _g_pattern(ws, ws.G[0], ck.G0[i], True)
 
 
 @hot
@@ -112,23 +136,33 @@ def _segment(md, tabs, opts, h, state, ws, k0, cnt, n_total, every, smp, info, s
                erased(byref(Recording(rec, k0))))
 
 
+@hot_inline
+def _offset(n_total, C):
+    """``o`` with segment ``i`` the steps ``max(iC − o, 0) … (i + 1)C − o − 1``: segment
+    ``i`` holds step ``k`` for ``i = (k + o) // C``, and only the first is shorter than
+    ``C``."""
+    return ((n_total + C - 1) // C) * C - n_total
+
+
 @hot
 def run_checkpointed(md, tabs, opts, h, state, ws, n_total, save_every, smp, info, sout, ev,
                      stepk, stages, ck, rec, each, stop):
-    """:func:`.drive.run` in segments of ``C`` steps (``rec`` holds ``C``), keeping a
-    checkpoint before each in ``ck`` (``ceil(n_total / C)`` of them) and recording each
-    segment into ``rec`` by ``each`` (the :func:`recorder`): at the end ``rec`` holds the
-    last segment, which :func:`run_adjoint` then needs not retake. Up to step ``stop``: a
-    call continues where the last one stopped (a progress display between them). Returns a
-    status code."""
+    """:func:`.drive.run` in segments of at most ``C`` steps (``rec`` holds ``C``; the
+    first is the short one, :func:`_offset`), keeping a checkpoint before each in ``ck``
+    (``ceil(n_total / C)`` of them) and recording each segment into ``rec`` by ``each``
+    (the :func:`recorder`): at the end ``rec`` holds the last segment, ``C`` steps that
+    :func:`run_adjoint` then needs not retake. Up to step ``stop``: a call continues where
+    the last one stopped (a progress display between them). Returns a status code."""
     C = rec.qk.shape[0]
+    off = _offset(n_total, C)
     end = min(stop, n_total)
     while int(info[I_STEPS]) < end:
-        i = int(info[I_STEPS]) // C  # the segments start at multiples of C
-        if int(info[I_STEPS]) == i * C:
+        i = (int(info[I_STEPS]) + off) // C
+        k0 = max(i * C - off, 0)
+        if int(info[I_STEPS]) == k0:
             _keep(ck, i, state, ws, info)
-        st = _segment(md, tabs, opts, h, state, ws, i * C, min(C, end - i * C), n_total,
-                      save_every, smp, info, sout, ev, stepk, stages, rec, each)
+        st = _segment(md, tabs, opts, h, state, ws, k0, min((i + 1) * C - off, end) - k0,
+                      n_total, save_every, smp, info, sout, ev, stepk, stages, rec, each)
         if st != 0:
             return st
     return 0
@@ -237,15 +271,17 @@ def run_adjoint(md, tabs, tx, opts, h, state, ws, n_total, every, smp, info, sou
     C = rec.qk.shape[0]
     K = Lq.shape[0]
     nseg = (n_total + C - 1) // C
+    off = _offset(n_total, C)
     no_samples = nseg - nseg  # an int64 of run time: a literal would compile `run` again
     for k in range(k_hi - 1, k_lo - 1, -1):
-        seg = k // C
+        seg = (k + off) // C
         k0 = ck.steps[seg]
         j = k - k0
-        if seg < nseg - 1 and j == C - 1:
+        k1 = (seg + 1) * C - off  # the segment's end
+        if seg < nseg - 1 and k == k1 - 1:
             _restore(ck, seg, state, ws, info)
-            st = _segment(md, tabs, opts, h, state, ws, k0, C, n_total, no_samples, smp, info,
-                          sout, ev, stepk, stages, rec, each)
+            st = _segment(md, tabs, opts, h, state, ws, k0, k1 - k0, n_total, no_samples, smp,
+                          info, sout, ev, stepk, stages, rec, each)
             if st != 0:
                 return st
         i = _sample_of(k + 1, every, n_total, K)

@@ -183,7 +183,7 @@ def _system(P, PS, J, solver, system):
     return _System(lay.SOLVE_DENSE, (kl, ku), perm_b, 0, None, None, costs)
 
 
-def _greedy_colours(neighbours):
+def greedy_colours(neighbours):
     """Greedy colouring in vertex order: vertex ``i`` takes the smallest colour none of
     ``neighbours[i]`` (indices) already has. Returns the colours (int64)."""
     colour = np.full(len(neighbours), -1, dtype=np.int64)
@@ -258,7 +258,7 @@ def linearisation_patterns(PG, PA, s: int, J: int, diagonal_mass: bool = False):
     Gi = PG.astype(np.int64)
     if m:
         share = (Gi @ Gi.T) > 0
-        colour = _greedy_colours([np.nonzero(share[c])[0] for c in range(m)])
+        colour = greedy_colours([np.nonzero(share[c])[0] for c in range(m)])
         ng = int(colour.max()) + 1
         if 2 * ng <= m:
             out["gptr"], out["gcol"] = compressed_rows(PG)
@@ -286,7 +286,7 @@ def _column_groups(PG):
     H = ((Gs.T @ Gs) > 0).tocsc()
     n = H.shape[0]
     C = ((H.T @ H) > 0).tolil()  # columns that share a row of H
-    colour = _greedy_colours(C.rows)
+    colour = greedy_colours(C.rows)
     ng = int(colour.max()) + 1 if n else 0
     if 2 * ng > n:
         return None

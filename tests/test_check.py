@@ -9,6 +9,7 @@ swapped index, a forgotten term or constraint.
 """
 
 import functools
+import importlib
 import time
 
 import numpy as np
@@ -17,6 +18,8 @@ import pytest
 import fastvi
 from fastvi.check import CheckReport, check_model
 from fastvi.scenes import SCENES
+
+CHAIN = importlib.import_module("fastvi.scenes.chain")  # the module: `fastvi.scenes.chain` is its scene
 
 # ----------------------------------------------------------------------------- cart pendulum
 # params = (M, m, l, g, k): cart mass, bob mass, rod length, gravity, cart spring stiffness
@@ -449,3 +452,59 @@ def test_callback_value_evaluates_each_slot_as_the_kernels_call_it(double_pendul
         model.callback_value("mass", q)
     with pytest.raises(ValueError, match="`slot` must be one of mass, kinetic_grad"):
         model.callback_value("gradient", q)
+
+
+# ----------------------------------------------------------------------------- large models
+def test_hessian_reference_by_groups_is_the_coordinate_by_coordinate_one():
+    from fastvi.check import _fd, _fd_contracted_by_groups
+
+    model = fastvi.scenes.chain(6)  # n = 12, m = 6: its declared pattern gives 4 groups
+    rng = np.random.default_rng(3)
+    q = rng.uniform(-1.0, 1.0, model.n)
+    E = rng.standard_normal((3, model.m))
+
+    def G(x):
+        return model.constraint_jacobian_value(x)
+
+    dG, est, fscale, hmin = _fd(G, q)
+    refs, ests, fs, hm = _fd_contracted_by_groups(G, q, E, model.constraint_jacobian_pattern)
+    assert np.allclose(refs, np.einsum("jc,cab->jab", E, dG), rtol=0, atol=1e-12)
+    assert np.allclose(ests, np.einsum("jc,cab->jab", np.abs(E), est), rtol=0, atol=1e-12)
+    assert (fs, hm) == (fscale, hmin)
+    # the theory: Σ_c η_c ∇²g_c of a chain, block tridiagonal (scene docstring)
+    for j in range(3):
+        exact = np.zeros((model.n, model.n))
+        CHAIN.constraint_hessian(q, E[j], model.params, exact)
+        assert np.abs(refs[j] - exact).max() < 1e-9
+
+
+def _hessian_forgets_a_curvature(q, eta, p, out):  # the chain's, but for one entry
+    nb = q.shape[0] // 2
+    out[:, :] = 0.0
+    for i in range(nb):
+        d = eta[i] + (eta[i + 1] if i + 1 < nb else 0.0)
+        out[2 * i, 2 * i] = d
+        out[2 * i + 1, 2 * i + 1] = d
+        if i + 1 < nb:
+            out[2 * i, 2 * i + 2] = out[2 * i + 2, 2 * i] = -eta[i + 1]
+            out[2 * i + 1, 2 * i + 3] = out[2 * i + 3, 2 * i + 1] = -eta[i + 1]
+    out[2 * nb - 1, 2 * nb - 1] = 0.0  # ∂²g_last/∂y_last² = 1 forgotten
+
+
+def test_a_wrong_constraint_hessian_of_a_patterned_model_is_named():
+    chain = fastvi.scenes.chain(5)
+    fns = {slot: getattr(CHAIN, slot)
+           for slot in ("potential", "potential_grad", "constraint", "constraint_jacobian")}
+    model = fastvi.Model(chain.n, chain.m, params=chain.params,
+                         mass=chain.mass_matrix_constant, potential_hessian=0,
+                         constraint_hessian=_hessian_forgets_a_curvature,
+                         constraint_jacobian_pattern=chain.constraint_jacobian_pattern, **fns)
+    q = np.random.default_rng(4).uniform(-1.0, 1.0, chain.n)
+    with pytest.raises(fastvi.ModelCheckError, match="callback `constraint_hessian` disagrees") as err:
+        model.check(q)
+    assert err.value.callbacks == ["constraint_hessian"]
+    good = fastvi.Model(chain.n, chain.m, params=chain.params,
+                        mass=chain.mass_matrix_constant, potential_hessian=0,
+                        constraint_hessian=CHAIN.constraint_hessian,
+                        constraint_jacobian_pattern=chain.constraint_jacobian_pattern, **fns)
+    assert good.check(q).ok

@@ -857,8 +857,8 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
     qs, vs = max(1.0, float(np.abs(q).max())), max(1.0, float(np.abs(v).max()))
     for _ in range(int(n_random)):
         states.append((q + radius * qs * rng.standard_normal(n), v + radius * vs * rng.standard_normal(n)))
-    # every unit impulse e_a for small m; for large mechanisms (issue 12) a random subset of
-    # them and random dense η: each costs an (m, n, n) contraction (91 s for chain(256))
+    # every unit impulse e_a for small m; for large mechanisms a random subset of them and
+    # random dense η: each η costs an (n, n) comparison
     units = range(m) if m <= MAX_UNIT_ETAS else sorted(rng.choice(m, MAX_UNIT_ETAS, replace=False))
     etas = [np.eye(m)[a] for a in units]
     n_units = len(etas)

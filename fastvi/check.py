@@ -100,6 +100,11 @@ DEFAULT_RANDOM_STATES = 3
 #: Size of the random perturbation of the nearby states, relative to ``max(1, |q|)``.
 DEFAULT_RADIUS = 1e-2
 _NOISE = 10.0  # safety factor on the estimated finite-difference error
+#: the bytes the differences by the parameters take at once (:func:`_fd_by_blocks`), and
+#: the arrays of the derivative's size :func:`_fd` holds at once (three differences, two
+#: extrapolations, the result and its error estimate)
+FD_BLOCK_BYTES = 64 * 2**20
+_FD_ARRAYS = 7
 _ROUNDOFF = 100.0 * np.finfo(float).eps
 
 # What each derivative callback is compared with (in the order the checks run: a second
@@ -740,30 +745,72 @@ def _symmetry(M: np.ndarray, k: int) -> CheckRow:
 
 
 def _compare(callback: str, state: int, exact: np.ndarray, fd, rtol: float, note: str = "") -> CheckRow:
-    ref, est, fscale, hmin = fd
-    reference = _REFERENCE[callback]
+    """One row of the report: ``exact`` against the reference ``fd = (ref, est, fscale,
+    hmin)`` (:func:`_fd`)."""
+    ref = fd[0]
+    row = _compare_blocks(callback, state, [(exact, *fd)], rtol, note)
     exact = np.asarray(exact, dtype=float)
-    if not np.all(np.isfinite(exact)):
-        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(exact))[0]) if exact.ndim else ()
-        if state > 0:  # a random nearby state may lie outside the model's domain
-            return CheckRow(callback, reference, state, np.nan, 0.0, 0.0, bad, "skipped",
-                            "non-finite values at this nearby state")
-        return CheckRow(callback, reference, state, np.inf, 0.0, 0.0, bad, "wrong",
-                        (note + "; " if note else "") + "returned non-finite values")
-    if not (np.all(np.isfinite(ref)) and np.all(np.isfinite(est))):
-        return CheckRow(callback, reference, state, np.nan, 0.0, 0.0, (), "skipped",
-                        "reference not finite near this state")
-    diff = np.abs(exact - ref)
-    idx = np.unravel_index(int(np.argmax(diff)), diff.shape) if diff.size else ()
-    error = float(diff.max()) if diff.size else 0.0
-    scale = max(float(np.abs(exact).max()), float(np.abs(ref).max())) if diff.size else 0.0
-    noise = _NOISE * (float(est.max()) if est.size else 0.0) + _ROUNDOFF * fscale / hmin
-    allowed = rtol * scale + noise
-    if error > allowed and exact.ndim == 2 and exact.shape[0] == exact.shape[1] > 1 \
-            and float(np.abs(exact.T - ref).max()) <= allowed:
-        note = (note + "; " if note else "") + "it matches the transpose of the reference: wrong shape or transposed?"
-    return CheckRow(callback, reference, state, error, scale, allowed,
-                    tuple(int(i) for i in idx), "ok" if error <= allowed else "wrong", note)
+    if row.status == "wrong" and np.isfinite(row.error) and exact.ndim == 2 \
+            and exact.shape[0] == exact.shape[1] > 1 and float(np.abs(exact.T - ref).max()) <= row.allowed:
+        row = replace(row, note=(note + "; " if note else "")
+                      + "it matches the transpose of the reference: wrong shape or transposed?")
+    return row
+
+
+def _compare_blocks(callback: str, state: int, blocks, rtol: float, note: str = "") -> CheckRow:
+    """:func:`_compare` of arrays that come in blocks along their first axis: ``blocks``
+    yields ``(exact, ref, est, fscale, hmin)`` for each (:func:`_fd_by_blocks`), and the
+    row is that of the whole arrays, with one block in memory at a time."""
+    reference = _REFERENCE[callback]
+    error, scale, noise, idx, offset, fscale, hmin = 0.0, 0.0, 0.0, None, 0, 0.0, np.inf
+    for ex, rf, es, fs, hm in blocks:
+        ex = np.asarray(ex, dtype=float)
+        if not np.all(np.isfinite(ex)):
+            bad = np.argwhere(~np.isfinite(ex))[0] if ex.ndim else ()
+            bad = tuple(int(i) + (offset if j == 0 else 0) for j, i in enumerate(bad))
+            if state > 0:  # a random nearby state may lie outside the model's domain
+                return CheckRow(callback, reference, state, np.nan, 0.0, 0.0, bad, "skipped",
+                                "non-finite values at this nearby state")
+            return CheckRow(callback, reference, state, np.inf, 0.0, 0.0, bad, "wrong",
+                            (note + "; " if note else "") + "returned non-finite values")
+        if not (np.all(np.isfinite(rf)) and np.all(np.isfinite(es))):
+            return CheckRow(callback, reference, state, np.nan, 0.0, 0.0, (), "skipped",
+                            "reference not finite near this state")
+        if ex.size:
+            diff = np.abs(ex - rf)
+            at = np.unravel_index(int(np.argmax(diff)), diff.shape)
+            if idx is None or float(diff[at]) > error:
+                error = float(diff[at])
+                idx = tuple(int(i) + (offset if j == 0 else 0) for j, i in enumerate(at))
+            scale = max(scale, float(np.abs(ex).max()), float(np.abs(rf).max()))
+            noise = max(noise, float(es.max()) if es.size else 0.0)
+        fscale, hmin = max(fscale, fs), min(hmin, hm)
+        offset += ex.shape[0] if ex.ndim else 0
+    allowed = rtol * scale + _NOISE * noise + _ROUNDOFF * fscale / hmin
+    return CheckRow(callback, reference, state, error, scale, allowed, idx or (),
+                    "ok" if error <= allowed else "wrong", note)
+
+
+def _fd_by_blocks(f, prm: np.ndarray, out_size: int, budget: int = None):
+    """:func:`_fd` of ``f(θ)`` by the parameters, in blocks of parameters whose differences
+    take about ``budget`` bytes (:data:`FD_BLOCK_BYTES`): yields ``(lo, hi, ref, est,
+    fscale, hmin)`` for ``θ_lo … θ_{hi−1}``, ``ref`` and ``est`` of shape
+    ``(hi − lo, *f.shape)`` (the derivative's layout, ``out[l] = ∂f/∂θ_l``). A large
+    model's ``G`` (m, n) by its k parameters would take ``8 k m n`` bytes in each of the
+    differences' arrays at once."""
+    budget = FD_BLOCK_BYTES if budget is None else budget
+    k = prm.shape[0]
+    step = max(1, budget // (_FD_ARRAYS * 8 * max(out_size, 1)))
+    for lo in range(0, k, step):
+        hi = min(k, lo + step)
+
+        def part(th, lo=lo, hi=hi):
+            full = prm.copy()
+            full[lo:hi] = th
+            return f(full)
+
+        J, est, fscale, hmin = _fd(part, prm[lo:hi])
+        yield lo, hi, np.moveaxis(J, -1, 0), np.moveaxis(est, -1, 0), fscale, hmin
 
 
 def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
@@ -917,12 +964,13 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
     # the derivatives by θ against differences of their callbacks in each parameter θ_l
     def by_params_row(slot, k, qk, vk):
         name = _theta(slot)
-        fd = _fd(lambda th: cb.with_params(slot, th, qk, vk), prm)
-        ref, est, fscale, hmin = (np.moveaxis(fd[0], -1, 0), np.moveaxis(fd[1], -1, 0)) + fd[2:]
-        if has(name):
-            return _compare(name, k, cb(name, qk, vk), (ref, est, fscale, hmin), rtol)
-        return _compare(name, k, np.zeros_like(ref), (ref, est, fscale, hmin), rtol,
-                        "declared 0 (independent of θ)")
+        size = int(np.prod(cb.shape[slot] or (1,)))
+        exact = cb(name, qk, vk) if has(name) else None
+        blocks = ((np.zeros_like(ref) if exact is None else exact[lo:hi], ref, est, fs, hm)
+                  for lo, hi, ref, est, fs, hm in
+                  _fd_by_blocks(lambda th: cb.with_params(slot, th, qk, vk), prm, size))
+        return _compare_blocks(name, k, blocks, rtol,
+                               "" if has(name) else "declared 0 (independent of θ)")
 
     for slot in PARAM_SLOTS if by_params else ():
         if slot in model.param_derivatives:

@@ -508,3 +508,16 @@ def test_a_wrong_constraint_hessian_of_a_patterned_model_is_named():
                         constraint_hessian=CHAIN.constraint_hessian,
                         constraint_jacobian_pattern=chain.constraint_jacobian_pattern, **fns)
     assert good.check(q).ok
+
+
+def test_derivatives_by_the_parameters_compared_in_blocks_are_compared_as_a_whole(monkeypatch):
+    model = fastvi.scenes.double_pendulum(damping=0.3)
+    q, v = model.initial_state(0.7, -0.4, 0.2, 0.9)
+    whole = check_model(model, q, v, n_random=1)
+    assert any(r.callback.endswith("/θ") for r in whole.rows)
+    monkeypatch.setattr(fastvi.check, "FD_BLOCK_BYTES", 1)  # one parameter a block
+    blocks = check_model(model, q, v, n_random=1)
+    assert whole.ok and blocks.ok
+    for a, b in zip(whole.rows, blocks.rows, strict=True):
+        assert (a.callback, a.state, a.error, a.scale, a.allowed, a.index, a.status) == \
+               (b.callback, b.state, b.error, b.scale, b.allowed, b.index, b.status), a.callback

@@ -262,6 +262,20 @@ def test_check_names_a_wrong_derivative_by_the_parameters():
         time_dependent_model(potential_grad=too_long_by_params).check(q)
 
 
+def test_a_wrong_derivative_by_the_parameters_is_pinned_alike_in_blocks(monkeypatch):
+    q = np.array([0.4, -0.3])
+    wrong = {}
+    for budget in (fastvi.check.FD_BLOCK_BYTES, 1):  # all parameters at once; one a block
+        monkeypatch.setattr(fastvi.check, "FD_BLOCK_BYTES", budget)
+        for slot, model in (("potential_grad", time_dependent_model(potential_grad=wrong_sign_by_params)),
+                            ("force", time_dependent_model(force=0))):
+            row = model.check(q, raise_on_error=False).worst(f"{slot}/θ")
+            wrong.setdefault(slot, []).append((row.status, row.index, row.error, row.allowed))
+    for slot, (whole, blocks) in wrong.items():
+        assert whole == blocks and whole[0] == "wrong", (slot, whole, blocks)
+    assert wrong["force"][0][1][0] == 3  # ∂F/∂θ_3 (F = −θ_3 …): found past the first block
+
+
 # ----------------------------------------------------------------------------- pickling
 def test_models_pickle_with_their_derivatives_by_the_parameters(spring_pendulum):
     q, v = np.array([0.4, -0.3]), np.array([0.5, 0.2])

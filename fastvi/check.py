@@ -966,6 +966,16 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
         name = _theta(slot)
         size = int(np.prod(cb.shape[slot] or (1,)))
         exact = cb(name, qk, vk) if has(name) else None
+        if exact is None:
+            # declared 0: first along one random direction w of θ, d/dt f(θ + t w) = 0 for
+            # all w, in one difference instead of k; only a failure is pinned to its θ_l
+            w = np.random.default_rng([seed, k]).standard_normal(prm.shape[0])
+            w *= np.maximum(1.0, np.abs(prm))
+            J, est, fs, hm = _fd(lambda t: cb.with_params(slot, prm + t[0] * w, qk, vk), np.zeros(1))
+            row = _compare(name, k, np.zeros(J.shape[:-1]), (J[..., 0], est[..., 0], fs, hm), rtol,
+                           "declared 0 (independent of θ), along a random direction of θ")
+            if row.status != "wrong":
+                return row
         blocks = ((np.zeros_like(ref) if exact is None else exact[lo:hi], ref, est, fs, hm)
                   for lo, hi, ref, est, fs, hm in
                   _fd_by_blocks(lambda th: cb.with_params(slot, th, qk, vk), prm, size))

@@ -521,3 +521,24 @@ def test_derivatives_by_the_parameters_compared_in_blocks_are_compared_as_a_whol
     for a, b in zip(whole.rows, blocks.rows, strict=True):
         assert (a.callback, a.state, a.error, a.scale, a.allowed, a.index, a.status) == \
                (b.callback, b.state, b.error, b.scale, b.allowed, b.index, b.status), a.callback
+
+
+def test_a_derivative_by_the_parameters_declared_zero_is_checked_along_a_random_direction():
+    chain = fastvi.scenes.chain(4, damping=0.3)  # ∂G/∂θ declared 0: G has no length in it
+    q, v = np.random.default_rng(5).uniform(-1.0, 1.0, (2, chain.n))
+    row = chain.check(q, v, n_random=0).worst("constraint_jacobian/θ")
+    assert row.status == "ok" and "random direction" in row.note
+    # the length moves g but not G: a g whose derivative by θ is declared 0 is caught, and
+    # pinned to the length l_i by the differences in each parameter
+    plain = fastvi.scenes.chain(4)
+    wrong = fastvi.Model(plain.n, plain.m, params=plain.params, mass=plain.mass_matrix_constant,
+                         potential_hessian=0,
+                         param_derivatives={**CHAIN.param_derivatives(), "constraint": 0},
+                         param_patterns={s: p for s, p in CHAIN.param_patterns(4).items()
+                                         if s != "constraint"},
+                         constraint_jacobian_pattern=plain.constraint_jacobian_pattern,
+                         **{s: getattr(CHAIN, s) for s in ("potential", "potential_grad",
+                                                           "constraint", "constraint_jacobian")},
+                         constraint_hessian=CHAIN.constraint_hessian)
+    bad = wrong.check(q, v, n_random=0, raise_on_error=False).worst("constraint/θ")
+    assert bad.status == "wrong" and chain.m <= bad.index[0] < 2 * chain.m  # a length l_i

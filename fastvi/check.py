@@ -690,24 +690,22 @@ def _fd(f, q: np.ndarray):
     return J, est, fscale, hmin
 
 
-def _fd_contracted_by_groups(G, q: np.ndarray, E: np.ndarray, pattern: np.ndarray):
-    r""":func:`_fd` of the constraint Jacobian ``G(q)`` (m, n) contracted with each row
-    ``η_j`` of ``E``: ``(refs, ests, fscale, hmin)`` with ``refs[j] ≈ Σ_c η_jc ∂G_c/∂q``
-    (the constraint Hessian, (n, n)) and ``ests[j] = Σ_c |η_jc| est_c``.
+def _fd_by_groups(f, q: np.ndarray, pattern: np.ndarray):
+    """:func:`_fd` of ``f(q)`` (m, ...) whose row ``c`` depends only on the coordinates of
+    row ``c`` of ``pattern`` (m, n): a constraint, or a constraint's gradient, on the
+    coordinates the constraint involves.
 
-    Row ``c`` of ``G`` depends only on the coordinates of its ``pattern`` (a constraint's
-    gradient on the coordinates the constraint involves), so coordinates that share no
-    constraint are perturbed together (Curtis–Powell–Reid groups): each constraint meets
-    at most one coordinate ``b`` of a group, and its rows' differences are ``∂G_c/∂q_b``.
-    A chain of links needs four groups instead of ``n`` coordinates, and nothing of size
-    ``m n²`` is formed."""
+    Coordinates that share no row are perturbed together (Curtis–Powell–Reid groups, a
+    greedy colouring of ``patternᵀ pattern``): each row meets at most one coordinate ``b``
+    of a group, and its differences are ``∂f_c/∂q_b``. A chain of links needs four groups
+    instead of ``n`` coordinates. Yields ``(rows, b, ref, est)`` per group — the rows the
+    group moves, the coordinate of each, and their derivatives and error estimates
+    ``(len(rows), ...)`` — then, last, ``(fscale, hmin)`` as :func:`_fd` gives them."""
     m, n = pattern.shape
     P = sp.csr_matrix(pattern.astype(np.int64))
-    colour = greedy_colours(((P.T @ P) > 0).tolil().rows)  # coordinates sharing a constraint
-    refs, ests = np.zeros((E.shape[0], n, n)), np.zeros((E.shape[0], n, n))
-    absE = np.abs(E)
-    G0 = np.asarray(G(q), dtype=float)
-    fscale, hmin = float(np.abs(G0).max()) if G0.size else 0.0, np.inf
+    colour = greedy_colours(((P.T @ P) > 0).tolil().rows)  # coordinates sharing a row
+    f0 = np.asarray(f(q), dtype=float)
+    fscale, hmin = float(np.abs(f0).max()) if f0.size else 0.0, np.inf
     for g in range(int(colour.max()) + 1 if n else 0):
         cols = np.flatnonzero(colour == g)
         rr, bb = np.nonzero(pattern[:, cols])
@@ -720,16 +718,47 @@ def _fd_contracted_by_groups(G, q: np.ndarray, E: np.ndarray, pattern: np.ndarra
             qp, qm = q.copy(), q.copy()
             qp[cols] += base / k
             qm[cols] -= base / k
-            Gp, Gm = np.asarray(G(qp), dtype=float), np.asarray(G(qm), dtype=float)
-            fscale = max(fscale, float(np.abs(Gp).max()), float(np.abs(Gm).max()))
-            D.append((Gp[rr] - Gm[rr]) / (qp[b] - qm[b])[:, None])  # the steps taken
+            fp, fm = np.asarray(f(qp), dtype=float), np.asarray(f(qm), dtype=float)
+            fscale = max(fscale, float(np.abs(fp).max()), float(np.abs(fm).max()))
+            step = (qp[b] - qm[b]).reshape((-1,) + (1,) * (f0.ndim - 1))  # the steps taken
+            D.append((fp[rr] - fm[rr]) / step)
             hmin = min(hmin, float((qp[cols] - q[cols]).min()))
         r1 = (4.0 * D[1] - D[0]) / 3.0
         r2 = (4.0 * D[2] - D[1]) / 3.0
-        # refs[j, a, b_c] += η_jc ∂G_ca/∂q_b over the rows c, as (j, b, a) then transposed
-        np.add.at(refs.transpose(0, 2, 1), (slice(None), b), E[:, rr, None] * r2[None])
-        np.add.at(ests.transpose(0, 2, 1), (slice(None), b), absE[:, rr, None] * np.abs(r2 - r1)[None])
-    return refs, ests, fscale, hmin
+        yield rr, b, r2, np.abs(r2 - r1)
+    yield fscale, hmin
+
+
+def _fd_contracted_by_groups(G, q: np.ndarray, E: np.ndarray, pattern: np.ndarray):
+    r""":func:`_fd` of the constraint Jacobian ``G(q)`` (m, n) by :func:`_fd_by_groups`,
+    contracted with each row ``η_j`` of ``E``: ``(refs, ests, fscale, hmin)`` with
+    ``refs[j] ≈ Σ_c η_jc ∂G_c/∂q`` (the constraint Hessian, (n, n)) and
+    ``ests[j] = Σ_c |η_jc| est_c``; nothing of size ``m n²`` is formed."""
+    n = pattern.shape[1]
+    refs, ests = np.zeros((E.shape[0], n, n)), np.zeros((E.shape[0], n, n))
+    absE = np.abs(E)
+    for item in _fd_by_groups(G, q, pattern):
+        if len(item) == 2:
+            return refs, ests, *item
+        rr, b, r2, err = item
+        # refs[j, a, b_c] += η_jc ∂G_ca/∂q_b over the rows c: a sparse (n, rows) sum per η
+        cols_rr = np.arange(rr.size)
+        for j in range(E.shape[0]):
+            refs[j] += (sp.csr_matrix((E[j, rr], (b, cols_rr)), shape=(n, rr.size)) @ r2).T
+            ests[j] += (sp.csr_matrix((absE[j, rr], (b, cols_rr)), shape=(n, rr.size)) @ err).T
+
+
+def _declared_zero(callback: str, state: int, f, x: np.ndarray, rtol: float, note: str,
+                   seed) -> CheckRow:
+    """A derivative declared 0 (``potential_hessian=0``, ``force_jacobian_q=0``, a ``0`` by
+    θ) against differences of ``f`` along one random direction ``w`` of ``x``:
+    ``d/dt f(x + t w) = 0`` for every ``w``, one difference instead of one per entry of
+    ``x``. A derivative that is not zero is non-zero along almost every direction; only
+    then do the callers difference entry by entry, to name it."""
+    w = np.random.default_rng(seed).standard_normal(x.shape[0]) * np.maximum(1.0, np.abs(x))
+    J, est, fs, hm = _fd(lambda t: f(x + t[0] * w), np.zeros(1))
+    return _compare(callback, state, np.zeros(J.shape[:-1]), (J[..., 0], est[..., 0], fs, hm),
+                    rtol, note + ", along a random direction")
 
 
 def _symmetry(M: np.ndarray, k: int) -> CheckRow:
@@ -948,10 +977,19 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
     if has("force_jacobian_q") or model.force_independent_of_q:
         # force_jacobian_q=0 declares ∂F/∂q = 0: compared like a callback returning zeros
         declared = model.force_independent_of_q
-        each_state("force_jacobian_q", lambda k, qk, vk: _compare(
-            "force_jacobian_q", k, np.zeros((n, n)) if declared else cb("force_jacobian_q", qk, vk),
-            _fd(lambda x: cb("force", x, vk), qk), rtol,
-            "declared 0 (force independent of q)" if declared else ""))
+
+        def force_q_row(k, qk, vk):
+            note = "declared 0 (force independent of q)" if declared else ""
+            if declared:
+                row = _declared_zero("force_jacobian_q", k, lambda x: cb("force", x, vk), qk, rtol,
+                                     note, [seed, k])
+                if row.status != "wrong":
+                    return row
+            return _compare("force_jacobian_q", k,
+                            np.zeros((n, n)) if declared else cb("force_jacobian_q", qk, vk),
+                            _fd(lambda x: cb("force", x, vk), qk), rtol, note)
+
+        each_state("force_jacobian_q", force_q_row)
     if has("force_jacobian_v"):
         each_state("force_jacobian_v", lambda k, qk, vk: _compare(
             "force_jacobian_v", k, cb("force_jacobian_v", qk, vk), _fd(lambda x: cb("force", qk, x), vk), rtol))
@@ -967,13 +1005,8 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
         size = int(np.prod(cb.shape[slot] or (1,)))
         exact = cb(name, qk, vk) if has(name) else None
         if exact is None:
-            # declared 0: first along one random direction w of θ, d/dt f(θ + t w) = 0 for
-            # all w, in one difference instead of k; only a failure is pinned to its θ_l
-            w = np.random.default_rng([seed, k]).standard_normal(prm.shape[0])
-            w *= np.maximum(1.0, np.abs(prm))
-            J, est, fs, hm = _fd(lambda t: cb.with_params(slot, prm + t[0] * w, qk, vk), np.zeros(1))
-            row = _compare(name, k, np.zeros(J.shape[:-1]), (J[..., 0], est[..., 0], fs, hm), rtol,
-                           "declared 0 (independent of θ), along a random direction of θ")
+            row = _declared_zero(name, k, lambda th: cb.with_params(slot, th, qk, vk), prm, rtol,
+                                 "declared 0 (independent of θ)", [seed, k])
             if row.status != "wrong":
                 return row
         blocks = ((np.zeros_like(ref) if exact is None else exact[lo:hi], ref, est, fs, hm)
@@ -993,6 +1026,11 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
             # potential_hessian=0 declares ∇²V = 0: compared like a callback returning zeros
             exact = np.zeros((n, n)) if model.linear_potential else cb(slot, qk)
             note = "declared 0 (potential linear in q)" if model.linear_potential else ""
+            if model.linear_potential:
+                row = _declared_zero(slot, k, lambda x: cb("potential_grad", x), qk, rtol, note,
+                                     [seed, k])
+                if row.status != "wrong":
+                    return row
             return _compare(slot, k, exact, _fd(lambda x: cb("potential_grad", x), qk), rtol, note)
         G = lambda x: cb("constraint_jacobian", x)  # noqa: E731
         pattern = model.constraint_jacobian_pattern

@@ -212,8 +212,8 @@ def coupling(PG, PA, s: int):
     one, is a combination of such terms, so its pattern is within this."""
     PG, PA = np.asarray(PG, dtype=bool), np.asarray(PA, dtype=bool)
     n = PG.shape[1]
-    Gi = PG.astype(np.int64)
-    B = (Gi.T @ Gi) > 0
+    Gs = sp.csr_matrix(PG.astype(np.int64))  # a dense integer product has no BLAS: O(m n²)
+    B = (Gs.T @ Gs).toarray() > 0
     for nu in range(s):
         for mu in range(s):
             B |= PA[nu * n:(nu + 1) * n, mu * n:(mu + 1) * n]
@@ -255,10 +255,9 @@ def linearisation_patterns(PG, PA, s: int, J: int, diagonal_mass: bool = False):
     m, n = PG.shape
     z = np.zeros(0, dtype=np.int64)
     out = dict(gptr=z, gcol=z, gsta=z, grow=z)
-    Gi = PG.astype(np.int64)
+    Gs = sp.csr_matrix(PG.astype(np.int64))
     if m:
-        share = (Gi @ Gi.T) > 0
-        colour = greedy_colours([np.nonzero(share[c])[0] for c in range(m)])
+        colour = greedy_colours(((Gs @ Gs.T) > 0).tolil().rows)  # constraints sharing a coordinate
         ng = int(colour.max()) + 1
         if 2 * ng <= m:
             out["gptr"], out["gcol"] = compressed_rows(PG)
@@ -381,8 +380,8 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
 
     if m and flags[lay.F_DIAG] and not flags[lay.F_AUGMENT]:  # M⁻¹ elementwise
         PG = pats["G"]
-        Gi = PG.astype(np.int64)
-        PS = (Gi @ Gi.T) > 0
+        Gs = sp.csr_matrix(PG.astype(np.int64))
+        PS = (Gs @ Gs.T).toarray() > 0
         rows_s, cols_s = np.nonzero(PS)  # row by row: the order of SI_SPTR / SI_SCOL
         proj = _system(PS, PS, 1, solver, "projection")
         bands["projection"] = proj.band

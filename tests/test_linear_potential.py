@@ -143,9 +143,12 @@ def test_check_catches_a_false_declaration():
     with pytest.raises(fastvi.ModelCheckError, match="callback `potential_hessian` disagrees") as err:
         model.check([0.3, 1.1], [0.7, -1.3])
     assert "declared 0" in str(err.value)
+    # a random direction finds it, the differences by each coordinate name ∂²V/∂x² = k
+    assert err.value.report.worst("potential_hessian").index == (0, 0)
     honest = fastvi.Model(2, 0, params=(0.0, 9.81), mass=np.ones(2), potential=spring_potential,
                           potential_grad=spring_potential_grad, potential_hessian=0, name="no spring")
-    assert honest.check([0.3, 1.1], [0.7, -1.3]).ok
+    report = honest.check([0.3, 1.1], [0.7, -1.3])
+    assert report.ok and "random direction" in report.worst("potential_hessian").note
 
 
 def test_symbolic_models_declare_a_linear_potential():

@@ -780,7 +780,8 @@ def _compare(callback: str, state: int, exact: np.ndarray, fd, rtol: float, note
     row = _compare_blocks(callback, state, [(exact, *fd)], rtol, note)
     exact = np.asarray(exact, dtype=float)
     if row.status == "wrong" and np.isfinite(row.error) and exact.ndim == 2 \
-            and exact.shape[0] == exact.shape[1] > 1 and float(np.abs(exact.T - ref).max()) <= row.allowed:
+            and exact.shape[0] == exact.shape[1] > 1 \
+            and float(np.abs(exact.T - ref).max()) <= row.allowed:
         row = replace(row, note=(note + "; " if note else "")
                       + "it matches the transpose of the reference: wrong shape or transposed?")
     return row

@@ -31,8 +31,8 @@ from .drive import c_entry, run, step_hook
 from .layout import H_SIZE, I_FAILED, I_FIRST, I_STEPS, OK, SI_GCOL, SI_GPTR, sizes
 from .tangent import linearise, pull, sized_twin
 
-__all__ = ["Checkpoints", "Records", "g_entries", "make_checkpoints", "make_records", "run_checkpointed",
-           "run_adjoint", "recorder", "sweeper", "Sweep"]
+__all__ = ["Checkpoints", "Records", "g_entries", "make_checkpoints", "make_records",
+           "run_checkpointed", "run_adjoint", "recorder", "sweeper", "Sweep"]
 
 #: what a step needs of the past to be retaken bit for bit: the state (rows q, p, v), the
 #: predictor's unknowns of the last two steps, the workspace's flags and step lengths, and

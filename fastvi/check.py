@@ -81,7 +81,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._numba import njit, ptr, quiet
-from .model import PARAM_SLOTS, SLOTS, Model, call_callback
+from .model import PARAM_SLOTS, SLOTS, Model, direct_callback
 from .structure import greedy_colours
 
 __all__ = ["check_model", "CheckReport", "CheckRow", "ModelCheckError", "DEFAULT_RTOL"]
@@ -395,6 +395,7 @@ class _Callbacks:
                  by_params: bool = False):
         cfs = model.kernel_arguments()[0]
         self.fn = dict(zip(SLOTS, cfs))
+        self.direct = {}  # the callbacks called by address (large models, :meth:`__call__`)
         self.present = set(model.callbacks)
         self.shape = {slot: model.output_shape(slot) for slot in SLOTS}
         if by_params and model.param_derivatives:
@@ -514,8 +515,10 @@ class _Callbacks:
             out = np.zeros(self.shape[slot] or (1,))
             q = np.ascontiguousarray(q, dtype=np.float64)
             v = q if v is None else np.ascontiguousarray(v, dtype=np.float64)
-            with quiet():
-                call_callback(self.fn[slot], q, v, self.p, out)
+            direct = self.direct.get(slot)
+            if direct is None:
+                direct = self.direct[slot] = direct_callback(self.fn[slot])
+            direct(q.ctypes.data, v.ctypes.data, self.p.ctypes.data, out.ctypes.data)
             self.count += 1
             mask = self.pattern.get(slot)
             if mask is not None and np.any(out.ravel()[~mask] != 0.0):
@@ -735,17 +738,22 @@ def _fd_contracted_by_groups(G, q: np.ndarray, E: np.ndarray, pattern: np.ndarra
     ``refs[j] ≈ Σ_c η_jc ∂G_c/∂q`` (the constraint Hessian, (n, n)) and
     ``ests[j] = Σ_c |η_jc| est_c``; nothing of size ``m n²`` is formed."""
     n = pattern.shape[1]
-    refs, ests = np.zeros((E.shape[0], n, n)), np.zeros((E.shape[0], n, n))
+    # accumulated transposed, (j, b, a): each group adds whole rows b
+    refs_t, ests_t = np.zeros((E.shape[0], n, n)), np.zeros((E.shape[0], n, n))
     absE = np.abs(E)
     for item in _fd_by_groups(G, q, pattern):
         if len(item) == 2:
-            return refs, ests, *item
+            return refs_t.transpose(0, 2, 1), ests_t.transpose(0, 2, 1), *item
         rr, b, r2, err = item
-        # refs[j, a, b_c] += η_jc ∂G_ca/∂q_b over the rows c: a sparse (n, rows) sum per η
+        # refs[j, a, b_c] += η_jc ∂G_ca/∂q_b over the rows c: a sparse sum per η into the
+        # columns of the group's coordinates alone
+        ub, at = np.unique(b, return_inverse=True)
         cols_rr = np.arange(rr.size)
         for j in range(E.shape[0]):
-            refs[j] += (sp.csr_matrix((E[j, rr], (b, cols_rr)), shape=(n, rr.size)) @ r2).T
-            ests[j] += (sp.csr_matrix((absE[j, rr], (b, cols_rr)), shape=(n, rr.size)) @ err).T
+            S = sp.csr_matrix((E[j, rr], (at, cols_rr)), shape=(ub.size, rr.size))
+            refs_t[j, ub] += S @ r2
+            S = sp.csr_matrix((absE[j, rr], (at, cols_rr)), shape=(ub.size, rr.size))
+            ests_t[j, ub] += S @ err
 
 
 def _declared_zero(callback: str, state: int, f, x: np.ndarray, rtol: float, note: str,

@@ -662,6 +662,32 @@ class _Callbacks:
                 f"for you, every entry must be set on every call: {hint}")
 
 
+def _absmax(x: np.ndarray) -> float:
+    return float(np.abs(x).max()) if x.size else 0.0
+
+
+def _richardson(f, q: np.ndarray, cols, quotient):
+    """The coordinates ``cols`` of ``q`` moved together by ``±h/k``, ``h = FD_STEP ·
+    max(1, |q_b|)``, ``k = 1, 2, 4``; ``quotient(fp, fm, qp, qm)`` forms each central
+    difference quotient from the evaluations and the points (whose rounded steps it
+    divides by). Returns the twice Richardson-extrapolated quotient, its error estimate
+    (the difference of the last two extrapolations), ``max |f|`` over the evaluations and
+    the smallest step."""
+    base = FD_STEP * np.maximum(1.0, np.abs(q[cols]))
+    D, fscale, hmin = [], 0.0, np.inf
+    for k in (1.0, 2.0, 4.0):
+        qp, qm = q.copy(), q.copy()
+        qp[cols] += base / k
+        qm[cols] -= base / k
+        fp, fm = np.asarray(f(qp), dtype=float), np.asarray(f(qm), dtype=float)
+        fscale = max(fscale, _absmax(fp), _absmax(fm))
+        D.append(quotient(fp, fm, qp, qm))
+        hmin = min(hmin, float((qp[cols] - q[cols]).min()))
+    r1 = (4.0 * D[1] - D[0]) / 3.0
+    r2 = (4.0 * D[2] - D[1]) / 3.0
+    return r2, np.abs(r2 - r1), fscale, hmin
+
+
 def _fd(f, q: np.ndarray):
     """Richardson-extrapolated central differences of ``f`` along each coordinate.
 
@@ -672,24 +698,11 @@ def _fd(f, q: np.ndarray):
     f0 = np.asarray(f(q), dtype=float)
     J = np.empty(f0.shape + (n,))
     est = np.empty_like(J)
-    fscale = float(np.max(np.abs(f0))) if f0.size else 0.0
-    hmin = np.inf
+    fscale, hmin = _absmax(f0), np.inf
     for b in range(n):
-        base = FD_STEP * max(1.0, abs(q[b]))
-        D = []
-        for k in (1.0, 2.0, 4.0):
-            qp, qm = q.copy(), q.copy()
-            qp[b] += base / k
-            qm[b] -= base / k
-            fp, fm = np.asarray(f(qp), dtype=float), np.asarray(f(qm), dtype=float)
-            fscale = max(fscale, float(np.max(np.abs(fp))) if fp.size else 0.0,
-                         float(np.max(np.abs(fm))) if fm.size else 0.0)
-            D.append((fp - fm) / (qp[b] - qm[b]))  # the step actually taken (rounded)
-            hmin = min(hmin, qp[b] - q[b])
-        r1 = (4.0 * D[1] - D[0]) / 3.0
-        r2 = (4.0 * D[2] - D[1]) / 3.0
-        J[..., b] = r2
-        est[..., b] = np.abs(r2 - r1)
+        J[..., b], est[..., b], fs, hm = _richardson(
+            f, q, [b], lambda fp, fm, qp, qm: (fp - fm) / (qp[b] - qm[b]))
+        fscale, hmin = max(fscale, fs), min(hmin, hm)
     return J, est, fscale, hmin
 
 
@@ -708,27 +721,18 @@ def _fd_by_groups(f, q: np.ndarray, pattern: np.ndarray):
     P = sp.csr_matrix(pattern.astype(np.int64))
     colour = greedy_colours(((P.T @ P) > 0).tolil().rows)  # coordinates sharing a row
     f0 = np.asarray(f(q), dtype=float)
-    fscale, hmin = float(np.abs(f0).max()) if f0.size else 0.0, np.inf
+    fscale, hmin = _absmax(f0), np.inf
     for g in range(int(colour.max()) + 1 if n else 0):
         cols = np.flatnonzero(colour == g)
         rr, bb = np.nonzero(pattern[:, cols])
         if rr.size == 0:
             continue
         b = cols[bb]  # the one coordinate of the group in each of the rows rr
-        base = FD_STEP * np.maximum(1.0, np.abs(q[cols]))
-        D = []
-        for k in (1.0, 2.0, 4.0):
-            qp, qm = q.copy(), q.copy()
-            qp[cols] += base / k
-            qm[cols] -= base / k
-            fp, fm = np.asarray(f(qp), dtype=float), np.asarray(f(qm), dtype=float)
-            fscale = max(fscale, float(np.abs(fp).max()), float(np.abs(fm).max()))
-            step = (qp[b] - qm[b]).reshape((-1,) + (1,) * (f0.ndim - 1))  # the steps taken
-            D.append((fp[rr] - fm[rr]) / step)
-            hmin = min(hmin, float((qp[cols] - q[cols]).min()))
-        r1 = (4.0 * D[1] - D[0]) / 3.0
-        r2 = (4.0 * D[2] - D[1]) / 3.0
-        yield rr, b, r2, np.abs(r2 - r1)
+        per_row = (-1,) + (1,) * (f0.ndim - 1)
+        ref, est, fs, hm = _richardson(
+            f, q, cols, lambda fp, fm, qp, qm: (fp[rr] - fm[rr]) / (qp[b] - qm[b]).reshape(per_row))
+        fscale, hmin = max(fscale, fs), min(hmin, hm)
+        yield rr, b, ref, est
     yield fscale, hmin
 
 

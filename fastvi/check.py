@@ -761,13 +761,14 @@ def _fd_contracted_by_groups(G, q: np.ndarray, E: np.ndarray, pattern: np.ndarra
 
 
 def _declared_zero(callback: str, state: int, f, x: np.ndarray, rtol: float, note: str,
-                   seed) -> CheckRow:
+                   rng: np.random.Generator) -> CheckRow:
     """A derivative declared 0 (``potential_hessian=0``, ``force_jacobian_q=0``, a ``0`` by
     θ) against differences of ``f`` along one random direction ``w`` of ``x``:
     ``d/dt f(x + t w) = 0`` for every ``w``, one difference instead of one per entry of
     ``x``. A derivative that is not zero is non-zero along almost every direction; only
-    then do the callers difference entry by entry, to name it."""
-    w = np.random.default_rng(seed).standard_normal(x.shape[0]) * np.maximum(1.0, np.abs(x))
+    then do the callers difference entry by entry, to name it. ``w`` is drawn from
+    ``rng`` (the check's own, after its states and impulses: reproducible by ``seed``)."""
+    w = rng.standard_normal(x.shape[0]) * np.maximum(1.0, np.abs(x))
     J, est, fs, hm = _fd(lambda t: f(x + t[0] * w), np.zeros(1))
     return _compare(callback, state, np.zeros(J.shape[:-1]), (J[..., 0], est[..., 0], fs, hm),
                     rtol, note + ", along a random direction")
@@ -880,8 +881,10 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
         Relative size of the perturbation of the nearby states.
     rtol : float, default 1e-6
         Relative tolerance (on top of the estimated finite-difference error).
-    seed : int, default 0
-        Seed of the random nearby states and of the random ``η`` (reproducible reports).
+    seed : int, numpy.random.Generator or None, default 0
+        Seed of the random nearby states, of the random ``η`` and of the random directions
+        a declared zero is compared along (reproducible reports), as
+        :func:`numpy.random.default_rng` takes it.
     raise_on_error : bool, default True
         Raise :class:`ModelCheckError` when a callback disagrees; otherwise only return the
         report (``report.ok`` is False).
@@ -995,7 +998,7 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
             note = "declared 0 (force independent of q)" if declared else ""
             if declared:
                 row = _declared_zero("force_jacobian_q", k, lambda x: cb("force", x, vk), qk, rtol,
-                                     note, [seed, k])
+                                     note, rng)
                 if row.status != "wrong":
                     return row
             return _compare("force_jacobian_q", k,
@@ -1019,7 +1022,7 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
         exact = cb(name, qk, vk) if has(name) else None
         if exact is None:
             row = _declared_zero(name, k, lambda th: cb.with_params(slot, th, qk, vk), prm, rtol,
-                                 "declared 0 (independent of θ)", [seed, k])
+                                 "declared 0 (independent of θ)", rng)
             if row.status != "wrong":
                 return row
         blocks = ((np.zeros_like(ref) if exact is None else exact[lo:hi], ref, est, fs, hm)
@@ -1041,7 +1044,7 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
             note = "declared 0 (potential linear in q)" if model.linear_potential else ""
             if model.linear_potential:
                 row = _declared_zero(slot, k, lambda x: cb("potential_grad", x), qk, rtol, note,
-                                     [seed, k])
+                                     rng)
                 if row.status != "wrong":
                     return row
             return _compare(slot, k, exact, _fd(lambda x: cb("potential_grad", x), qk), rtol, note)

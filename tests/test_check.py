@@ -542,3 +542,10 @@ def test_a_derivative_by_the_parameters_declared_zero_is_checked_along_a_random_
                          constraint_hessian=CHAIN.constraint_hessian)
     bad = wrong.check(q, v, n_random=0, raise_on_error=False).worst("constraint/θ")
     assert bad.status == "wrong" and chain.m <= bad.index[0] < 2 * chain.m  # a length l_i
+
+
+@pytest.mark.parametrize("seed", [None, 3, np.random.default_rng(4)])
+def test_check_takes_any_seed_numpy_takes(seed):
+    model = fastvi.scenes.chain(3, damping=0.3)  # declared zeros: compared along directions
+    q, v = np.random.default_rng(1).uniform(-1.0, 1.0, (2, model.n))
+    assert model.check(q, v, n_random=1, seed=seed).ok

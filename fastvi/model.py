@@ -138,12 +138,17 @@ def direct_callback(cf):
 # Model and per process. Two caches cut it: compiled callbacks are reused within the process
 # for the same function object and sizes (_CALLBACKS), and the wrappers of importable
 # functions are cached on disk by numba (the cache key includes a fingerprint of the
-# function's source, see _fingerprint).
+# function's source, see _fingerprint). The user's function itself is jitted once per process
+# (_JITTED): the sizes are baked into the wrapper only, so a chain of 8 links and one of 64
+# share the compiled `constraint` and compile only their thin wrappers.
 
 #: (kind, function, n, m, k) -> cfunc, most recent last; bounded so that a loop creating
 #: models from fresh lambdas does not keep every compiled module alive.
 _CALLBACKS: dict = {}
 _CALLBACKS_MAX = 512
+#: (function, fingerprint) -> its numba dispatcher, most recent last, bounded like _CALLBACKS;
+#: the fingerprint in the key: a constant the function reads, changed, compiles it anew
+_JITTED: dict = {}
 
 
 def _templates(n, m, k, tag):
@@ -374,9 +379,26 @@ def _wrap_all(slots, functions: dict, kind: Callable, n: int, m: int, k: int) ->
                      for slot in slots)
 
 
+def _jitted(fn: Callable, tag):
+    """``fn`` as a numba dispatcher, one per function object, fingerprint and process."""
+    if isinstance(fn, nb.core.dispatcher.Dispatcher):
+        return fn
+    key = (fn, tag)
+    try:
+        jf = _JITTED.pop(key, None)
+    except TypeError:  # an unhashable callable object
+        return nb.njit(fn)
+    if jf is None:
+        jf = nb.njit(fn)
+    _JITTED[key] = jf
+    while len(_JITTED) > _CALLBACKS_MAX:
+        del _JITTED[next(iter(_JITTED))]
+    return jf
+
+
 def _compile_callback(kind: str, fn: Callable, n: int, m: int, k: int):
     tag = _fingerprint(fn)
-    jf = fn if isinstance(fn, nb.core.dispatcher.Dispatcher) else nb.njit(fn)
+    jf = _jitted(fn, tag)
     template = _templates(n, m, k, 0 if tag is None else tag)[kind]
     # __name__: numba rebuilds a cached function's environment by importing that module
     namespace = {"__name__": __name__, "jf": jf, "carray": carray}

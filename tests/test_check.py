@@ -374,6 +374,7 @@ def test_automatic_check_costs_a_fraction_of_the_model_setup(monkeypatch):
     # the callbacks' compile caches (in-process and on disk) would make the set-up ~0: compare
     # with a real compile, what a model of new functions pays
     monkeypatch.setattr(fastvi.model, "_CALLBACKS", {})
+    monkeypatch.setattr(fastvi.model, "_JITTED", {})
     monkeypatch.setattr(fastvi.model, "_fingerprint", lambda fn: None)
     model = fastvi.Model(2, 0, params=CART_PARAMS, name="cart", **CART)  # fresh, uncompiled
     t0 = time.perf_counter()

@@ -4,9 +4,11 @@ The callbacks are compiled with their sizes baked in and no bounds checks, so be
 guarded check these mistakes ended in ``double free or corruption``, segmentation faults, or
 a "successful" run that crashed at exit (this script before the fix: signals 11 and 6 for the
 first three mistakes, by either route; the unwritten constraint entry was blamed on the
-Jacobian). Corruption is not deterministic, hence each mistake runs in
-fresh processes, several times, and every run must end in a Python exception (exit code 1)
-with the expected message: never a signal (negative code), never success (0).
+Jacobian). Corruption is not deterministic, hence the mistakes run in fresh processes: one
+process a route, the mistakes one after another, in ``make test``; each mistake alone in
+its own process, three times, in ``make test-slow``. Every run must end in a Python
+exception (exit code 1) with the expected message: never a signal (negative code), never
+success (0).
 """
 
 import os
@@ -144,17 +146,61 @@ EVENT_CASES = {
 def _run_all(jobs, script=SCRIPT):
     """Run ``(case, route)`` jobs in fresh processes, two at a time (numba import and compiling
     the model's callbacks take a few seconds each): ``[(job, returncode, stdout, stderr)]``."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     results, pending = [], list(jobs)
     while pending:
         batch, pending = pending[:2], pending[2:]
-        procs = [(job, subprocess.Popen([sys.executable, "-c", script, *job], cwd=ROOT, env=env,
-                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
-                 for job in batch]
+        procs = [(job, _start(script, *job)) for job in batch]
         for job, proc in procs:
             out, err = proc.communicate(timeout=600)
             results.append((job, proc.returncode, out, err))
     return results
+
+
+# Runs the script once per job in one fresh process, each job's output after a marker line.
+BATCH = r'''
+import sys, traceback
+script, jobs = sys.argv[1], sys.argv[2:]
+for job in jobs:
+    sys.argv = ["-c"] + job.split(":")
+    for stream in (sys.stdout, sys.stderr):
+        print("=== job " + job, file=stream, flush=True)
+    try:
+        exec(script, {"__name__": "__main__"})
+        code = 0
+    except Exception:
+        traceback.print_exc()
+        code = 1
+    sys.stderr.flush()
+    print("=== exit", code, flush=True)
+'''
+
+
+def _run_in_one_process(jobs, script=SCRIPT):
+    """The jobs of :func:`_run_all` one after the other in a single fresh process (the import and
+    the kernels' loading paid once): the same ``[(job, returncode, stdout, stderr)]``, with
+    returncode 1 for a job that raised, 0 for one that ran through, and the process's own code
+    (negative: a signal) for the job it died in and the jobs it never reached."""
+    proc = _start(BATCH, script, *(f"{case}:{route}" for case, route in jobs))
+    out, err = proc.communicate(timeout=600)
+    outs, errs = _by_job(out), _by_job(err)
+    results = []
+    for case, route in jobs:
+        job_out = outs.get(f"{case}:{route}", "")
+        last = job_out.rstrip().rsplit("\n", 1)[-1]
+        code = int(last.split()[-1]) if last.startswith("=== exit") else proc.returncode
+        results.append(((case, route), code, job_out, errs.get(f"{case}:{route}", err[-2000:])))
+    return results
+
+
+def _by_job(text):
+    parts = text.split("=== job ")[1:]
+    return {p.split("\n", 1)[0]: p.split("\n", 1)[1] if "\n" in p else "" for p in parts}
+
+
+def _start(script, *args):
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    return subprocess.Popen([sys.executable, "-c", script, *args], cwd=ROOT, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
 def _assert_clean_errors(results):
@@ -171,10 +217,10 @@ def _assert_clean_errors(results):
 
 def test_size_mistakes_raise_a_clear_error_in_a_fresh_process():
     """Through ``integrate``; through ``Model.check`` in ``test_size_mistakes_raise_every_time``
-    (``make test-slow``: one process a case and route is a second each)."""
+    (``make test-slow``: one process a case and route, three times)."""
     jobs = [(case, "integrate") for case in CASES]
     jobs.append(("correct", "integrate"))  # the control: the same script runs when nothing is wrong
-    results = _run_all(jobs)
+    results = _run_in_one_process(jobs)
     control = results.pop()
     assert control[1] == 0 and "integrated True" in control[2], control
     _assert_clean_errors(results)
@@ -183,11 +229,11 @@ def test_size_mistakes_raise_a_clear_error_in_a_fresh_process():
 def test_size_mistakes_raise_with_check_false_too():
     """``check=False`` skips the derivative comparison only: before the size guard ran always,
     these ended in a segfault at exit (m too small), a raise then a segfault (transposed
-    Jacobian), or a silent success (gradient past n). One fresh process each (three each:
-    ``test_size_mistakes_raise_every_time``, ``make test-slow``)."""
+    Jacobian), or a silent success (gradient past n). One fresh process for all (one each,
+    three times: ``test_size_mistakes_raise_every_time``, ``make test-slow``)."""
     jobs = [(case, "nocheck") for case in CASES]
     jobs.append(("correct", "nocheck"))
-    results = _run_all(jobs)
+    results = _run_in_one_process(jobs)
     control = results.pop()
     assert control[1] == 0 and "integrated True" in control[2], control
     _assert_clean_errors(results)
@@ -196,11 +242,11 @@ def test_size_mistakes_raise_with_check_false_too():
 def test_event_mistakes_raise_a_clear_error_in_a_fresh_process():
     """Before the event guard an event reading v[n] returned invented crossings (exit 0), one
     writing into v corrupted the recorded velocities silently, and SciPy's ev(t, y) got
-    numba's generic typing advice. One fresh process each, without the model check (the
+    numba's generic typing advice. One fresh process for all, without the model check (the
     guard's own work; with it too: ``test_event_mistakes_raise_with_the_check_too``); the
     correct event is the control."""
     jobs = [(case, "nocheck") for case in EVENT_CASES]
-    results = _run_all(jobs + [("correct", "check")], script=EVENT_SCRIPT)
+    results = _run_in_one_process(jobs + [("correct", "check")], script=EVENT_SCRIPT)
     control = results.pop()
     assert control[1] == 0 and "integrated True" in control[2], control
     _assert_event_errors(results)

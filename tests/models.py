@@ -6,6 +6,7 @@ spring (unconstrained, m = 0), otherwise the constraint r − l = 0 makes it a p
 params = (m, g, l_or_r0, k).
 """
 
+import numba
 import numpy as np
 
 import fastvi
@@ -282,3 +283,19 @@ def td_potential(t, q, p):
 def td_potential_grad(t, q, p, out):
     out[0] = p[0] * q[0]
     out[1] = p[1] * (q[1] - p[2] * np.sin(t))
+
+
+@numba.njit
+def chain_constraint_hessian_dense(q, eta, p, out):
+    """``fastvi.scenes.chain``'s ``Σ_i η_i ∇²g_i``, every entry written (the scene's writes
+    those of coordinates that share a link alone); jitted, so that other callbacks can call it."""
+    nb = q.shape[0] // 2
+    out[:, :] = 0.0
+    for i in range(nb):
+        d = eta[i] + (eta[i + 1] if i + 1 < nb else 0.0)
+        out[2 * i, 2 * i] = d
+        out[2 * i + 1, 2 * i + 1] = d
+        if i + 1 < nb:
+            for a in range(2):
+                out[2 * i + a, 2 * i + 2 + a] = -eta[i + 1]
+                out[2 * i + 2 + a, 2 * i + a] = -eta[i + 1]

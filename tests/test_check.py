@@ -18,6 +18,7 @@ import pytest
 import fastvi
 from fastvi.check import CheckReport, check_model
 from fastvi.scenes import SCENES
+from tests.models import chain_constraint_hessian_dense
 
 CHAIN = importlib.import_module("fastvi.scenes.chain")  # the module: `fastvi.scenes.chain` is its scene
 
@@ -480,16 +481,8 @@ def test_hessian_reference_by_groups_is_the_coordinate_by_coordinate_one():
 
 
 def _hessian_forgets_a_curvature(q, eta, p, out):  # the chain's, but for one entry
-    nb = q.shape[0] // 2
-    out[:, :] = 0.0
-    for i in range(nb):
-        d = eta[i] + (eta[i + 1] if i + 1 < nb else 0.0)
-        out[2 * i, 2 * i] = d
-        out[2 * i + 1, 2 * i + 1] = d
-        if i + 1 < nb:
-            out[2 * i, 2 * i + 2] = out[2 * i + 2, 2 * i] = -eta[i + 1]
-            out[2 * i + 1, 2 * i + 3] = out[2 * i + 3, 2 * i + 1] = -eta[i + 1]
-    out[2 * nb - 1, 2 * nb - 1] = 0.0  # ∂²g_last/∂y_last² = 1 forgotten
+    chain_constraint_hessian_dense(q, eta, p, out)
+    out[-1, -1] = 0.0  # ∂²g_last/∂y_last² = 1 forgotten
 
 
 def test_a_wrong_constraint_hessian_of_a_patterned_model_is_named():

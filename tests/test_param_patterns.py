@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import fastvi
+from tests.models import chain_constraint_hessian_dense as dense_constraint_hessian
 from tests.models import td_potential, td_potential_grad
 from fastvi.check import ModelCheckError
 from fastvi.model import PATTERN_MIN_ENTRIES
@@ -42,19 +43,6 @@ def dense_force_by_params(t, q, v, p, out):
     out[:, :] = 0.0
     for a in range(q.shape[0]):
         out[p.shape[0] - 1, a] = -v[a]
-
-
-def dense_constraint_hessian(q, eta, p, out):
-    nb = q.shape[0] // 2
-    out[:, :] = 0.0
-    for i in range(nb):
-        d = eta[i] + (eta[i + 1] if i + 1 < nb else 0.0)
-        out[2 * i, 2 * i] = d
-        out[2 * i + 1, 2 * i + 1] = d
-        if i + 1 < nb:
-            for a in range(2):
-                out[2 * i + a, 2 * i + 2 + a] = -eta[i + 1]
-                out[2 * i + 2 + a, 2 * i + a] = -eta[i + 1]
 
 
 def dense_chain(N, c):

@@ -57,7 +57,7 @@ from .linalg import (augmented_mass, invert, invert_unpivoted, lu_factor, lu_fac
                      lu_solve, lu_solve_small)
 
 __all__ = ["make_workspace", "assemble", "assemble_at", "newton_matrix", "add_block", "plan_spans", "residual", "linear_force", "step", "step_kernel",
-           "take_step", "step_once", "cached_cfunc",
+           "take_step", "step_once", "cached_cfunc", "assemble_function", "ASSEMBLE_SIGNATURE",
            "end_momentum", "velocity_residual", "hidden_residual", "constraint_rate",
            "jacobian_rate"]
 
@@ -327,6 +327,38 @@ def assemble(md_, tabs_, h, qk, pk, ws_, jac):
     if st == OK and jac:
         newton_matrix(md_, tabs_, h, qk, ws_)
     return st
+
+
+def _assemble_entry(md_, tabs_, h, qk_, pk_, ws_, jac):
+    return assemble(md_, tabs_, h, own(qk_), own(pk_), ws_, jac)
+
+
+#: how a caller holds :func:`assemble_function`: pointers to the model, tables and workspace
+#: erased (:func:`fastvi._numba.erased`), so that the caller is compiled once for every type
+#: of them
+ASSEMBLE_SIGNATURE = types.int64(types.voidptr, types.voidptr, types.float64,
+                                 types.CPointer(numba.typeof(np.zeros(1))),
+                                 types.CPointer(numba.typeof(np.zeros(1))), types.voidptr,
+                                 types.boolean)
+_ASSEMBLE: dict = {}
+
+
+def assemble_function(md, tabs, ws):
+    """:func:`assemble` for these types of model, tables and workspace as a C function
+    (cached on disk), held as :data:`ASSEMBLE_SIGNATURE`: the linearised step calls it
+    through its address. numba links a callee's code into its caller and optimises it again
+    there; called directly, the residual and the Newton matrix (two fifths of the linearised
+    step's code) would be optimised again in the linearised step and in every C function that
+    holds it (the per-step hooks of sensitivities, the adjoint's sweep, each sized twin)."""
+    key = (_key(md), _key(tabs), _key(ws))
+    if key not in _ASSEMBLE:
+        P, arg = types.CPointer, numba.typeof
+        a1 = P(arg(np.zeros(1)))
+        sig = types.int64(P(arg(md)), P(arg(tabs)), types.float64, a1, a1, P(arg(ws)),
+                          types.boolean)
+        with quiet():
+            _ASSEMBLE[key] = CalledAs(cached_cfunc(_assemble_entry, sig), ASSEMBLE_SIGNATURE)
+    return _ASSEMBLE[key]
 
 
 @hot

@@ -61,12 +61,12 @@ from .banded import (band_factor, band_ld, band_solve, band_solve_transposed, gm
                      gmg_solve)
 # inlined: with the sizes as constants (sized_twin) the factorisations and solves unroll
 from .linalg import lu_factor_small, lu_solve_small
-from .step import (add_block, fd_constraint_hessian, fd_momentum_jacobian, assemble,
-                   end_momentum, jacobian_rate, linear_force, plan_spans)
+from .step import (ASSEMBLE_SIGNATURE, add_block, assemble_function, fd_constraint_hessian,
+                   fd_momentum_jacobian, end_momentum, jacobian_rate, linear_force, plan_spans)
 
 __all__ = ["PointWork", "TangentWork", "extended_tables", "make_point_work",
            "make_tangent_work", "point", "point_terms", "linearise", "push", "pull",
-           "lu_solve_transposed", "run_tangent", "differentiator", "sized_twin", "Members",
+           "lu_solve_transposed", "run_tangent", "differentiator", "sized_twin", "Members", "ASSEMBLE_TYPE", "sized_entry",
            "tangent_member", "point_work", "tangent_work", "index_maps", "step_band",
            "Sparsity", "make_sparsity"]
 
@@ -399,7 +399,7 @@ def _start_jacobian(md, qk, wx, sp, n, m):
 
 
 @hot
-def _theta_differences(md_, tx_, h, q1, P, tw_):
+def _theta_differences(md_, tx_, asm, h, q1, P, tw_):
     """``tw.Rth`` (the rows of R and of P) and ``tw.Pth`` (the projection at fixed
     ``q_{k+1}`` and ``P``): five-point differences in each parameter of ``tw.pidx``. Leaves
     ``md.prm`` as it found it. Returns a status code."""
@@ -423,8 +423,8 @@ def _theta_differences(md_, tx_, h, q1, P, tw_):
             linear_force(md, wx, tw.qk)
             if m > 0:
                 _start_jacobian(md, tw.qk, wx, tw.pt.sp, n, m)
-            # a bool of run time: a literal would compile `assemble` once more for its type
-            st = assemble(md_, tx_, h, tw.qk, tw.pk, wxp, N < 0)
+            st = asm(erased(md_), erased(tx_), h, byref(tw.qk), byref(tw.pk), erased(wxp),
+                     N < 0)
             if st != OK:
                 break
             for k in range(Rd.shape[0]):
@@ -835,13 +835,14 @@ def _theta_pull(md_, tx_, h, tw_, q1, v1, eta, yb, zb, wb, u, lth):
 
 
 @hot
-def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
+def linearise(md_, tx_, asm, h, time, X, q1, v1, eta, P, tw_):
     """The blocks of the step's derivative (module docstring) at its converged unknowns
     ``X``, from the start ``tw.qk``, ``tw.pk`` at ``time`` = (t_k, t_{k+1}), to the end
     ``q1``, ``v1`` with the end impulse ``eta`` (m,) and ``P`` (the momentum before the
-    projection); ``tx`` the :func:`extended_tables`. Factors ``K``, ``M(q_{k+1})`` and
-    ``G M⁻¹ Gᵀ``. Returns a status code (``SINGULAR``: the Newton matrix at the solution is
-    singular, and the step has no derivative there)."""
+    projection); ``md_``, ``tx_`` pointers to the model and the :func:`extended_tables`,
+    ``asm`` the extended step's :func:`.step.assemble_function`. Factors ``K``,
+    ``M(q_{k+1})`` and ``G M⁻¹ Gᵀ``. Returns a status code (``SINGULAR``: the Newton matrix
+    at the solution is singular, and the step has no derivative there)."""
     md, tx, tw = own(md_), own(tx_), own(tw_)
     wx, pw = tw.ws, tw.pt
     n, m, s, N = _step_sizes(wx)
@@ -859,9 +860,8 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
     wx.time[1] = time[1]
     if m > 0:
         _start_jacobian(md, tw.qk, wx, tw.pt.sp, n, m)
-    # the matrix too, asked by a bool of run time: a literal would compile `assemble` once
-    # more for its type
-    st = assemble(md_, tx_, h, tw.qk, tw.pk, byref(wx), N > 0)
+    # the matrix too (N > 0: a bool of run time)
+    st = asm(erased(md_), erased(tx_), h, byref(tw.qk), byref(tw.pk), erased(byref(wx)), N > 0)
     if st != OK:
         return st
     if m > 0:
@@ -908,7 +908,7 @@ def linearise(md_, tx_, h, time, X, q1, v1, eta, P, tw_):
             if columns:
                 _theta_exact(md_, tx_, h, tw_)
         else:
-            st = _theta_differences(md_, tx_, h, q1, P, tw_)
+            st = _theta_differences(md_, tx_, asm, h, q1, P, tw_)
             if st != OK:
                 return st
     if md.flags[F_TIME] != 0:
@@ -1398,9 +1398,9 @@ def pull(md_, tx_, h, tw_, q1, v1, eta, lq, lp, lth):
 
 # ----------------------------------------------------------------------------- time loop
 #: what :func:`_differentiate` needs besides the step: pointers to the extended tables and
-#: the :class:`TangentWork` (set by :func:`run_tangent`), and the directions' samples
-#: (K, d, n)
-TangentRun = namedtuple("TangentRun", ["txp", "twp", "dQ", "dP"])
+#: the :class:`TangentWork` (set by :func:`run_tangent`), the directions' samples
+#: (K, d, n), and the extended step's :func:`.step.assemble_function`
+TangentRun = namedtuple("TangentRun", ["txp", "twp", "dQ", "dP", "asm"])
 
 
 def _differentiate(mdp, h, k, statep, wsp, infop, slot, runp):
@@ -1412,8 +1412,8 @@ def _differentiate(mdp, h, k, statep, wsp, infop, slot, runp):
     tw = own(tr.twp)
     n = state.shape[1]
     m = sizes(tw.ws)[1]
-    st = linearise(mdp, tr.txp, h, ws.time, ws.X, state[3], state[5], ws.etaJ[:m], ws.P,
-                   tr.twp)
+    st = linearise(mdp, tr.txp, tr.asm, h, ws.time, ws.X, state[3], state[5], ws.etaJ[:m],
+                   ws.P, tr.twp)
     if st == OK:
         st = push(tr.twp)
     if st != OK:
@@ -1431,20 +1431,39 @@ def _differentiate(mdp, h, k, statep, wsp, infop, slot, runp):
 
 def differentiator(md, state, ws, info, tx, tw, dQ, sized=False):
     """:func:`_differentiate` compiled as the per-step hook of :func:`.drive.run`
-    (:func:`.drive.step_hook`) for these argument types: what :func:`run_tangent` passes.
+    (:func:`.drive.step_hook`) for these argument types, and the extended step's
+    :func:`.step.assemble_function` it calls: ``(each, asm)``, what :func:`run_tangent`
+    takes.
 
-    ``sized``: ``True`` compiles it for the model's sizes (:func:`sized_twin`),
-    ``"cached"`` takes that one if it is compiled already, ``False`` (or a structured
-    model) the generic one. Both take the same generic ``tw``."""
+    ``sized``: ``True`` compiles both for the model's sizes (:func:`sized_twin`),
+    ``"cached"`` takes the sized ones if they are compiled already, ``False`` (or a
+    structured model) the generic ones. All take the same generic ``tw``."""
+    twin = sized_entry(_hook, (md, state, ws, info, tx, tw, dQ), md, tx, tw, sized)
+    return twin or (_hook(md, state, ws, info, tx, tw, dQ, True),
+                    assemble_function(md, tx, tw.ws))
+
+
+def _hook(md, state, ws, info, tx, t, dQ, compile):
     P, typeof = types.CPointer, numba.typeof
+    return step_hook(_differentiate, md, state, ws, info, (tx, t, dQ),
+                     lambda: types.NamedTuple([P(typeof(tx)), P(typeof(t)), typeof(dQ),
+                                               typeof(dQ), ASSEMBLE_TYPE], TangentRun), compile)
 
-    def hook(t, compile):
-        return step_hook(_differentiate, md, state, ws, info, (tx, t, dQ),
-                         lambda: types.NamedTuple([P(typeof(tx)), P(typeof(t)), typeof(dQ),
-                                                   typeof(dQ)], TangentRun), compile)
 
-    twin = hook(sized_twin(tw), sized is True) if sized and tw.ws.structured is None else None
-    return twin or hook(tw, True)
+#: how the hooks' records hold :func:`.step.assemble_function`
+ASSEMBLE_TYPE = types.FunctionType(ASSEMBLE_SIGNATURE)
+
+
+def sized_entry(entry, args, md, tx, tw, sized):
+    """``(entry(*args with tw sized, compile), assemble sized)`` for a small model asked
+    ``sized`` (True: compiled now; "cached": only if the entry is compiled already), else
+    None."""
+    if not sized or tw.ws.structured is not None:
+        return None
+    twin = sized_twin(tw)
+    args = tuple(twin if a is tw else a for a in args)
+    fn = entry(*args, sized is True)
+    return None if fn is None else (fn, assemble_function(md, tx, twin.ws))
 
 
 def sized_twin(tw):
@@ -1459,9 +1478,9 @@ def sized_twin(tw):
 
 @hot
 def run_tangent(md, tabs, tx, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, sout,
-                ev, stepk, stages, tw, dQ, dPs, each):
+                ev, stepk, stages, tw, dQ, dPs, each, asm):
     """:func:`.drive.run` with each step differentiated after it by ``each``
-    (:func:`differentiator`): the samples of the trajectory into ``smp`` (the same steps as
+    (:func:`differentiator`, with its ``asm``): the samples of the trajectory into ``smp`` (the same steps as
     ``integrate``'s, bit for bit), and the directions at each sample into ``dQ``, ``dPs``
     (K, d, n). At most ``n_chunk`` steps a call, as ``run``: a call continues where the last
     one stopped (a progress display between them). Returns a status code;
@@ -1470,7 +1489,8 @@ def run_tangent(md, tabs, tx, opts, h, state, ws, n_chunk, n_total, save_every, 
         tw.qk[a] = state[0, a]
         tw.pk[a] = state[1, a]
     return run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, sout, ev,
-               stepk, stages, None, each, erased(byref(TangentRun(byref(tx), byref(tw), dQ, dPs))))
+               stepk, stages, None, each,
+               erased(byref(TangentRun(byref(tx), byref(tw), dQ, dPs, asm))))
 
 
 @njit
@@ -1496,11 +1516,11 @@ def _started(tw, dq, dp, th):
 #: :func:`index_maps`, the parameters differentiated ``pidx``, the model's
 #: :class:`Sparsity` ``sp`` and derivatives by θ ``pd``, the initial tangent states
 #: ``DQ``, ``DP`` (N, d, n) and parameter parts ``TH`` (N, d, np), the directions' samples
-#: ``dQ``, ``dP`` (N, K, d, n), and the :func:`differentiator` ``each``
+#: ``dQ``, ``dP`` (N, K, d, n), and the :func:`differentiator`'s ``each`` and ``asm``
 Members = namedtuple("Members", [
     "fns", "flags", "Mc", "P", "tabs", "tx", "opts", "h", "dims", "si", "sb", "structured",
     "X0", "n_total", "save_every", "smp", "infos", "ev", "stepk", "stages", "rows", "cols",
-    "pidx", "sp", "pd", "DQ", "DP", "TH", "dQ", "dP", "each"])
+    "pidx", "sp", "pd", "DQ", "DP", "TH", "dQ", "dP", "each", "asm"])
 
 
 def tangent_member(i, membersp):
@@ -1527,4 +1547,4 @@ def tangent_member(i, membersp):
                   a.work[i], a.work_forces[i])
     return run_tangent(md, g.tabs, g.tx, g.opts, g.h, state, ws, g.n_total, g.n_total,
                        g.save_every, smp, g.infos[i], np.zeros(STEP_OUT_SIZE), g.ev, g.stepk,
-                       g.stages, tw, g.dQ[i], g.dP[i], g.each)
+                       g.stages, tw, g.dQ[i], g.dP[i], g.each, g.asm)

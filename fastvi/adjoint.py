@@ -233,7 +233,7 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     Lq, Lp, direct = _cotangents(run, result, cotangent, pidx)
     tw = disc.tangent_work(run, 0, pidx)  # no forward directions: pull contracts R_θ
     lq, lp, lth = np.zeros(n), np.zeros(n), np.zeros(max(len(pidx), 1))
-    back, asm = sweeper(run.model_data, run.tx, tw, rec, lth, run.sized)
+    back, lin = sweeper(run.model_data, run.tx, tw, rec, lth, run.sized)
     t_back = time.perf_counter()
     info[:] = run.info
     hi = total
@@ -243,7 +243,7 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
             status = _BACKWARD(run.model_data, run.tabs, run.tx, run.opts, run.h, run.state,
                                run.ws, total, run.every, run.smp, info, run.sout, run.ev,
                                run.stepk, run.stages, tw, ck, rec, Lq, Lp, lq, lp, lth, each,
-                               back, asm, hi, lo)
+                               back, lin, hi, lo)
         if status != 0:
             break
         hi = lo

@@ -265,7 +265,7 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     dQ = np.zeros((run.K, d, n))
     dP = np.zeros((run.K, d, n))
     dQ[0], dP[0] = dq0, dp0
-    each, asm = differentiator(run.model_data, run.state, run.ws, run.info, run.tx, tw, dQ,
+    each, lin = differentiator(run.model_data, run.state, run.ws, run.info, run.tx, tw, dQ,
                                run.sized)
     total = run.total
     bar = ProgressBar(total, label="fastvi sensitivity") if progress else None
@@ -275,7 +275,7 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
         with quiet():
             status = _RUN_TANGENT(run.model_data, run.tabs, run.tx, run.opts, run.h, run.state,
                                   run.ws, chunk, total, run.every, run.smp, run.info, run.sout,
-                                  run.ev, run.stepk, run.stages, tw, dQ, dP, each, asm)
+                                  run.ev, run.stepk, run.stages, tw, dQ, dP, each, lin)
         done = int(run.info[lay.I_STEPS])
         if bar is not None:
             bar.update(done, f"t = {run.t0 + done * run.h:.6g}", final=status != 0 or done >= total)

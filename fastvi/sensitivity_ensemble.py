@@ -234,13 +234,13 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
     md, ws, ev = first.model_data, first.ws, first.ev
     rows, cols = index_maps(n, m, meth.s, meth.J)
     # the hook for a member's argument types, which are those of a single run's
-    each, asm = differentiator(md, first.state, ws, first.info, first.tx,
+    each, lin = differentiator(md, first.state, ws, first.info, first.tx,
                                disc.tangent_work(first, d, pidx), dQ[0], first.sized)
     group = Members(md.fns, md.flags, md.Mc, KP, first.tabs, first.tx, first.opts, first.h,
                     ws.dims, ws.si, ws.sb, ws.structured, X0, first.total, first.every, smp,
                     infos, ev, first.stepk, first.stages, rows, cols,
                     np.asarray(pidx, dtype=np.int64), first.sparsity,
-                    model.param_derivative_data(), DQ, DP, TH, dQ, dP, each, asm)
+                    model.param_derivative_data(), DQ, DP, TH, dQ, dP, each, lin)
     with quiet():
         t_compile = time.perf_counter()
         member = member_function(tangent_member, group)

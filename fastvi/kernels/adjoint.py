@@ -29,8 +29,7 @@ from .._numba import byref, erased, hot, hot_inline, own
 from .._launch import _key
 from .drive import c_entry, run, step_hook
 from .layout import H_SIZE, I_FAILED, I_FIRST, I_STEPS, OK, SI_GCOL, SI_GPTR, sizes
-from .step import assemble_function
-from .tangent import ASSEMBLE_TYPE, linearise, pull, sized_entry
+from .tangent import LINEARISED_TYPE, linearise_by_address, linearised, pull, sized_entry
 
 __all__ = ["Checkpoints", "Records", "g_entries", "make_checkpoints", "make_records",
            "run_checkpointed", "run_adjoint", "recorder", "sweeper", "Sweep"]
@@ -206,8 +205,8 @@ def _record(mdp, h, k, statep, wsp, infop, slot, recp):
 
 #: what a step of the backward sweep (:func:`_sweep_step`) reads besides the model: pointers
 #: to the extended tables and the TangentWork, the records, the cotangent ``(lq, lp)`` and
-#: the parameters' gradient ``lth``, and the extended step's :func:`.step.assemble_function`
-Sweep = namedtuple("Sweep", ["txp", "twp", "rec", "lq", "lp", "lth", "asm"])
+#: the parameters' gradient ``lth``, and the :func:`.tangent.linearised` step
+Sweep = namedtuple("Sweep", ["txp", "twp", "rec", "lq", "lp", "lth", "lin"])
 
 
 def _sweep_step(mdp, h, j, sweepp):
@@ -219,8 +218,8 @@ def _sweep_step(mdp, h, j, sweepp):
     for a in range(tw.qk.shape[0]):
         tw.qk[a] = rec.qk[j, a]
         tw.pk[a] = rec.pk[j, a]
-    st = linearise(mdp, sw.txp, sw.asm, h, rec.time[j], rec.X[j], rec.q1[j], rec.v1[j],
-                   rec.eta[j, :m], rec.P[j], sw.twp)
+    st = linearise_by_address(mdp, sw.lin, sw.txp, sw.twp, h, rec.time[j], rec.X[j], rec.q1[j],
+                              rec.v1[j], rec.eta[j, :m], rec.P[j])
     if st == OK:
         st = pull(mdp, sw.txp, h, sw.twp, rec.q1[j], rec.v1[j], rec.eta[j, :m], sw.lq, sw.lp,
                   sw.lth)
@@ -229,12 +228,12 @@ def _sweep_step(mdp, h, j, sweepp):
 
 def sweeper(md, tx, tw, rec, lth, sized=False):
     """:func:`_sweep_step` compiled as a C function for these argument types, called by
-    :func:`run_adjoint` through its address, and the extended step's
-    :func:`.step.assemble_function` it calls: ``(back, asm)``. The sweep's loop is then
+    :func:`run_adjoint` through its address, and the :func:`.tangent.linearised` step it
+    calls: ``(back, lin)``. The sweep's loop is then
     compiled once for the generic and the sized linearised step (``sized`` as in
     :func:`.tangent.differentiator`)."""
     twin = sized_entry(_sweeper, (md, tx, tw, rec, lth), md, tx, tw, sized)
-    return twin or (_sweeper(md, tx, tw, rec, lth, True), assemble_function(md, tx, tw.ws))
+    return twin or (_sweeper(md, tx, tw, rec, lth, True), linearised(md, tx, tw))
 
 
 def _sweeper(md, tx, t, rec, lth, compile):
@@ -243,7 +242,7 @@ def _sweeper(md, tx, t, rec, lth, compile):
     return c_entry(key, lambda: (P(typeof(md)), types.float64, types.int64), _sweep_step,
                    lambda: types.NamedTuple([P(typeof(tx)), P(typeof(t)), typeof(rec),
                                              typeof(lth), typeof(lth), typeof(lth),
-                                             ASSEMBLE_TYPE], Sweep),
+                                             LINEARISED_TYPE], Sweep),
                    compile)
 
 
@@ -256,7 +255,7 @@ def recorder(md, state, ws, info, rec):
 
 @hot
 def run_adjoint(md, tabs, tx, opts, h, state, ws, n_total, every, smp, info, sout, ev, stepk,
-                stages, tw, ck, rec, Lq, Lp, lq, lp, lth, each, back, asm, k_hi, k_lo):
+                stages, tw, ck, rec, Lq, Lp, lq, lp, lth, each, back, lin, k_hi, k_lo):
     """The backward sweep over the steps ``k_hi − 1`` down to ``k_lo``: the cotangent
     ``(lq, lp)`` after step ``k_hi`` becomes the one at step ``k_lo`` for the sample
     cotangents ``Lq``, ``Lp`` (K, n) (at step 0: ``λ_0``), and ``lth`` (np,) gains the
@@ -264,12 +263,12 @@ def run_adjoint(md, tabs, tx, opts, h, state, ws, n_total, every, smp, info, sou
     0 in several calls, each continuing where the last one stopped, equals one call (a
     progress display between them). Each segment of ``ck`` (:func:`run_checkpointed`) is
     swept backwards with :func:`.tangent.linearise` and :func:`.tangent.pull` (by
-    ``back`` and ``asm``, the :func:`sweeper`'s): the last one from ``rec`` as the forward run left it,
+    ``back`` and ``lin``, the :func:`sweeper`'s): the last one from ``rec`` as the forward run left it,
     the others retaken into ``rec`` (by ``each``, the :func:`recorder`) from their
     checkpoints when the sweep reaches their last step.
     Returns a status code; ``info[I_FAILED]`` is the failed step."""
     mdp = byref(md)
-    sw = erased(byref(Sweep(byref(tx), byref(tw), rec, lq, lp, lth, asm)))
+    sw = erased(byref(Sweep(byref(tx), byref(tw), rec, lq, lp, lth, lin)))
     n = state.shape[1]
     C = rec.qk.shape[0]
     K = Lq.shape[0]

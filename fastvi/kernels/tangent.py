@@ -48,7 +48,8 @@ import numpy as np
 import numba
 from numba.core import types
 
-from .._numba import byref, erased, hot, hot_inline, njit, only_if, own, ptr
+from .._launch import _key
+from .._numba import CalledAs, byref, erased, hot, hot_inline, njit, only_if, own, ptr, quiet
 from .drive import run, step_hook
 from .layout import specialize as layout_specialize
 from .layout import (CHESS, CJAC, F_AUGMENT, F_CH_PATTERN, F_DIAG, F_EX_CHESS, F_EX_MJAC, F_MASSFN, F_TIME,
@@ -61,12 +62,13 @@ from .banded import (band_factor, band_ld, band_solve, band_solve_transposed, gm
                      gmg_solve)
 # inlined: with the sizes as constants (sized_twin) the factorisations and solves unroll
 from .linalg import lu_factor_small, lu_solve_small
-from .step import (ASSEMBLE_SIGNATURE, add_block, assemble_function, fd_constraint_hessian,
+from .step import (ASSEMBLE_SIGNATURE, add_block, assemble_function, cached_cfunc, fd_constraint_hessian,
                    fd_momentum_jacobian, end_momentum, jacobian_rate, linear_force, plan_spans)
 
 __all__ = ["PointWork", "TangentWork", "extended_tables", "make_point_work",
            "make_tangent_work", "point", "point_terms", "linearise", "push", "pull",
-           "lu_solve_transposed", "run_tangent", "differentiator", "sized_twin", "Members", "ASSEMBLE_TYPE", "sized_entry",
+           "lu_solve_transposed", "run_tangent", "differentiator", "sized_twin", "Members", "ASSEMBLE_TYPE", "sized_entry", "Linearised",
+           "LinearisationArgs", "linearised", "linearise_by_address", "LINEARISED_TYPE",
            "tangent_member", "point_work", "tangent_work", "index_maps", "step_band",
            "Sparsity", "make_sparsity"]
 
@@ -1399,8 +1401,53 @@ def pull(md_, tx_, h, tw_, q1, v1, eta, lq, lp, lth):
 # ----------------------------------------------------------------------------- time loop
 #: what :func:`_differentiate` needs besides the step: pointers to the extended tables and
 #: the :class:`TangentWork` (set by :func:`run_tangent`), the directions' samples
-#: (K, d, n), and the extended step's :func:`.step.assemble_function`
-TangentRun = namedtuple("TangentRun", ["txp", "twp", "dQ", "dP", "asm"])
+#: (K, d, n), and the :class:`Linearised` step
+TangentRun = namedtuple("TangentRun", ["txp", "twp", "dQ", "dP", "lin"])
+
+#: the linearised step as C functions (:func:`linearised`): ``asm``, the extended step's
+#: :func:`.step.assemble_function`, and ``step``, :func:`linearise` called as
+#: ``step(md*, h, args*)`` with a pointer to its :class:`LinearisationArgs`
+Linearised = namedtuple("Linearised", ["asm", "step"])
+
+#: the arguments of :func:`linearise` but the model and ``h``, as its C function takes them
+LinearisationArgs = namedtuple("LinearisationArgs", ["txp", "twp", "asm", "time", "X", "q1",
+                                                     "v1", "eta", "P"])
+
+
+def _linearise_entry(mdp, h, argsp):
+    a = own(argsp)
+    return linearise(mdp, a.txp, a.asm, h, a.time, a.X, a.q1, a.v1, a.eta, a.P, a.twp)
+
+
+#: how the hooks' records hold :func:`linearise` (pointers erased: one type for every step)
+LINEARISE_SIGNATURE = types.int64(types.voidptr, types.float64, types.voidptr)
+_LINEARISED: dict = {}
+
+
+def linearised(md, tx, tw):
+    """The :class:`Linearised` step for these types of model, extended tables and
+    :class:`TangentWork` (generic, or its :func:`sized_twin`), compiled once as C functions
+    (cached on disk). The time loop's hook and the adjoint's sweep call the linearised step
+    through its address: numba would otherwise optimise its code again inside each of them
+    (``docs/decisions/0028-the-linearised-step-calls-assemble-by-address.md``)."""
+    key = (_key(md), _key(tx), _key(tw))
+    if key not in _LINEARISED:
+        P, typeof = types.CPointer, numba.typeof
+        a1 = typeof(np.zeros(1))
+        args = types.NamedTuple([P(typeof(tx)), P(typeof(tw)), ASSEMBLE_TYPE, a1, a1, a1, a1, a1,
+                                 a1], LinearisationArgs)
+        sig = types.int64(P(typeof(md)), types.float64, P(args))
+        with quiet():
+            step = CalledAs(cached_cfunc(_linearise_entry, sig), LINEARISE_SIGNATURE)
+        _LINEARISED[key] = Linearised(assemble_function(md, tx, tw.ws), step)
+    return _LINEARISED[key]
+
+
+@hot_inline
+def linearise_by_address(mdp, lin, txp, twp, h, time, X, q1, v1, eta, P):
+    """:func:`linearise` through ``lin`` (:class:`Linearised`)."""
+    args = LinearisationArgs(txp, twp, lin.asm, time, X, q1, v1, eta, P)
+    return lin.step(erased(mdp), h, erased(byref(args)))
 
 
 def _differentiate(mdp, h, k, statep, wsp, infop, slot, runp):
@@ -1412,8 +1459,8 @@ def _differentiate(mdp, h, k, statep, wsp, infop, slot, runp):
     tw = own(tr.twp)
     n = state.shape[1]
     m = sizes(tw.ws)[1]
-    st = linearise(mdp, tr.txp, tr.asm, h, ws.time, ws.X, state[3], state[5], ws.etaJ[:m],
-                   ws.P, tr.twp)
+    st = linearise_by_address(mdp, tr.lin, tr.txp, tr.twp, h, ws.time, ws.X, state[3], state[5],
+                              ws.etaJ[:m], ws.P)
     if st == OK:
         st = push(tr.twp)
     if st != OK:
@@ -1431,39 +1478,41 @@ def _differentiate(mdp, h, k, statep, wsp, infop, slot, runp):
 
 def differentiator(md, state, ws, info, tx, tw, dQ, sized=False):
     """:func:`_differentiate` compiled as the per-step hook of :func:`.drive.run`
-    (:func:`.drive.step_hook`) for these argument types, and the extended step's
-    :func:`.step.assemble_function` it calls: ``(each, asm)``, what :func:`run_tangent`
-    takes.
+    (:func:`.drive.step_hook`) for these argument types, and the :func:`linearised` step it
+    calls: ``(each, lin)``, what :func:`run_tangent` takes.
 
     ``sized``: ``True`` compiles both for the model's sizes (:func:`sized_twin`),
     ``"cached"`` takes the sized ones if they are compiled already, ``False`` (or a
     structured model) the generic ones. All take the same generic ``tw``."""
     twin = sized_entry(_hook, (md, state, ws, info, tx, tw, dQ), md, tx, tw, sized)
-    return twin or (_hook(md, state, ws, info, tx, tw, dQ, True),
-                    assemble_function(md, tx, tw.ws))
+    return twin or (_hook(md, state, ws, info, tx, tw, dQ, True), linearised(md, tx, tw))
 
 
 def _hook(md, state, ws, info, tx, t, dQ, compile):
     P, typeof = types.CPointer, numba.typeof
     return step_hook(_differentiate, md, state, ws, info, (tx, t, dQ),
                      lambda: types.NamedTuple([P(typeof(tx)), P(typeof(t)), typeof(dQ),
-                                               typeof(dQ), ASSEMBLE_TYPE], TangentRun), compile)
+                                               typeof(dQ), LINEARISED_TYPE], TangentRun),
+                     compile)
 
 
-#: how the hooks' records hold :func:`.step.assemble_function`
+#: how :class:`LinearisationArgs` holds :func:`.step.assemble_function`, and the hooks'
+#: records the :class:`Linearised` step
 ASSEMBLE_TYPE = types.FunctionType(ASSEMBLE_SIGNATURE)
+LINEARISED_TYPE = types.NamedTuple([ASSEMBLE_TYPE, types.FunctionType(LINEARISE_SIGNATURE)],
+                                   Linearised)
 
 
 def sized_entry(entry, args, md, tx, tw, sized):
-    """``(entry(*args with tw sized, compile), assemble sized)`` for a small model asked
-    ``sized`` (True: compiled now; "cached": only if the entry is compiled already), else
-    None."""
+    """``(entry(*args with tw sized, compile), the linearised step sized)`` for a small model
+    asked ``sized`` (True: compiled now; "cached": only if the entry is compiled already),
+    else None."""
     if not sized or tw.ws.structured is not None:
         return None
     twin = sized_twin(tw)
     args = tuple(twin if a is tw else a for a in args)
     fn = entry(*args, sized is True)
-    return None if fn is None else (fn, assemble_function(md, tx, twin.ws))
+    return None if fn is None else (fn, linearised(md, tx, twin))
 
 
 def sized_twin(tw):
@@ -1478,9 +1527,9 @@ def sized_twin(tw):
 
 @hot
 def run_tangent(md, tabs, tx, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, sout,
-                ev, stepk, stages, tw, dQ, dPs, each, asm):
+                ev, stepk, stages, tw, dQ, dPs, each, lin):
     """:func:`.drive.run` with each step differentiated after it by ``each``
-    (:func:`differentiator`, with its ``asm``): the samples of the trajectory into ``smp`` (the same steps as
+    (:func:`differentiator`, with its ``lin``): the samples of the trajectory into ``smp`` (the same steps as
     ``integrate``'s, bit for bit), and the directions at each sample into ``dQ``, ``dPs``
     (K, d, n). At most ``n_chunk`` steps a call, as ``run``: a call continues where the last
     one stopped (a progress display between them). Returns a status code;
@@ -1490,7 +1539,7 @@ def run_tangent(md, tabs, tx, opts, h, state, ws, n_chunk, n_total, save_every, 
         tw.pk[a] = state[1, a]
     return run(md, tabs, opts, h, state, ws, n_chunk, n_total, save_every, smp, info, sout, ev,
                stepk, stages, None, each,
-               erased(byref(TangentRun(byref(tx), byref(tw), dQ, dPs, asm))))
+               erased(byref(TangentRun(byref(tx), byref(tw), dQ, dPs, lin))))
 
 
 @njit
@@ -1516,11 +1565,11 @@ def _started(tw, dq, dp, th):
 #: :func:`index_maps`, the parameters differentiated ``pidx``, the model's
 #: :class:`Sparsity` ``sp`` and derivatives by θ ``pd``, the initial tangent states
 #: ``DQ``, ``DP`` (N, d, n) and parameter parts ``TH`` (N, d, np), the directions' samples
-#: ``dQ``, ``dP`` (N, K, d, n), and the :func:`differentiator`'s ``each`` and ``asm``
+#: ``dQ``, ``dP`` (N, K, d, n), and the :func:`differentiator`'s ``each`` and ``lin``
 Members = namedtuple("Members", [
     "fns", "flags", "Mc", "P", "tabs", "tx", "opts", "h", "dims", "si", "sb", "structured",
     "X0", "n_total", "save_every", "smp", "infos", "ev", "stepk", "stages", "rows", "cols",
-    "pidx", "sp", "pd", "DQ", "DP", "TH", "dQ", "dP", "each", "asm"])
+    "pidx", "sp", "pd", "DQ", "DP", "TH", "dQ", "dP", "each", "lin"])
 
 
 def tangent_member(i, membersp):
@@ -1547,4 +1596,4 @@ def tangent_member(i, membersp):
                   a.work[i], a.work_forces[i])
     return run_tangent(md, g.tabs, g.tx, g.opts, g.h, state, ws, g.n_total, g.n_total,
                        g.save_every, smp, g.infos[i], np.zeros(STEP_OUT_SIZE), g.ev, g.stepk,
-                       g.stages, tw, g.dQ[i], g.dP[i], g.each, g.asm)
+                       g.stages, tw, g.dQ[i], g.dP[i], g.each, g.lin)

@@ -837,14 +837,21 @@ def _theta_pull(md_, tx_, h, tw_, q1, v1, eta, yb, zb, wb, u, lth):
 
 
 @hot
-def linearise(md_, tx_, asm, h, time, X, q1, v1, eta, P, tw_):
+def linearise(md_, h, argsp):
     """The blocks of the step's derivative (module docstring) at its converged unknowns
     ``X``, from the start ``tw.qk``, ``tw.pk`` at ``time`` = (t_k, t_{k+1}), to the end
     ``q1``, ``v1`` with the end impulse ``eta`` (m,) and ``P`` (the momentum before the
-    projection); ``md_``, ``tx_`` pointers to the model and the :func:`extended_tables`,
-    ``asm`` the extended step's :func:`.step.assemble_function`. Factors ``K``,
-    ``M(q_{k+1})`` and ``G M⁻¹ Gᵀ``. Returns a status code (``SINGULAR``: the Newton matrix
-    at the solution is singular, and the step has no derivative there)."""
+    projection); ``md_`` a pointer to the model, the rest in the :class:`LinearisationArgs`
+    behind ``argsp``: pointers ``txp`` to the :func:`extended_tables` and ``twp`` to the
+    :class:`TangentWork`, and ``asm`` the extended step's :func:`.step.assemble_function`.
+    Factors ``K``, ``M(q_{k+1})`` and ``G M⁻¹ Gᵀ``. Returns a status code (``SINGULAR``:
+    the Newton matrix at the solution is singular, and the step has no derivative there).
+
+    Compiled only as the C function of :func:`linearised` (its body, not a call of it:
+    numba would optimise the code once more in a wrapper)."""
+    a = own(argsp)
+    tx_, tw_, asm = a.txp, a.twp, a.asm
+    time, X, q1, v1, eta, P = a.time, a.X, a.q1, a.v1, a.eta, a.P
     md, tx, tw = own(md_), own(tx_), own(tw_)
     wx, pw = tw.ws, tw.pt
     n, m, s, N = _step_sizes(wx)
@@ -1414,11 +1421,6 @@ LinearisationArgs = namedtuple("LinearisationArgs", ["txp", "twp", "asm", "time"
                                                      "v1", "eta", "P"])
 
 
-def _linearise_entry(mdp, h, argsp):
-    a = own(argsp)
-    return linearise(mdp, a.txp, a.asm, h, a.time, a.X, a.q1, a.v1, a.eta, a.P, a.twp)
-
-
 #: how the hooks' records hold :func:`linearise` (pointers erased: one type for every step)
 LINEARISE_SIGNATURE = types.int64(types.voidptr, types.float64, types.voidptr)
 _LINEARISED: dict = {}
@@ -1438,7 +1440,7 @@ def linearised(md, tx, tw):
                                  a1], LinearisationArgs)
         sig = types.int64(P(typeof(md)), types.float64, P(args))
         with quiet():
-            step = CalledAs(cached_cfunc(_linearise_entry, sig), LINEARISE_SIGNATURE)
+            step = CalledAs(cached_cfunc(linearise.py_func, sig), LINEARISE_SIGNATURE)
         _LINEARISED[key] = Linearised(assemble_function(md, tx, tw.ws), step)
     return _LINEARISED[key]
 

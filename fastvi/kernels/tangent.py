@@ -1431,7 +1431,7 @@ def linearised(md, tx, tw):
     :class:`TangentWork` (generic, or its :func:`sized_twin`), compiled once as C functions
     (cached on disk). The time loop's hook and the adjoint's sweep call the linearised step
     through its address: numba would otherwise optimise its code again inside each of them
-    (``docs/decisions/0028-the-linearised-step-calls-assemble-by-address.md``)."""
+    (``docs/decisions/0028-the-linearised-step-and-its-assembly-by-address.md``)."""
     key = (_key(md), _key(tx), _key(tw))
     if key not in _LINEARISED:
         P, typeof = types.CPointer, numba.typeof

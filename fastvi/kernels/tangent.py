@@ -62,13 +62,15 @@ from .banded import (band_factor, band_ld, band_solve, band_solve_transposed, gm
                      gmg_solve)
 # inlined: with the sizes as constants (sized_twin) the factorisations and solves unroll
 from .linalg import lu_factor_small, lu_solve_small
-from .step import (ASSEMBLE_SIGNATURE, add_block, assemble_function, cached_cfunc, fd_constraint_hessian,
-                   fd_momentum_jacobian, end_momentum, jacobian_rate, linear_force, plan_spans)
+from .step import (ASSEMBLE_SIGNATURE, add_block, assemble_function, cached_cfunc,
+                   fd_constraint_hessian, fd_momentum_jacobian, end_momentum, jacobian_rate,
+                   linear_force, plan_spans)
 
 __all__ = ["PointWork", "TangentWork", "extended_tables", "make_point_work",
            "make_tangent_work", "point", "point_terms", "linearise", "push", "pull",
-           "lu_solve_transposed", "run_tangent", "differentiator", "sized_twin", "Members", "ASSEMBLE_TYPE", "sized_entry", "Linearised",
-           "LinearisationArgs", "linearised", "linearise_by_address", "LINEARISED_TYPE",
+           "lu_solve_transposed", "run_tangent", "differentiator", "sized_twin", "Members",
+           "ASSEMBLE_TYPE", "sized_entry", "Linearised", "LinearisationArgs", "linearised",
+           "linearise_by_address", "LINEARISED_TYPE",
            "tangent_member", "point_work", "tangent_work", "index_maps", "step_band",
            "Sparsity", "make_sparsity"]
 

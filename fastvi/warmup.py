@@ -19,6 +19,8 @@ double pendulum, the step's stages compiled for its sizes (which the default,
 sensitivity,adjoint,sensitivity-ensemble`` compiles (or times) the derivatives of the flow:
 ``sensitivity`` of the damped double pendulum by its initial state and parameters (the
 full Newton included), ``adjoint`` of it, and ``sensitivity_ensemble`` of 4 members;
+``sensitivity-state`` the default ``sensitivity``, by the initial state alone (no part by
+the parameters compiled);
 ``sensitivity-sized`` and ``adjoint-sized`` the same two with ``specialize=True``, the
 linearised step compiled for the model's sizes.
 """
@@ -111,6 +113,13 @@ def _sensitivity(specialize=None):
                               specialize=specialize)
 
 
+def _sensitivity_by_the_state():
+    import fastvi
+
+    model, q0, v0 = _damped()
+    return fastvi.sensitivity(model, q0, v0, h=0.01, n_steps=10)
+
+
 def _adjoint(specialize=None):
     import fastvi
 
@@ -134,6 +143,7 @@ FIRST_CALLS = {
     "events+dense": _events,
     "ensemble": _ensemble,
     "specialize": _specialized,
+    "sensitivity-state": _sensitivity_by_the_state,
     "sensitivity": _sensitivity,
     "adjoint": _adjoint,
     "sensitivity-ensemble": _sensitivity_ensemble,

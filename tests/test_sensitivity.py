@@ -276,6 +276,34 @@ def test_the_models_derivatives_by_theta_agree_with_differences_of_the_step():
         assert np.abs(x - y).max() < 1e-11 * np.abs(y).max()
 
 
+def test_a_run_compiles_only_the_parts_by_the_parameters_it_differentiates(monkeypatch):
+    """A run by the initial state alone compiles no part by θ; one by θ compiles the model's
+    derivatives (forward), their contraction (adjoint) or the differences of the step (a
+    model without them), each beside the others for the same step: the columns by θ of a
+    run after one by the state alone are still right."""
+    from fastvi.kernels import tangent
+
+    monkeypatch.setattr(tangent, "_THETA", {})  # what the runs below compile
+    exact = fastvi.scenes.double_pendulum(damping=0.3)
+    twin = models.damped_double_pendulum_by_differences(0.3)
+    q0, v0 = exact.initial_state(0.9, -0.4, 0.3, 1.1)
+    run = dict(h=0.02, n_steps=60)
+
+    def kinds():
+        return sorted({kind for _, kind in tangent._THETA})
+
+    fastvi.sensitivity(exact, q0, v0, **run)
+    assert kinds() == [tangent.THETA_NONE]
+    a = fastvi.sensitivity(exact, q0, v0, wrt=("params",), **run)
+    assert kinds() == [tangent.THETA_NONE, tangent.THETA_BY_MODEL]
+    fastvi.adjoint(exact, q0, v0, lambda r: (np.ones((len(r.t), exact.n)), None), **run)
+    assert kinds() == [tangent.THETA_NONE, tangent.THETA_BY_MODEL, tangent.THETA_PULL_BY_MODEL]
+    b = fastvi.sensitivity(twin, q0, v0, wrt=("params",), **run)
+    assert tangent.THETA_BY_DIFFERENCES in kinds()
+    assert np.abs(b.dq).max() > 0.1
+    assert np.abs(a.dq - b.dq).max() < 1e-11 * np.abs(b.dq).max()
+
+
 @pytest.mark.parametrize("which", ["spring", "bead"])
 def test_adjoint_by_theta_from_the_models_derivatives_equals_the_forward_derivative(which):
     spring, bead, xb = _symbolic()  # M(q, θ) and ∂T/∂q; g and G by θ

@@ -29,7 +29,7 @@ from .._numba import byref, erased, hot, hot_inline, own
 from .._launch import _key
 from .drive import c_entry, run, step_hook
 from .layout import H_SIZE, I_FAILED, I_FIRST, I_STEPS, OK, SI_GCOL, SI_GPTR, sizes
-from .tangent import LINEARISED_TYPE, linearise_by_address, linearised, pull, sized_entry
+from .tangent import LINEARISED_TYPE, linearisation_args, linearised, pull, sized_entry
 
 __all__ = ["Checkpoints", "Records", "g_entries", "make_checkpoints", "make_records",
            "run_checkpointed", "run_adjoint", "recorder", "sweeper", "Sweep"]
@@ -218,11 +218,11 @@ def _sweep_step(mdp, h, j, sweepp):
     for a in range(tw.qk.shape[0]):
         tw.qk[a] = rec.qk[j, a]
         tw.pk[a] = rec.pk[j, a]
-    st = linearise_by_address(mdp, sw.lin, sw.txp, sw.twp, h, rec.time[j], rec.X[j], rec.q1[j],
-                              rec.v1[j], rec.eta[j, :m], rec.P[j])
+    argsp = byref(linearisation_args(sw.lin, sw.txp, sw.twp, rec.time[j], rec.X[j], rec.q1[j],
+                                     rec.v1[j], rec.eta[j, :m], rec.P[j]))
+    st = sw.lin.step(erased(mdp), h, erased(argsp))
     if st == OK:
-        st = pull(mdp, sw.txp, h, sw.twp, rec.q1[j], rec.v1[j], rec.eta[j, :m], sw.lq, sw.lp,
-                  sw.lth)
+        st = pull(mdp, h, argsp, sw.lq, sw.lp, sw.lth)
     return st
 
 

@@ -33,7 +33,9 @@ values at its points, so ``R_θ`` is the same sums of their derivatives
 (:func:`_theta_exact`, and :func:`_theta_pull` for the adjoint, which contracts them with
 its cotangent instead). Otherwise they are five-point differences in ``θ`` (the kernels'
 rule for differences in time, ``layout.FD_T``) of the extended residual and of the
-projection (:func:`_theta_differences`).
+projection (:func:`_theta_differences`). The step reaches these parts through a C function
+compiled for what the run differentiates (:func:`theta_kind`): a run by the initial state
+alone compiles none of them.
 
 :func:`linearise` computes and factors these blocks once a step; :func:`push` applies the
 step's derivative to any number of directions (one solve each), :func:`pull` its transpose
@@ -70,7 +72,8 @@ __all__ = ["PointWork", "TangentWork", "extended_tables", "make_point_work",
            "make_tangent_work", "point", "point_terms", "linearise", "push", "pull",
            "lu_solve_transposed", "run_tangent", "differentiator", "sized_twin", "Members",
            "ASSEMBLE_TYPE", "sized_entry", "Linearised", "LinearisationArgs", "linearised",
-           "linearise_by_address", "LINEARISED_TYPE",
+           "linearise_by_address", "linearisation_args", "LINEARISED_TYPE", "THETA_TYPE",
+           "theta_kind",
            "tangent_member", "point_work", "tangent_work", "index_maps", "step_band",
            "Sparsity", "make_sparsity"]
 
@@ -846,13 +849,14 @@ def linearise(md_, h, argsp):
     projection); ``md_`` a pointer to the model, the rest in the :class:`LinearisationArgs`
     behind ``argsp``: pointers ``txp`` to the :func:`extended_tables` and ``twp`` to the
     :class:`TangentWork`, and ``asm`` the extended step's :func:`.step.assemble_function`.
-    Factors ``K``, ``M(q_{k+1})`` and ``G M⁻¹ Gᵀ``. Returns a status code (``SINGULAR``:
+    The parts by the parameters are the C function ``theta`` of the arguments
+    (:func:`linearised`). Factors ``K``, ``M(q_{k+1})`` and ``G M⁻¹ Gᵀ``. Returns a status code (``SINGULAR``:
     the Newton matrix at the solution is singular, and the step has no derivative there).
 
     Compiled only as the C function of :func:`linearised` (its body, not a call of it:
     numba would optimise the code once more in a wrapper)."""
     a = own(argsp)
-    tx_, tw_, asm = a.txp, a.twp, a.asm
+    tx_, tw_, asm, theta = a.txp, a.twp, a.asm, a.theta
     time, X, q1, v1, eta, P = a.time, a.X, a.q1, a.v1, a.eta, a.P
     md, tx, tw = own(md_), own(tx_), own(tw_)
     wx, pw = tw.ws, tw.pt
@@ -910,26 +914,19 @@ def linearise(md_, h, argsp):
             return SINGULAR
     elif lu_factor_small(K, tw.piv, N) != 0:
         return SINGULAR
-    exact = _exact_in_theta(md, tw)
-    # the forward directions' columns of R_θ; the adjoint (no directions) contracts them in
-    # pull (_theta_pull)
-    columns = tw.pidx.shape[0] > 0 and tw.dq.shape[0] > 0
-    if tw.pidx.shape[0] > 0:
-        if exact:
-            if columns:
-                _theta_exact(md_, tx_, h, tw_)
-        else:
-            st = _theta_differences(md_, tx_, asm, h, q1, P, tw_)
-            if st != OK:
-                return st
+    by_theta = tw.pidx.shape[0] > 0
+    if by_theta:  # (the last argument is read by THETA_PULL only)
+        st = theta(erased(md_), h, erased(argsp), THETA_COLUMNS, erased(byref(P)))
+        if st != OK:
+            return st
     if md.flags[F_TIME] != 0:
         md.prm[md.flags[F_TSLOT]] = time[1]  # the projection's time, as the step had it
     point(md_, q1, v1, eta, byref(pw))
     if m > 0 and pw.sp.gsta.shape[0] > 0:
         _grouped_hv(wx, md, q1, v1, pw, n, m)
     st = _factor_projection(md, tw, wx, pw, sp, n, m)
-    if st == OK and exact and columns:
-        _theta_projection(md_, tw_, q1, v1, eta)
+    if st == OK and by_theta:
+        st = theta(erased(md_), h, erased(argsp), THETA_PROJECTION, erased(byref(P)))
     return st
 
 
@@ -1309,14 +1306,15 @@ def push(tw_):
 
 
 @hot
-def pull(md_, tx_, h, tw_, q1, v1, eta, lq, lp, lth):
+def pull(md_, h, argsp, lq, lp, lth):
     """The transpose of :func:`push`: the cotangent ``(lq, lp)`` at ``t_{k+1}`` becomes the
     one at ``t_k`` (in place), and ``lth`` (np,) gains the parameters' part
     (``lth += (∂x_{k+1}/∂θ)ᵀ λ_{k+1}``): from the model's derivatives by θ
-    (:func:`_theta_pull`, at the step :func:`linearise` was given: ``q1``, ``v1``, ``eta``),
-    or from the differences ``R_θ``, ``P_θ`` that :func:`linearise` made. One transposed
-    solve with ``K``. Returns a status code."""
-    tw = own(tw_)
+    (:func:`_theta_pull`, through the arguments' ``theta``, at the step :func:`linearise`
+    was given by the same :class:`LinearisationArgs` ``argsp``), or from the differences
+    ``R_θ``, ``P_θ`` that :func:`linearise` made. One transposed solve with ``K``. Returns
+    a status code."""
+    tw = own(own(argsp).twp)
     pw = tw.pt
     n, m, s, N = _step_sizes(tw.ws)
     sn = s * n
@@ -1391,7 +1389,7 @@ def pull(md_, tx_, h, tw_, q1, v1, eta, lq, lp, lth):
                 acc += Tq[i, b] * yb[i]
             lq[b] = acc
     if exact and tw.pidx.shape[0] > 0:
-        _theta_pull(md_, tx_, h, tw_, q1, v1, eta, yb, zb, wb, u, lth)
+        own(argsp).theta(erased(md_), h, erased(argsp), THETA_PULL, erased(byref(lth)))
     for a in range(n):
         lp[a] = yb[a]
     for l in range(npar):
@@ -1414,18 +1412,85 @@ def pull(md_, tx_, h, tw_, q1, v1, eta, lq, lp, lth):
 TangentRun = namedtuple("TangentRun", ["txp", "twp", "dQ", "dP", "lin"])
 
 #: the linearised step as C functions (:func:`linearised`): ``asm``, the extended step's
-#: :func:`.step.assemble_function`, and ``step``, :func:`linearise` called as
-#: ``step(md*, h, args*)`` with a pointer to its :class:`LinearisationArgs`
-Linearised = namedtuple("Linearised", ["asm", "step"])
+#: :func:`.step.assemble_function`, ``theta``, its parts by the parameters (of
+#: :data:`THETA_SIGNATURE`, compiled for what the run differentiates), and ``step``,
+#: :func:`linearise` called as ``step(md*, h, args*)`` with a pointer to its
+#: :class:`LinearisationArgs`
+Linearised = namedtuple("Linearised", ["asm", "theta", "step"])
 
-#: the arguments of :func:`linearise` but the model and ``h``, as its C function takes them
-LinearisationArgs = namedtuple("LinearisationArgs", ["txp", "twp", "asm", "time", "X", "q1",
-                                                     "v1", "eta", "P"])
+#: the arguments of :func:`linearise` (and :func:`pull`) but the model and ``h``, as their
+#: C functions take them: pointers to the extended tables and the :class:`TangentWork`, the
+#: :class:`Linearised` step's ``asm`` and ``theta``, then the step's ``time`` = (t_k,
+#: t_{k+1}), converged unknowns ``X``, end ``q1``, ``v1``, end impulse ``eta`` and ``P``
+LinearisationArgs = namedtuple("LinearisationArgs", ["txp", "twp", "asm", "theta", "time", "X",
+                                                     "q1", "v1", "eta", "P"])
+
+#: the parts of the linearised step by the parameters, each a call of the ``theta`` of
+#: :class:`Linearised`: the columns of ``R_θ`` (before the projection is factored), the
+#: projection's ``P_θ`` (after), and the adjoint's contraction in :func:`pull`
+THETA_COLUMNS, THETA_PROJECTION, THETA_PULL = 0, 1, 2
+#: ``theta(md*, h, args*, part, lth*)``: ``lth`` the adjoint's (np,) gradient by θ, read by
+#: ``THETA_PULL`` only
+THETA_SIGNATURE = types.int64(types.voidptr, types.float64, types.voidptr, types.int64,
+                              types.voidptr)
+
+
+def _theta_none(md_, h, argsp, part, lthp):
+    """``theta`` of a run that differentiates by no parameter (never called: the step calls it
+    only for ``tw.pidx`` not empty)."""
+    return OK
+
+
+def _theta_by_model(md_, h, argsp, part, lthp):
+    """``theta`` of forward directions by the model's derivatives by θ."""
+    a = own(argsp)
+    if part == THETA_COLUMNS:
+        _theta_exact(md_, a.txp, h, a.twp)
+    elif part == THETA_PROJECTION:
+        _theta_projection(md_, a.twp, a.q1, a.v1, a.eta)
+    return OK
+
+
+def _theta_pull_by_model(md_, h, argsp, part, lthp):
+    """``theta`` of the adjoint by the model's derivatives by θ: contracted in :func:`pull`,
+    never formed."""
+    if part != THETA_PULL:
+        return OK
+    a = own(argsp)
+    tw = own(a.twp)
+    _theta_pull(md_, a.txp, h, a.twp, a.q1, a.v1, a.eta, tw.yb, tw.zb, tw.wb, tw.u, own(lthp))
+    return OK
+
+
+def _theta_by_differences(md_, h, argsp, part, lthp):
+    """``theta`` by differences in θ (a model without exact derivatives by θ): the columns
+    of ``R_θ`` and ``P_θ`` at once, which :func:`push` and :func:`pull` read."""
+    if part != THETA_COLUMNS:
+        return OK
+    a = own(argsp)
+    return _theta_differences(md_, a.txp, a.asm, h, a.q1, a.P, a.twp)
+
+
+#: what a run differentiates by θ (:func:`theta_kind`), and the ``theta`` compiled for it
+THETA_NONE, THETA_BY_MODEL, THETA_PULL_BY_MODEL, THETA_BY_DIFFERENCES = range(4)
+_THETA_BODIES = (_theta_none, _theta_by_model, _theta_pull_by_model, _theta_by_differences)
+
+
+def theta_kind(md, tw):
+    """How the linearised step of ``tw`` differentiates by the parameters: not at all
+    (``tw.pidx`` empty), by the model's derivatives by θ for forward directions or for the
+    adjoint (``tw`` without directions), or by differences in θ."""
+    if tw.pidx.shape[0] == 0:
+        return THETA_NONE
+    if not _exact_in_theta.py_func(md, tw):
+        return THETA_BY_DIFFERENCES
+    return THETA_BY_MODEL if tw.dq.shape[0] > 0 else THETA_PULL_BY_MODEL
 
 
 #: how the hooks' records hold :func:`linearise` (pointers erased: one type for every step)
 LINEARISE_SIGNATURE = types.int64(types.voidptr, types.float64, types.voidptr)
 _LINEARISED: dict = {}
+_THETA: dict = {}
 
 
 def linearised(md, tx, tw):
@@ -1433,24 +1498,42 @@ def linearised(md, tx, tw):
     :class:`TangentWork` (generic, or its :func:`sized_twin`), compiled once as C functions
     (cached on disk). The time loop's hook and the adjoint's sweep call the linearised step
     through its address: numba would otherwise optimise its code again inside each of them
-    (``docs/decisions/0028-the-linearised-step-and-its-assembly-by-address.md``)."""
+    (``docs/decisions/0028-the-linearised-step-and-its-assembly-by-address.md``).
+
+    Its parts by the parameters are compiled only for what ``tw`` differentiates
+    (:func:`theta_kind`): a run by the initial state alone compiles none of them
+    (``docs/decisions/0029-the-parts-by-the-parameters-compiled-on-need.md``)."""
     key = (_key(md), _key(tx), _key(tw))
-    if key not in _LINEARISED:
+    kind = theta_kind(md, tw)
+    if key not in _LINEARISED or (key, kind) not in _THETA:
         P, typeof = types.CPointer, numba.typeof
         a1 = typeof(np.zeros(1))
-        args = types.NamedTuple([P(typeof(tx)), P(typeof(tw)), ASSEMBLE_TYPE, a1, a1, a1, a1, a1,
-                                 a1], LinearisationArgs)
-        sig = types.int64(P(typeof(md)), types.float64, P(args))
+        args = P(types.NamedTuple([P(typeof(tx)), P(typeof(tw)), ASSEMBLE_TYPE, THETA_TYPE, a1,
+                                   a1, a1, a1, a1, a1], LinearisationArgs))
+        mdp, f64, i64 = P(typeof(md)), types.float64, types.int64
         with quiet():
-            step = CalledAs(cached_cfunc(linearise.py_func, sig), LINEARISE_SIGNATURE)
-        _LINEARISED[key] = Linearised(assemble_function(md, tx, tw.ws), step)
-    return _LINEARISED[key]
+            if key not in _LINEARISED:
+                _LINEARISED[key] = (assemble_function(md, tx, tw.ws), CalledAs(
+                    cached_cfunc(linearise.py_func, i64(mdp, f64, args)), LINEARISE_SIGNATURE))
+            if (key, kind) not in _THETA:
+                sig = (THETA_SIGNATURE if kind == THETA_NONE
+                       else i64(mdp, f64, args, i64, P(a1)))
+                _THETA[key, kind] = CalledAs(cached_cfunc(_THETA_BODIES[kind], sig),
+                                             THETA_SIGNATURE)
+    asm, step = _LINEARISED[key]
+    return Linearised(asm, _THETA[key, kind], step)
+
+
+@hot_inline
+def linearisation_args(lin, txp, twp, time, X, q1, v1, eta, P):
+    """The :class:`LinearisationArgs` of a step through ``lin`` (:class:`Linearised`)."""
+    return LinearisationArgs(txp, twp, lin.asm, lin.theta, time, X, q1, v1, eta, P)
 
 
 @hot_inline
 def linearise_by_address(mdp, lin, txp, twp, h, time, X, q1, v1, eta, P):
     """:func:`linearise` through ``lin`` (:class:`Linearised`)."""
-    args = LinearisationArgs(txp, twp, lin.asm, time, X, q1, v1, eta, P)
+    args = linearisation_args(lin, txp, twp, time, X, q1, v1, eta, P)
     return lin.step(erased(mdp), h, erased(byref(args)))
 
 
@@ -1503,8 +1586,9 @@ def _hook(md, state, ws, info, tx, t, dQ, compile):
 #: how :class:`LinearisationArgs` holds :func:`.step.assemble_function`, and the hooks'
 #: records the :class:`Linearised` step
 ASSEMBLE_TYPE = types.FunctionType(ASSEMBLE_SIGNATURE)
-LINEARISED_TYPE = types.NamedTuple([ASSEMBLE_TYPE, types.FunctionType(LINEARISE_SIGNATURE)],
-                                   Linearised)
+THETA_TYPE = types.FunctionType(THETA_SIGNATURE)
+LINEARISED_TYPE = types.NamedTuple([ASSEMBLE_TYPE, THETA_TYPE,
+                                    types.FunctionType(LINEARISE_SIGNATURE)], Linearised)
 
 
 def sized_entry(entry, args, md, tx, tw, sized):

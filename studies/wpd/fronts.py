@@ -135,7 +135,8 @@ def step_costs(points, T) -> dict:
 
 def front_at(points, E, bound: bool = True):
     """(CPU time, steps) to reach max|ΔH| = E on these runs' Pareto front in (max|ΔH|, CPU),
-    each interpolated log–log between the two front runs around E.
+    each interpolated log–log between the two front runs around E (steps NaN where a run
+    did not count them).
 
     With ``bound``, at an E looser than the whole front where a run of the set is that
     loose but costs more than the front's cheapest run (so the front dropped it: a longer
@@ -152,8 +153,10 @@ def front_at(points, E, bound: bool = True):
     steps = np.array([work[(e, c)] for e, c in zip(errs, cpus)], float)
     le = np.log(errs[::-1])  # increasing error
     x = np.log(E)
-    return (float(np.exp(np.interp(x, le, np.log(cpus[::-1])))),
-            float(np.exp(np.interp(x, le, np.log(steps[::-1])))))
+    cpu = float(np.exp(np.interp(x, le, np.log(cpus[::-1]))))
+    if not (steps > 0).all():  # runs that did not count their steps
+        return cpu, np.nan
+    return cpu, float(np.exp(np.interp(x, le, np.log(steps[::-1]))))
 
 
 def peer_split(points, T, rival, levels=PEER_LEVELS):

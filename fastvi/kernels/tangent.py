@@ -850,8 +850,9 @@ def linearise(md_, h, argsp):
     behind ``argsp``: pointers ``txp`` to the :func:`extended_tables` and ``twp`` to the
     :class:`TangentWork`, and ``asm`` the extended step's :func:`.step.assemble_function`.
     The parts by the parameters are the C function ``theta`` of the arguments
-    (:func:`linearised`). Factors ``K``, ``M(q_{k+1})`` and ``G M⁻¹ Gᵀ``. Returns a status code (``SINGULAR``:
-    the Newton matrix at the solution is singular, and the step has no derivative there).
+    (:func:`linearised`). Factors ``K``, ``M(q_{k+1})`` and ``G M⁻¹ Gᵀ``. Returns a status
+    code (``SINGULAR``: the Newton matrix at the solution is singular, and the step has no
+    derivative there).
 
     Compiled only as the C function of :func:`linearised` (its body, not a call of it:
     numba would optimise the code once more in a wrapper)."""

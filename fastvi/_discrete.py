@@ -29,7 +29,7 @@ from .results import Result
 from .status import Status
 from .tables import Method
 
-__all__ = ["Run", "refuse", "prepare", "checked_model", "directions", "param_indices", "tangent_work",
+__all__ = ["Run", "refuse", "prepare", "with_full_newton", "checked_model", "directions", "param_indices", "tangent_work",
            "initial_tangent", "theta_derivative", "velocity_derivatives", "finish"]
 
 
@@ -68,6 +68,8 @@ class Run:
     #: whether the linearised step is compiled for the model's sizes (``structure.sizing``:
     #: True, "cached" or False)
     sized: object
+    #: the same for the step's stages
+    step_sized: object
 
 
 #: options of :func:`fastvi.integrate` that the derivatives of the discrete flow do not take,
@@ -97,10 +99,14 @@ def refuse(options: dict, what: str) -> None:
 
 
 def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every, tol, max_iter,
-            newton, params, solver, check, monitor, what, specialize=None) -> Run:
+            newton, params, solver, check, monitor, what, specialize=None, full=False) -> Run:
     """Validate the arguments of a run of the linearised flow (as :func:`fastvi.integrate`
     does, and refusing what ``what`` — the caller's name — does not differentiate) and
-    allocate its kernels' arguments."""
+    allocate its kernels' arguments.
+
+    ``full``: the step's full Newton compiled now (a driver that cannot stop for it);
+    else the caller compiles it on a step's first need (:func:`with_full_newton`), as
+    :func:`fastvi.integrate` does."""
     started = time.perf_counter()
     n = checked_model(model).n
     if model.mass_singular:
@@ -145,8 +151,8 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
     specialize = valid.optional_flag(specialize, "specialize")
     # the stages compiled for the model's sizes when integrate has compiled them: the same
     # steps bit for bit, at half the cost
-    stepk, stages = step_kernel(md, tabs, opts, ws, full=True,
-                                sized=structure.sizing(specialize, n, total))
+    step_sized = structure.sizing(specialize, n, total)
+    stepk, stages = step_kernel(md, tabs, opts, ws, full=full, sized=step_sized)
     sized = False if ws.structured else structure.sizing(specialize, n, total,
                                                          structure.SIZED_TANGENT_MIN_STEPS)
     compile_time = time.perf_counter() - compile_time
@@ -158,7 +164,17 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
                extended_tables(tabs, meth.s, meth.J), ws, opts,
                events_.prepare(model, meth, None, 0), stepk, stages, state, info,
                np.zeros(lay.STEP_OUT_SIZE), smp, K, started, compile_time, check_time,
-               valid.flag(monitor, "monitor"), sparsity, sized)
+               valid.flag(monitor, "monitor"), sparsity, sized, step_sized)
+
+
+def with_full_newton(run: Run) -> None:
+    """Give ``run`` the step's full Newton, compiled now: after its time loop returned
+    ``NEEDS_FULL_NEWTON``, having kept nothing of the step it then retakes (the same steps
+    bit for bit as a run that had it from the start)."""
+    started = time.perf_counter()
+    run.stepk, run.stages = step_kernel(run.model_data, run.tabs, run.opts, run.ws, full=True,
+                                        sized=run.step_sized)
+    run.compile_time += time.perf_counter() - started
 
 
 def tangent_work(run: Run, d: int, pidx):

@@ -223,6 +223,9 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
             status = _FORWARD(run.model_data, run.tabs, run.opts, run.h, run.state, run.ws,
                               total, run.every, run.smp, run.info, run.sout, run.ev,
                               run.stepk, run.stages, ck, rec, each, stop)
+        if status == lay.NEEDS_FULL_NEWTON:  # compiled on first need; the step is retaken
+            disc.with_full_newton(run)
+            continue
         done = int(run.info[lay.I_STEPS])
         if bar is not None:
             bar.update(done, f"forward, t = {run.t0 + done * run.h:.6g}", final=status != 0)

@@ -276,6 +276,9 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
             status = _RUN_TANGENT(run.model_data, run.tabs, run.tx, run.opts, run.h, run.state,
                                   run.ws, chunk, total, run.every, run.smp, run.info, run.sout,
                                   run.ev, run.stepk, run.stages, tw, dQ, dP, each, lin)
+        if status == lay.NEEDS_FULL_NEWTON:  # compiled on first need; the step is retaken
+            disc.with_full_newton(run)
+            continue
         done = int(run.info[lay.I_STEPS])
         if bar is not None:
             bar.update(done, f"t = {run.t0 + done * run.h:.6g}", final=status != 0 or done >= total)

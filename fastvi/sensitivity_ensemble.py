@@ -210,7 +210,7 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
                          t_span=t_span, method=method, save_every=save_every, tol=tol,
                          max_iter=max_iter, newton=newton, params=P[i], solver=solver,
                          check=check, monitor=monitor, what="the sensitivity",
-                         specialize=specialize)
+                         specialize=specialize, full=True)  # members run in one compiled loop
             for i in range(N)]
     first = runs[0]
     meth, m, k = first.meth, model.m, P.shape[1]

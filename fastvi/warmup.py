@@ -17,8 +17,9 @@ The four first calls are the four kinds of kernel a session uses:
 double pendulum, the step's stages compiled for its sizes (which the default,
 ``specialize=None``, then uses for every run of a model of those sizes). ``--only
 sensitivity,adjoint,sensitivity-ensemble`` compiles (or times) the derivatives of the flow:
-``sensitivity`` of the damped double pendulum by its initial state and parameters (the
-full Newton included), ``adjoint`` of it, and ``sensitivity_ensemble`` of 4 members;
+``sensitivity`` of the damped double pendulum by its initial state and parameters,
+``adjoint`` of it, and ``sensitivity_ensemble`` of 4 members (the full Newton included,
+which the first two compile only when a step needs it, as ``integrate`` does);
 ``sensitivity-state`` the default ``sensitivity``, by the initial state alone (no part by
 the parameters compiled);
 ``sensitivity-sized`` and ``adjoint-sized`` the same two with ``specialize=True``, the

@@ -201,3 +201,37 @@ def test_the_full_newton_compiled_on_first_need_gives_the_same_run():
     assert np.array_equal(lazy.t_events[0], eager.t_events[0]) and len(eager.t_events[0]) > 0
     ts = np.linspace(0.0, float(eager.t[-1]), 37)
     assert np.array_equal(lazy.sol(ts)[0], eager.sol(ts)[0])
+
+
+@pytest.mark.parametrize("what", ["sensitivity", "adjoint"])
+def test_derivatives_compile_the_full_newton_on_first_need_with_the_same_results(
+        what, monkeypatch):
+    """``sensitivity`` and ``adjoint`` compile the full Newton when a step first needs it, as
+    ``integrate`` does: the stiff rod–slider's run retakes that step, and gives the same
+    trajectory and derivatives, bit for bit, as a run that had the stage from the start."""
+    from fastvi.kernels import step as step_kernels
+    from studies import peers
+
+    k = 1e8
+    model = fastvi.scenes.rotary_rod_slider(k=k)
+    q0, v0 = model.initial_state(0.0, peers.SLIDER_R0 + peers.slider_stretch(k))
+    kw = dict(h=0.01, n_steps=300, method="P2L-Q2G")
+    if what == "sensitivity":
+        def derive():
+            S = fastvi.sensitivity(model, q0, v0, **kw)
+            return S.result, (S.dq, S.dv, S.dp)
+    else:
+        def derive():
+            A = fastvi.adjoint(model, q0, v0, lambda r: (r.q, r.v), **kw)
+            return A.result, (A.grad_q0, A.grad_v0, A.grad_params)
+    derive()  # compiles the full Newton (lazily, if first)
+    eager, eager_d = derive()  # has it from the start
+    assert eager.stats["full_newton_steps"] > 0
+    monkeypatch.setattr(step_kernels, "_OPTIONAL", {
+        key: stage for key, stage in step_kernels._OPTIONAL.items() if key[1] != "newton_full"})
+    lazy, lazy_d = derive()
+    assert any(key[1] == "newton_full" for key in step_kernels._OPTIONAL)
+    assert lazy.stats["full_newton_steps"] == eager.stats["full_newton_steps"]
+    assert np.array_equal(lazy.q, eager.q)
+    for x, y in zip(lazy_d, eager_d):
+        assert np.abs(y).max() > 0 and np.array_equal(x, y)

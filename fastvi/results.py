@@ -218,7 +218,7 @@ class TrajectoryResult(ResultBase):
             ab = a1.twinx()
             ab.plot(self.t, self.energy_balance, lw=0.6, color="tab:red")
             ab.set_ylabel("balance H − H(t0) − W", color="tab:red")
-        _residual_panel(a2, self.t[1:], {"max|g|": self.constraint_residual[1:],
+        residual_panel(a2, self.t[1:], {"max|g|": self.constraint_residual[1:],
                                           f"max{self._velocity_label()}": self.velocity_residual[1:]})
         a2.set_xlabel("t")
         a0.set_title(f"{self.model_name}, {self._label()}, h = {self.h:g}")
@@ -689,7 +689,7 @@ def finish_figure(fig, path):
     return fig
 
 
-def _residual_panel(ax, t, series: dict) -> None:
+def residual_panel(ax, t, series: dict) -> None:
     """Log-scale residuals with exact zeros shown at the bottom edge, labelled as such."""
     nonzero = [np.asarray(y)[np.asarray(y) > 0] for y in series.values()]
     nonzero = np.concatenate(nonzero) if nonzero else np.zeros(0)

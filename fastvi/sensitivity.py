@@ -21,8 +21,9 @@ from ._launch import Launcher
 from ._numba import quiet
 from .kernels import layout as lay
 from .progress import UPDATES, ProgressBar
-from .results import (Result, ResultBase, SavedResult, matching_model, result_arrays,
-                      result_from, run_items, run_text, timing)
+from .results import (Result, ResultBase, SavedResult, finish_figure, matching_model,
+                      new_figure, residual_panel, result_arrays, result_from, run_items,
+                      run_text, timing)
 
 __all__ = ["sensitivity", "SensitivityResult", "tangent_space"]
 
@@ -135,6 +136,82 @@ class SensitivityResult(SavedResult, ResultBase):
             g[i] = np.abs(lin_g).max()
             gv[i] = np.abs(lin_h).max()
         return g, gv
+
+    def plot(self, path=None, *, directions=None):
+        r"""How each direction grows along the run, and how far it stays from the tangent
+        space of the constraints (needs matplotlib).
+
+        The first two panels draw, for each direction ``j``, the Euclidean norms
+        ``‖∂q(t_i)/∂x_j‖`` and ``‖∂p(t_i)/∂x_j‖`` on a log axis: on chaotic motion they grow
+        as ``exp(λ t)``, with ``λ`` the largest Lyapunov exponent
+        (:func:`fastvi.lyapunov_spectrum`). The third draws :meth:`tangent_residual` relative
+        to the largest entry of the derivatives at each sample, at round-off for a
+        consistent start; it needs the model and is left out for a result read by
+        :meth:`load` without ``model=``, or a model without constraints.
+
+        Parameters
+        ----------
+        path : str or path-like, optional
+            Save the figure there (PNG, PDF, … by extension), on its own canvas: the
+            process's matplotlib backend is never changed.
+        directions : sequence of int or str, optional
+            The directions to draw, by index or by label (``"q0[1]"``, ``"params[5]"``;
+            :attr:`labels`). Default: every one.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        chosen = self._chosen(directions)
+        model = self._model
+        residuals = model is not None and model.m > 0
+        fig = new_figure(path, figsize=(7, 7.5 if residuals else 5.0))
+        axes = fig.subplots(3 if residuals else 2, 1, sharex=True)
+        for ax, d, name in ((axes[0], self.dq, "q"), (axes[1], self.dp, "p")):
+            for j in chosen:
+                norm = np.linalg.norm(d[:, :, j], axis=1)
+                # an exact 0 (a direction that does not move q at the start) has no log
+                ax.semilogy(self.t, np.where(norm > 0, norm, np.nan), lw=0.8,
+                            label=self.labels[j])
+            ax.set_ylabel(f"‖∂{name}(t)/∂x‖")
+            if len(chosen) <= 12:
+                ax.legend(fontsize="small", ncol=min(len(chosen), 4), loc="upper left")
+        if residuals:
+            g, gv = self.tangent_residual()
+            # the derivatives grow as exp(λ t) on chaotic motion, and their round-off with them
+            scale = np.maximum(1.0, np.maximum(np.abs(self.dq).max(axis=(1, 2)),
+                                               np.abs(self.dp).max(axis=(1, 2))))
+            residual_panel(axes[2], self.t, {"linearised g": g / scale,
+                                             "linearised hidden": gv / scale})
+            axes[2].set_ylabel("residual / max|∂x|")
+        axes[-1].set_xlabel("t")
+        axes[0].set_title(f"{self.result.model_name}: sensitivity\n{run_text(self.result)}",
+                          fontsize="medium")
+        fig.tight_layout()
+        return finish_figure(fig, path)
+
+    def _chosen(self, directions) -> list[int]:
+        """The indices of ``directions`` (indices or labels) into :attr:`labels`."""
+        d = len(self.labels)
+        if directions is None:
+            return list(range(d))
+        if isinstance(directions, (str, int, np.integer)):
+            directions = [directions]
+        chosen = []
+        for x in directions:
+            if isinstance(x, str):
+                if x not in self.labels:
+                    raise ValueError(f"`directions`: no direction is labelled {x!r}; the "
+                                     f"labels are {self.labels}")
+                chosen.append(self.labels.index(x))
+            elif isinstance(x, (int, np.integer)) and -d <= int(x) < d:
+                chosen.append(int(x) % d)
+            else:
+                raise ValueError(f"`directions` entries must be labels or indices from {-d} to "
+                                 f"{d - 1} of the {d} directions, got {x!r}")
+        if not chosen:
+            raise ValueError("`directions` is empty: name at least one direction to draw")
+        return chosen
 
 
 def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,

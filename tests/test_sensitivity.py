@@ -606,6 +606,33 @@ def test_load_checks_the_model_against_the_run(sens, tmp_path):
         SensitivityResult.load(tmp_path / "sens.npz", model="double_pendulum-damped")
 
 
+def test_sensitivity_plot_draws_each_direction_and_the_tangent_residual(sens, tmp_path):
+    matplotlib = pytest.importorskip("matplotlib")
+    before = matplotlib.get_backend()
+    fig = sens.plot(tmp_path / "sens.png")
+    assert matplotlib.get_backend() == before
+    assert (tmp_path / "sens.png").stat().st_size > 1000
+    assert len(fig.axes) == 3  # δq, δp, the tangent residual
+    lines = fig.axes[1].get_lines()
+    assert [line.get_label() for line in lines] == sens.labels
+    j = sens.labels.index("params[5]")
+    drawn = np.asarray(lines[j].get_ydata(), dtype=float)
+    assert np.array_equal(drawn, np.linalg.norm(sens.dp[:, :, j], axis=1))
+    residual = np.concatenate([np.asarray(x.get_ydata(), float) for x in fig.axes[2].get_lines()])
+    assert np.nanmax(residual) < 1e-10
+    fig = sens.plot(tmp_path / "two.png", directions=["params[5]", 0])
+    assert [x.get_label() for x in fig.axes[0].get_lines()] == ["params[5]", sens.labels[0]]
+    sens.save(tmp_path / "sens.npz")
+    fig = SensitivityResult.load(tmp_path / "sens.npz").plot(tmp_path / "loaded.png")
+    assert len(fig.axes) == 2  # no model: no tangent residual
+    with pytest.raises(ValueError, match=r"`directions`: no direction is labelled 'q0\[9\]'"):
+        sens.plot(tmp_path / "bad.png", directions=["q0[9]"])
+    with pytest.raises(ValueError, match=r"`directions` entries .* indices from"):
+        sens.plot(tmp_path / "bad.png", directions=[len(sens.labels)])
+    with pytest.raises(ValueError, match=r"`directions` is empty"):
+        sens.plot(tmp_path / "bad.png", directions=[])
+
+
 def test_sensitivity_repr_and_summary_are_one_line(sens):
     text = repr(sens)
     assert "\n" not in text and len(text) < 200, text

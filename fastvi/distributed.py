@@ -16,8 +16,6 @@ import pickle
 import threading
 import time
 
-import numpy as np
-
 from . import ensemble as _ens
 from .ensemble import EnsembleResult
 from .model import Model

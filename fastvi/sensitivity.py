@@ -332,9 +332,8 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
                        method=method, save_every=save_every, tol=tol, max_iter=max_iter,
                        newton=newton, params=params, solver=solver, check=check,
                        monitor=monitor, what="the sensitivity", specialize=specialize)
-    n, k = model.n, run.prm.shape[0]
+    n = model.n
     dq0, dp0, pidx, dth = disc.initial_tangent(run, D, initial_state)
-    meth = run.meth
     d = D.shape[0]
     tw = disc.tangent_work(run, d, pidx)
     tw.dq[:], tw.dp[:] = dq0, dp0

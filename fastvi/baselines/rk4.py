@@ -42,7 +42,7 @@ from .._numba import hot, njit, ptr
 from ..kernels.banded import gmg_factor, gmg_solve, gt_times
 from ..kernels.layout import SI_GCOL, SI_GPTR, SI_HEADER, SI_S, SOLVE_DENSE
 from ..kernels.linalg import lu_factor, lu_solve
-from ..model import SLOTS, Model
+from ..model import Model
 from ..results import TrajectoryResult
 from ..status import MESSAGES, Status
 

@@ -54,8 +54,8 @@ from .._launch import _key
 from .._numba import CalledAs, byref, erased, hot, hot_inline, njit, only_if, own, ptr, quiet
 from .drive import run, step_hook
 from .layout import specialize as layout_specialize
-from .layout import (CHESS, CJAC, F_AUGMENT, F_CH_PATTERN, F_DIAG, F_EX_CHESS, F_EX_MJAC, F_MASSFN, F_TIME,
-                     F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SI_A,
+from .layout import (CHESS, CJAC, F_AUGMENT, F_CH_PATTERN, F_EX_CHESS, F_EX_MJAC, F_MASSFN,
+                     F_TIME, F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SI_A,
                      SI_A_KL, SI_A_KU, SI_A_PERM, SI_S, SINGULAR, SOLVE_BANDED, SOLVE_DENSE,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, P_CJAC, P_CON,
                      P_FORCE, P_KGRAD, P_MASS, P_PGRAD, ModelData, Samples, is_timed,

@@ -29,8 +29,9 @@ from .results import Result
 from .status import Status
 from .tables import Method
 
-__all__ = ["Run", "refuse", "prepare", "with_full_newton", "checked_model", "directions", "param_indices", "tangent_work",
-           "initial_tangent", "theta_derivative", "velocity_derivatives", "finish"]
+__all__ = ["Run", "refuse", "prepare", "with_full_newton", "checked_model", "directions",
+           "param_indices", "tangent_work", "initial_tangent", "theta_derivative",
+           "velocity_derivatives", "finish"]
 
 
 @dataclass

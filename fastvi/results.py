@@ -219,7 +219,7 @@ class TrajectoryResult(ResultBase):
             ab.plot(self.t, self.energy_balance, lw=0.6, color="tab:red")
             ab.set_ylabel("balance H − H(t0) − W", color="tab:red")
         residual_panel(a2, self.t[1:], {"max|g|": self.constraint_residual[1:],
-                                          f"max{self._velocity_label()}": self.velocity_residual[1:]})
+                                         f"max{self._velocity_label()}": self.velocity_residual[1:]})
         a2.set_xlabel("t")
         a0.set_title(f"{self.model_name}, {self._label()}, h = {self.h:g}")
         fig.tight_layout()

@@ -6,10 +6,18 @@ Once per model, method and parameter vector, in NumPy:
    evaluating the model at ``PATTERN_STATES`` random states (configurations, velocities,
    impulses and unknowns drawn from a normal distribution, not consistent ones: a
    structural zero does not depend on the state) and taking the union. The Newton matrix
-   is assembled by the step kernel itself, so the pattern holds exactly what the kernel
-   writes, finite-difference Hessians included (a coordinate on which a derivative does not
-   depend gives an exact zero difference). A zero that is only accidental at one random
-   state is caught by the other states (probability zero otherwise). A model may declare
+   ``∂R/∂X`` is not assembled for this: column ``k`` holds the rows of the step's residual
+   that change when the unknown ``X_k`` moves by an amount of order one
+   (:func:`fastvi.kernels.step.residual_dependence`; the residual is evaluated exactly, so
+   a row that does not depend on ``X_k`` comes out the same, bit for bit). The blocks that
+   are ``G`` itself and the constraint Hessian's are added as the kernel forms them, since
+   an entry at round-off of an analytic zero (a rotation's arithmetic leaves 1e-18) does
+   not move a residual of order one. The pattern is then exactly what the kernel's
+   assembly writes, finite-difference Hessians included (a coordinate on which a
+   derivative does not depend gives an exact zero difference), and only the residual is
+   compiled for it, not the Newton matrix (a third of a structured model's first compile).
+   A zero that is only accidental at one random state is caught by the other states
+   (probability zero otherwise). A model may declare
    the pattern of ``G`` instead (``Model(constraint_jacobian_pattern=)``, verified by
    :meth:`fastvi.Model.check`); its callback then writes only those entries. From ``G``: the
    patterns of ``G Gᵀ`` (the projection) and of the Schur complement of the mechanics
@@ -93,7 +101,7 @@ def detect_pattern(model, meth, prm=None, n_states: int = PATTERN_STATES, seed: 
     """Boolean non-zero patterns ``{"G": (m, n), "newton": (N, N)}``, the union over
     ``n_states`` random states (see the module docstring); ``G``'s is the model's
     ``constraint_jacobian_pattern`` where it declares one."""
-    from .kernels.step import assemble_at
+    from .kernels.step import residual_dependence
 
     prm = model.params if prm is None else np.ascontiguousarray(prm, dtype=np.float64)
     rng = np.random.default_rng(seed)
@@ -103,7 +111,9 @@ def detect_pattern(model, meth, prm=None, n_states: int = PATTERN_STATES, seed: 
     ws = lay.make_workspace(n, m, s, meth.r, J)
     PG = np.zeros((m, n), dtype=bool)
     PA = np.zeros((N, N), dtype=bool)
+    R0 = np.zeros(N)
     declared = model.constraint_jacobian_pattern  # checked by Model.check, taken as it is
+    exact_hessian = "constraint_hessian" in model.callbacks
     tabs = meth.kernel_tables
     for _ in range(n_states):
         q = rng.standard_normal(n)
@@ -112,13 +122,59 @@ def detect_pattern(model, meth, prm=None, n_states: int = PATTERN_STATES, seed: 
             PG |= G0 != 0.0 if declared is None else declared
             ws.G[0, :m] = G0  # G at q_k: the step kernel sets it before Newton
         ws.X[:] = 0.1 * rng.standard_normal(N)
+        p = rng.standard_normal(n)
+        # moves of order one (a normal, away from zero): far above the residual's round-off
+        dx = rng.standard_normal(N)
+        dx += np.copysign(0.5, dx)
         with quiet():
-            assemble_at(md, tabs, 0.01, q, rng.standard_normal(n), ws, True)
-        PA |= ws.A[:N, :N] != 0.0
-        if m and declared is None:
-            for j in range(J + 1):
-                PG |= ws.G[j, :m] != 0.0
+            residual_dependence(md, tabs, 0.01, q, p, ws, dx, R0, PA)
+        if m:
+            _constraint_blocks(PA, ws.G, tabs.Lc, n, m, s, J)
+            if exact_hessian:
+                _hessian_blocks(PA, model, prm, q, ws.X, meth.kernel_tables, n, m, s, J)
+            if declared is None:
+                for j in range(J + 1):
+                    PG |= ws.G[j, :m] != 0.0
     return {"G": PG, "newton": PA}
+
+
+def _constraint_blocks(PA, G, Lc, n, m, s, J):
+    """Add to ``PA`` the non-zeros of the Newton matrix's blocks that are ``G`` itself at the
+    constraint points, ``∂E_ν/∂η_j = −ℓ_ν(d_j) G_jᵀ`` and ``∂g(q(d_j))/∂ΔQ^μ = ℓ_μ(d_j) G_j``
+    (the row and column layout of :func:`fastvi.kernels.step.newton_matrix`). A residual
+    moved by a unit of an unknown does not show an entry of G at round-off (an analytic
+    zero that a rotation's arithmetic leaves at 1e-18), which the step's assembly writes."""
+    sn = s * n
+    for j in range(J + 1):
+        NZ = G[j, :m] != 0.0
+        if j < J:
+            for nu in range(s):
+                if Lc[nu, j] != 0.0:
+                    PA[nu * n:(nu + 1) * n, sn + j * m:sn + (j + 1) * m] |= NZ.T
+        if j >= 1:
+            for mu in range(1, s + 1):
+                if Lc[mu, j] != 0.0:
+                    PA[sn + (j - 1) * m:sn + j * m, (mu - 1) * n:mu * n] |= NZ
+
+
+def _hessian_blocks(PA, model, prm, qk, X, tabs, n, m, s, J):
+    """Add to ``PA`` the non-zeros of ``Σ_c η_{j,c} ∇²g_c(q(d_j))`` in the coordinate blocks
+    where the step's assembly subtracts it (``ℓ_ν(d_j) ℓ_μ(d_j) ≠ 0``), at the points and
+    impulses of the unknowns ``X`` and in the kernel's arithmetic: the model's exact
+    Hessian of a rotation's constraints leaves entries at round-off (1e-18) that the
+    residual's dependence does not show."""
+    sn = s * n
+    Lc = tabs.Lc
+    for j in range(1, J):
+        qd = qk.copy()
+        for nu in range(1, s + 1):
+            qd += Lc[nu, j] * X[(nu - 1) * n:nu * n]
+        NZ = model.callback_value("constraint_hessian", qd, X[sn + j * m:sn + (j + 1) * m],
+                                  prm, t=0.01 * tabs.d[j]) != 0.0
+        for nu in range(s):
+            for mu in range(1, s + 1):
+                if Lc[nu, j] * Lc[mu, j] != 0.0:
+                    PA[nu * n:(nu + 1) * n, (mu - 1) * n:mu * n] |= NZ
 
 
 def _ordering(P):

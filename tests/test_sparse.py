@@ -79,6 +79,49 @@ def test_detected_pattern_of_a_chain_is_its_structure():
     assert pats["newton"].sum() < 0.3 * pats["newton"].size  # sparse: measured 17 %
 
 
+def _pattern_cases():
+    from fastvi.bodies import scenes as bodies_scenes
+    yield "damped_chain12", chain(12, damping=0.3), P2
+    yield "closed_chain14", fastvi.scenes.closed_chain(14), fastvi.method("P3L-Q4G")
+    yield "tree", fastvi.scenes.tree(), P2
+    yield "kapitza_pendulum", fastvi.scenes.kapitza_pendulum(), P2  # rheonomic
+    # a rotation's exact constraint Hessian, with entries at round-off of an analytic zero
+    yield "spatial_slider_crank", bodies_scenes.spatial_slider_crank(), P2
+    yield "flyball_governor", bodies_scenes.flyball_governor(), P2  # forces
+
+
+@pytest.mark.parametrize("case", list(_pattern_cases()), ids=lambda c: c[0])
+def test_detected_pattern_is_what_the_assembled_newton_matrix_writes(case, monkeypatch):
+    """The Newton matrix's pattern is detected from the residual's dependence on each
+    unknown (and G's blocks and the constraint Hessian's, which carry round-off entries),
+    without compiling the matrix: at the states it draws it equals the non-zeros of the
+    matrix the step kernel assembles there, exactly."""
+    from fastvi.kernels import step
+
+    _, model, meth = case
+    seen = []
+    real = step.residual_dependence
+
+    def spy(md, tabs, h, qk, pk, ws, dx, R0, P):
+        seen.append((qk.copy(), pk.copy(), ws.X.copy(), ws.G[0].copy()))
+        return real(md, tabs, h, qk, pk, ws, dx, R0, P)
+
+    monkeypatch.setattr(step, "residual_dependence", spy)
+    pats = structure.detect_pattern(model, meth)
+    assert len(seen) == structure.PATTERN_STATES
+    n, m = model.n, model.m
+    N = meth.s * n + meth.J * m
+    md = model.kernel_data()
+    union = np.zeros((N, N), dtype=bool)
+    for q, p, X, G0 in seen:
+        ws = lay.make_workspace(n, m, meth.s, meth.r, meth.J)
+        ws.X[:] = X
+        ws.G[0] = G0
+        assert assemble_at(md, meth.kernel_tables, 0.01, q, p, ws, True) == lay.OK
+        union |= ws.A[:N, :N] != 0.0
+    assert np.array_equal(pats["newton"], union)
+
+
 def test_small_models_keep_the_dense_path():
     for model in (double_pendulum(), chain(3)):
         p = structure.plan(model, P2)

@@ -56,7 +56,7 @@ from .layout import specialize as layout_specialize
 from .linalg import (augmented_mass, invert, invert_unpivoted, lu_factor, lu_factor_small,
                      lu_solve, lu_solve_small)
 
-__all__ = ["make_workspace", "assemble", "assemble_at", "newton_matrix", "add_block", "plan_spans", "residual", "linear_force", "step", "step_kernel",
+__all__ = ["make_workspace", "assemble", "assemble_at", "residual_dependence", "newton_matrix", "add_block", "plan_spans", "residual", "linear_force", "step", "step_kernel",
            "take_step", "step_once", "cached_cfunc", "assemble_function", "ASSEMBLE_SIGNATURE",
            "end_momentum", "velocity_residual", "hidden_residual", "constraint_rate",
            "jacobian_rate"]
@@ -369,6 +369,36 @@ def assemble_at(md, tabs, h, qk, pk, ws, jac):
     themselves it would be typed, and compiled, a second time with its residual and Newton
     matrix (half a minute). Passing them on by pointer here reuses the kernels' compile."""
     return assemble(byref(md), byref(tabs), h, qk, pk, byref(ws), jac)
+
+
+@hot
+def residual_dependence(md, tabs, h, qk, pk, ws, dx, R0, P):
+    """``P[a, k] |= R_a`` depends on ``X_k``, at the unknowns ``ws.X``, for a caller in
+    Python (:func:`fastvi.structure.detect_pattern`): the non-zeros of the Newton matrix
+    ``∂R/∂X`` without compiling it.
+
+    Each unknown in turn is moved by ``dx[k]`` and the rows whose residual changes, bit for
+    bit, are marked. The residual is evaluated exactly, so a row that does not depend on
+    ``X_k`` comes out the same, and a change of order ``dx`` is far above round-off. A
+    callback that gives NaN or inf marks its rows too (NaN equals nothing): the pattern
+    can only grow. Ends with the residual at ``ws.X`` (``ws.G[1:]`` there) and returns
+    its status."""
+    md_, tabs_, ws_ = byref(md), byref(tabs), byref(ws)
+    n, m, s, _, J = sizes(ws)
+    N = s * n + J * m
+    X, R = ws.X, ws.R
+    residual(md_, tabs_, h, qk, pk, ws_)
+    for a in range(N):
+        R0[a] = R[a]
+    for k in range(N):
+        x = X[k]
+        X[k] = x + dx[k]
+        residual(md_, tabs_, h, qk, pk, ws_)
+        for a in range(N):
+            if R[a] != R0[a]:
+                P[a, k] = True
+        X[k] = x
+    return residual(md_, tabs_, h, qk, pk, ws_)
 
 
 @hot_inline

@@ -23,7 +23,9 @@ which the first two compile only when a step needs it, as ``integrate`` does);
 ``sensitivity-state`` the default ``sensitivity``, by the initial state alone (no part by
 the parameters compiled);
 ``sensitivity-sized`` and ``adjoint-sized`` the same two with ``specialize=True``, the
-linearised step compiled for the model's sizes.
+linearised step compiled for the model's sizes. ``--only large`` times ``integrate`` of a
+chain of 16 links (the banded and sparse solves of a large mechanism), ``--only bodies``
+that of the Bricard mechanism of rigid bodies (which also takes the full Newton).
 """
 
 from __future__ import annotations
@@ -99,6 +101,23 @@ def _specialized():
     return fastvi.integrate(model, q0, v0, h=0.01, n_steps=100, specialize=True)
 
 
+def _large():
+    import fastvi
+
+    model = fastvi.scenes.chain(16)
+    q0, v0 = model.initial_state(np.linspace(0.2, 0.9, 16))
+    return fastvi.integrate(model, q0, v0, h=0.01, n_steps=50)
+
+
+def _bodies():
+    import fastvi
+    from fastvi.bodies import scenes
+
+    model = scenes.bricard()
+    q0, v0 = model.initial_state()
+    return fastvi.integrate(model, q0, v0, h=0.02, t_end=1.0)
+
+
 def _damped():
     import fastvi
 
@@ -144,6 +163,8 @@ FIRST_CALLS = {
     "events+dense": _events,
     "ensemble": _ensemble,
     "specialize": _specialized,
+    "large": _large,
+    "bodies": _bodies,
     "sensitivity-state": _sensitivity_by_the_state,
     "sensitivity": _sensitivity,
     "adjoint": _adjoint,

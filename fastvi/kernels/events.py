@@ -22,10 +22,8 @@ grows them when :data:`EVENTS_FULL` asks for room (the state carries everything,
 changes no bit).
 """
 
-import numpy as np
-
 from .._numba import hot, hot_inline, ptr
-from .layout import EVENT_SLOTS, EVENTS_FULL, EVENT_TERMINAL, F_N, F_TSLOT
+from .layout import EVENT_TERMINAL, F_N, F_TSLOT
 
 __all__ = ["event_values", "after_step", "room_for_crossings"]
 

@@ -892,7 +892,7 @@ def newton_full(md_, tabs_, opts_, h, qk_, pk_, ws_, out_):
     ``out[S_RES]``. The loop has one call of :func:`assemble`, with the Newton matrix while
     iterating and without it for that final residual.
     """
-    md, tabs, ws = own(md_), own(tabs_), own(ws_)
+    ws = own(ws_)
     opts, qk, pk, out = own(opts_), own(qk_), own(pk_), own(out_)
     X, R, A, piv = ws.X, ws.R, ws.A, ws.piv
     n, m, s, _, J = sizes(ws)
@@ -1021,7 +1021,7 @@ def residual(md_, tabs_, h, qk, pk, ws_):
     fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
     b, L, Ld, Lc = tabs.b, tabs.L, tabs.Ld, tabs.Lc
     X, R, D, G = ws.X, ws.R, ws.D, ws.G
-    qi, vi, F, Pm, fa = ws.qi, ws.vi, ws.F, ws.Pm, ws.fa
+    qi, vi, F, Pm = ws.qi, ws.vi, ws.F, ws.Pm
     n, m, s, r, J = sizes(ws)
     has_mass = flags[F_MASSFN] != 0
     diag = flags[F_DIAG] != 0
@@ -1341,7 +1341,7 @@ def newton_mech(md_, tabs_, opts_, h, qk_, pk_, ws_, out_):
     ``P1L-Q2G`` on the double pendulum, against 5.5 with the Schur complement of the
     predictor's G(q_{k+1}) and the strict stop (docs/decisions/0001-mechanics-newton.md).
     """
-    md, tabs, ws = own(md_), own(tabs_), own(ws_)
+    md, ws = own(md_), own(ws_)
     opts, qk, pk, out = own(opts_), own(qk_), own(pk_), own(out_)
     X, R = ws.X, ws.R
     n, m, s, _, J = sizes(ws)
@@ -1447,7 +1447,7 @@ def step(md_, tabs_, opts_, h, state_, ws_, first, out_, stages_):
     """
     md, tabs, ws = own(md_), own(tabs_), own(ws_)
     opts, state, out, stages = own(opts_), own(state_), own(out_), own(stages_)
-    fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
+    fns, prm = md.fns, md.prm
     qk, pk, vk, q1, p1, v1 = state[0], state[1], state[2], state[3], state[4], state[5]
     X, R, D, G = ws.X, ws.R, ws.D, ws.G
     Lc = tabs.Lc
@@ -1586,8 +1586,8 @@ def _step_work(md_, tabs_, h, qk_, q1_, ws_, n, m, s, J, out_):
     apart, so that the total is the same sum as ever).
     """
     md, tabs, ws = own(md_), own(tabs_), own(ws_)
-    qk, q1, out = own(qk_), own(q1_), own(out_)
-    fns, flags, Mc, prm = md.fns, md.flags, md.Mc, md.prm
+    qk, out = own(qk_), own(out_)
+    fns, flags, prm = md.fns, md.flags, md.prm
     b, L, Ld, Lc = tabs.b, tabs.L, tabs.Ld, tabs.Lc
     X, qi, vi, fb = ws.X, ws.qi, ws.vi, ws.fb
     timed = flags[F_TIME] != 0

@@ -363,7 +363,7 @@ def assemble_function(md, tabs, ws):
 
 @hot
 def assemble_at(md, tabs, h, qk, pk, ws, jac):
-    """:func:`assemble` for a caller in Python (``structure.detect_pattern``, the tests).
+    """:func:`assemble` for a caller in Python (the tests, the profiles).
 
     The kernels hand ``assemble`` its tuples by pointer; called from Python with the tuples
     themselves it would be typed, and compiled, a second time with its residual and Newton

@@ -131,7 +131,7 @@ def detect_pattern(model, meth, prm=None, n_states: int = PATTERN_STATES, seed: 
         if m:
             _constraint_blocks(PA, ws.G, tabs.Lc, n, m, s, J)
             if exact_hessian:
-                _hessian_blocks(PA, model, prm, q, ws.X, meth.kernel_tables, n, m, s, J)
+                _hessian_blocks(PA, model, prm, q, ws.X, tabs, n, m, s, J)
             if declared is None:
                 for j in range(J + 1):
                     PG |= ws.G[j, :m] != 0.0

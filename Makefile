@@ -13,7 +13,9 @@ BENCH_STAMP := $(VENV)/.bench-installed
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test,plot,dask,sym]"
+	# --no-compile: pip would byte-compile every installed module (15 s of the install);
+	# Python compiles the ones a process imports when it first imports them
+	$(BIN)/python -m pip install --quiet --no-compile -e ".[test,plot,dask,sym]"
 	touch $(STAMP)
 
 $(BENCH_STAMP): $(STAMP) pyproject.toml
@@ -31,8 +33,11 @@ demo: $(STAMP)
 # runs the test files in TEST_JOBS processes (docs/benchmarks.md, "Compile and set-up time")
 TEST_JOBS ?= 2
 
+# the byte code of the modules a test process imports (fastvi's, the tests' with pytest's
+# assertions, the libraries') is kept for the next process even where the environment
+# sets PYTHONDONTWRITEBYTECODE: the suite starts many processes
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n $(TEST_JOBS) --dist loadfile
+	env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest -q -n $(TEST_JOBS) --dist loadfile
 
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow --run-slow

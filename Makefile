@@ -8,13 +8,18 @@ DOCS_STAMP := $(VENV)/.docs-installed
 # the bench extra (CyRK, the compiled peer) only for `make bench` / `make wpd`, not `make test`
 BENCH_STAMP := $(VENV)/.bench-installed
 
+# the byte code a process compiles (fastvi's modules, the tests' with pytest's assertions,
+# the libraries', which pip leaves uncompiled: see --no-compile below) is kept for the next
+# process even where the environment sets PYTHONDONTWRITEBYTECODE: the suite starts many
+unexport PYTHONDONTWRITEBYTECODE
+
 .PHONY: demo test test-slow bench paper-b orders wpd docs clean
 
+# --no-compile: pip would byte-compile every module it installs (15 s of a 25 s install);
+# Python compiles those a process imports, when it first imports them
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	# --no-compile: pip would byte-compile every installed module (15 s of the install);
-	# Python compiles the ones a process imports when it first imports them
 	$(BIN)/python -m pip install --quiet --no-compile -e ".[test,plot,dask,sym]"
 	touch $(STAMP)
 
@@ -33,11 +38,8 @@ demo: $(STAMP)
 # runs the test files in TEST_JOBS processes (docs/benchmarks.md, "Compile and set-up time")
 TEST_JOBS ?= 2
 
-# the byte code of the modules a test process imports (fastvi's, the tests' with pytest's
-# assertions, the libraries') is kept for the next process even where the environment
-# sets PYTHONDONTWRITEBYTECODE: the suite starts many processes
 test: $(STAMP)
-	env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest -q -n $(TEST_JOBS) --dist loadfile
+	$(BIN)/python -m pytest -q -n $(TEST_JOBS) --dist loadfile
 
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow --run-slow

@@ -72,6 +72,12 @@ class Run:
     #: the same for the step's stages
     step_sized: object
 
+    @property
+    def loop_ws(self):
+        """The workspace as the step and the time loops take it (:func:`.kernels.layout.loop_view`);
+        ``ws`` itself is typed with its plan, for the stages that solve."""
+        return lay.loop_view(self.ws)
+
 
 #: options of :func:`fastvi.integrate` that the derivatives of the discrete flow do not take,
 #: and why

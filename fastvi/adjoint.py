@@ -211,7 +211,7 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     ck = make_checkpoints(-(-run.total // C), n, m, N, g_size)
     rec = make_records(C, n, m, N)
     info = run.info.copy()
-    each = recorder(run.model_data, run.state, run.ws, info, rec)
+    each = recorder(run.model_data, run.state, run.loop_ws, info, rec)
     total = run.total
     # the forward run, then the sweep, in chunks of steps between two updates of the line
     bar = ProgressBar(2 * total, label="fastvi adjoint") if progress else None
@@ -220,7 +220,7 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     while True:
         stop = min(int(run.info[lay.I_STEPS]) + chunk, total)
         with quiet():
-            status = _FORWARD(run.model_data, run.tabs, run.opts, run.h, run.state, run.ws,
+            status = _FORWARD(run.model_data, run.tabs, run.opts, run.h, run.state, run.loop_ws,
                               total, run.every, run.smp, run.info, run.sout, run.ev,
                               run.stepk, run.stages, ck, rec, each, stop)
         if status == lay.NEEDS_FULL_NEWTON:  # compiled on first need; the step is retaken
@@ -244,7 +244,7 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
         lo = max(hi - chunk, 0)
         with quiet():
             status = _BACKWARD(run.model_data, run.tabs, run.tx, run.opts, run.h, run.state,
-                               run.ws, total, run.every, run.smp, info, run.sout, run.ev,
+                               run.loop_ws, total, run.every, run.smp, info, run.sout, run.ev,
                                run.stepk, run.stages, tw, ck, rec, Lq, Lp, lq, lp, lth, each,
                                back, lin, hi, lo)
         if status != 0:

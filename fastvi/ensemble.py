@@ -651,7 +651,7 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
         compile_time += time.perf_counter() - t_step
         group = drive.EnsembleMembers(
             fns, flags, Mc, KP, meth.kernel_tables, opts["newton"], h, t0, dims, plan.si,
-            plan.sb, ws.structured, X0, total, mode, every, H0, Qs, Vs, Ps, En, Gr, GVr, It, Wk,
+            plan.sb, X0, total, mode, every, H0, Qs, Vs, Ps, En, Gr, GVr, It, Wk,
             ist, fst, ev.fns, ev.count, ev.direction, ev.terminal, Te, Qe, Ve, Ne, stepk, stages)
         t_member = time.perf_counter()
         with quiet():

@@ -423,7 +423,10 @@ def integrate(
     compile_time += time.perf_counter() - t_step
     # a run without events or dense output has a time loop compiled without their code
     evk = True if ev.count or ev.dense.shape[0] else None
-    run, seconds = _RUN.bind(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout,
+    # the time loop and the step take the workspace's loop view: one compiled loop and step
+    # for small and large models (a large one's solving stages are its own: step_kernel)
+    loop = lay.loop_view(ws)
+    run, seconds = _RUN.bind(md, tabs, opts, h, state, loop, chunk, total, every, smp, info, sout,
                              ev, stepk, stages, evk)
     compile_time += seconds
     span = None if adaptive is None else float(t_end) - t0
@@ -438,7 +441,7 @@ def integrate(
         if span is not None:
             smp = _room(smp, _samples_after_chunk(int(info[lay.I_SLOT]), chunk, every))
         with quiet():
-            status = run(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout, ev,
+            status = run(md, tabs, opts, h, state, loop, chunk, total, every, smp, info, sout, ev,
                          stepk, stages, evk)
         if status == lay.NEEDS_FULL_NEWTON:  # compiled on first need; the step is retaken
             t_step = time.perf_counter()
@@ -448,7 +451,7 @@ def integrate(
             continue
         if status == lay.EVENTS_FULL:
             ev = events_.grow(ev)
-            run = _RUN.bind(md, tabs, opts, h, state, ws, chunk, total, every, smp, info, sout, ev,
+            run = _RUN.bind(md, tabs, opts, h, state, loop, chunk, total, every, smp, info, sout, ev,
                             stepk, stages, evk)[0]
             status = 0
             continue
@@ -564,7 +567,8 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
         info_sub[lay.I_FIRST] = 1
         info_sub[lay.I_T0] = info[lay.I_T0] + info[lay.I_STEPS] * h
         with quiet():
-            st = _RUN(md, tabs, opts, h / sub, trial, ws_sub, sub, sub, sub, smp_sub, info_sub,
+            st = _RUN(md, tabs, opts, h / sub, trial, lay.loop_view(ws_sub), sub, sub, sub, smp_sub,
+                      info_sub,
                       np.zeros(lay.STEP_OUT_SIZE), events_.prepare(model, meth, None, 0),
                       *step_kernel(md, tabs, opts, ws_sub, full=True, sized=sized and "cached"),
                       None)
@@ -582,7 +586,7 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
             sout[lay.S_WORK_F] = info_sub[lay.I_WORK_F]
             k = int(info[lay.I_STEPS]) + 1
             with quiet():
-                drive.accept(md, info[lay.I_T0] + k * h, k == total, state, ws_sub, every, smp,
+                drive.accept(md, info[lay.I_T0] + k * h, k == total, state, lay.loop_view(ws_sub), every, smp,
                              info, sout)
             return sub
     return 0

@@ -341,7 +341,7 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     dQ = np.zeros((run.K, d, n))
     dP = np.zeros((run.K, d, n))
     dQ[0], dP[0] = dq0, dp0
-    each, lin = differentiator(run.model_data, run.state, run.ws, run.info, run.tx, tw, dQ,
+    each, lin = differentiator(run.model_data, run.state, run.loop_ws, run.info, run.tx, tw, dQ,
                                run.sized)
     total = run.total
     bar = ProgressBar(total, label="fastvi sensitivity") if progress else None
@@ -350,7 +350,7 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     while True:
         with quiet():
             status = _RUN_TANGENT(run.model_data, run.tabs, run.tx, run.opts, run.h, run.state,
-                                  run.ws, chunk, total, run.every, run.smp, run.info, run.sout,
+                                  run.loop_ws, chunk, total, run.every, run.smp, run.info, run.sout,
                                   run.ev, run.stepk, run.stages, tw, dQ, dP, each, lin)
         if status == lay.NEEDS_FULL_NEWTON:  # compiled on first need; the step is retaken
             disc.with_full_newton(run)

@@ -234,7 +234,7 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
     md, ws, ev = first.model_data, first.ws, first.ev
     rows, cols = index_maps(n, m, meth.s, meth.J)
     # the hook for a member's argument types, which are those of a single run's
-    each, lin = differentiator(md, first.state, ws, first.info, first.tx,
+    each, lin = differentiator(md, first.state, first.loop_ws, first.info, first.tx,
                                disc.tangent_work(first, d, pidx), dQ[0], first.sized)
     group = Members(md.fns, md.flags, md.Mc, KP, first.tabs, first.tx, first.opts, first.h,
                     ws.dims, ws.si, ws.sb, ws.structured, X0, first.total, first.every, smp,

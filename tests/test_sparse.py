@@ -131,6 +131,49 @@ def test_small_models_keep_the_dense_path():
         assert not np.any(ws.si)
 
 
+def _field_offsets(ty):
+    """The byte offset of every field of the numba tuple type ``ty`` in memory, by LLVM's
+    rule for a struct that is not packed (each field at the next multiple of its alignment)."""
+    from numba.core.registry import cpu_target
+    ctx = cpu_target.target_context
+    offsets, at = [], 0
+    for t in ty.types:
+        llty = ctx.get_data_type(t)
+        align = ctx.get_abi_alignment(llty)
+        at = -(-at // align) * align
+        offsets.append(at)
+        at += ctx.get_abi_sizeof(llty)
+    return offsets
+
+
+def test_a_structured_workspace_lays_out_its_fields_as_its_loop_view():
+    # the step and the time loops are compiled for the loop view; the structured stages
+    # they call read the same memory as a structured workspace (layout.loop_view)
+    import numba
+    ws = structure.workspace(chain(16), P2)
+    assert ws.structured
+    view = lay.loop_view(ws)
+    assert view.structured is None and view.si is ws.si and view.sb is ws.sb
+    t_ws, t_view = numba.typeof(ws), numba.typeof(view)
+    assert t_ws != t_view
+    assert _field_offsets(t_ws) == _field_offsets(t_view)
+
+
+def test_a_structured_plan_steps_with_the_compiled_step_of_a_dense_one():
+    from fastvi.kernels import step as step_mod
+    model = chain(16)
+    md, tabs = model.kernel_data(), P2.kernel_tables
+    opts = lay.NewtonOptions(1e-14, 30, lay.NEWTON_AUTO)
+    banded = structure.workspace(model, P2)
+    dense = structure.workspace(model, P2, solver="dense")
+    step_b, stages_b = step_mod.step_kernel(md, tabs, opts, banded, full=True)
+    step_d, stages_d = step_mod.step_kernel(md, tabs, opts, dense, full=True)
+    assert step_b is step_d
+    for name in ("newton_mech", "newton_full", "end_momentum"):
+        assert isinstance(getattr(stages_b, name), step_mod._TwinStage), name
+        assert not isinstance(getattr(stages_d, name), step_mod._TwinStage), name
+
+
 def test_chain_chooses_banded_solves_by_size():
     assert structure.plan(chain(6), P2).solvers == dict(newton="banded", schur="dense",
                                                         projection="dense")

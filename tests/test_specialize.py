@@ -112,7 +112,7 @@ def test_none_takes_the_sized_stages_once_they_are_compiled_after_a_miss(monkeyp
     opts = lay.NewtonOptions(1e-14, 30, lay.NEWTON_MODES["auto"])
     _, stages = step_mod.step_kernel(dp.kernel_data(), meth.kernel_tables, opts,
                                      structure.workspace(dp, meth), sized="cached")
-    assert isinstance(stages.newton_mech, step_mod._SizedStage)
+    assert isinstance(stages.newton_mech, step_mod._TwinStage)
 
 
 def test_an_adaptive_run_is_sized_by_its_span_not_by_its_step_cap(monkeypatch):

@@ -344,7 +344,7 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
 
 
 EnsembleMembers = namedtuple("EnsembleMembers", [
-    "fns", "flags", "Mc", "P", "tabs", "opts", "h", "t0", "dims", "si", "sb", "structured",
+    "fns", "flags", "Mc", "P", "tabs", "opts", "h", "t0", "dims", "si", "sb",
     "X0", "n_total", "mode", "every", "H0", "Qs", "Vs", "Ps", "En", "Gr", "GVr", "It", "Wk",
     "ist", "fst", "efns", "ecount", "edir", "eterm", "Te", "Qe", "Ve", "Ne", "stepk",
     "stages"])
@@ -355,8 +355,8 @@ EnsembleMembers.__doc__ = """The ensemble of :func:`fastvi.integrate_ensemble`: 
     ``dims`` = (n, m, s, r, J) sizes each member's workspace (the stages in ``stages`` may
     be compiled for these sizes: :func:`.step.step_kernel`), and ``si``,
     ``sb`` are the structured-solve plan of the model and method (:func:`fastvi.structure.plan`;
-    each member solves with its own copy of ``sb``; ``structured`` as in
-    :class:`.layout.Workspace`). ``P``
+    each member solves with its own copy of ``sb``, in a workspace typed as the step's loop
+    view, :func:`.layout.loop_view`). ``P``
     (N, k + 1) holds each member's kernel parameters (the kernels write the time into the
     last entry of a member's own row); the
     outputs are indexed by
@@ -377,7 +377,7 @@ def _ensemble_member(i, gp):
     g = own(gp)
     n = dim(g.dims[0])
     s = dim(g.dims[2])
-    ws = with_plan(workspace_for(g.dims), g.si, g.sb.copy(), g.structured)
+    ws = with_plan(workspace_for(g.dims), g.si, g.sb.copy(), None)
     state = np.zeros((6, n))
     for a in range(n):
         state[0, a] = g.X0[i, 0, a]

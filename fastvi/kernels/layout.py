@@ -33,7 +33,7 @@ import numba as nb
 import numpy as np
 
 from numba.core import types
-from numba.extending import overload
+from numba.extending import intrinsic, overload
 
 from .._numba import hot_inline, njit
 from ..status import Status
@@ -421,6 +421,38 @@ def with_plan(ws, si, sb, structured):
     (``sb`` is written by the solves: each trajectory needs its own copy; ``si`` is read
     only). What :func:`fastvi.structure.workspace` does in Python, for compiled callers."""
     return Workspace(*ws[:_PLAN_AT], si, sb, structured, ws.dims)
+
+
+def loop_view(ws):
+    """``ws`` as the step and the time loops take it: the same arrays and plan, its
+    ``structured`` field ``None``.
+
+    ``structured`` is a type-level switch (:func:`fastvi._numba.only_if`): a kernel typed
+    with ``None`` there has no code for the banded and sparse solvers. Only the stages that
+    solve need that code, and :func:`.step.step_kernel` compiles them for ``ws`` itself; the
+    step and every time loop are compiled once, for this view, whatever the plan. The two
+    types lay out their fields alike (``None`` and a boolean each take one aligned word,
+    before the sizes), so the structured stages read the view's memory as their own."""
+    return ws if ws.structured is None else ws._replace(structured=None)
+
+
+@intrinsic
+def as_loop_view(typingctx, p):
+    """``p``, a pointer to a workspace (:func:`fastvi._numba.byref`), as a pointer to its
+    :func:`loop_view`: the same memory, typed with ``structured`` None. A structured stage
+    passes it to the helpers that solve nothing (the residual), which are then compiled once
+    for both plans."""
+    if not isinstance(p, types.CPointer) or not isinstance(p.dtype, types.BaseNamedTuple):
+        return None
+    t = p.dtype
+    at = t.fields.index("structured")
+    view = t if isinstance(t.types[at], types.NoneType) else types.NamedTuple(
+        [types.none if i == at else x for i, x in enumerate(t.types)], t.instance_class)
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], context.get_value_type(signature.return_type))
+
+    return types.CPointer(view)(p), codegen
 
 
 # ----------------------------------------------------------------------------- sizes

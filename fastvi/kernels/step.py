@@ -52,7 +52,7 @@ from .layout import (FD_T, FD_T_POINTS, CHESS, CJAC, CON, F_AUGMENT, F_DIAG, F_E
                      SI_HC_COLS, SI_HC_CPTR, SI_HC_NG, SI_HC_PPTR, SI_HC_ROWS, SI_S, SI_SC, SINGULAR,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, SOLVE_BANDED, SOLVE_DENSE, is_timed,
                      linear_potential, make_workspace, sizes)
-from .layout import specialize as layout_specialize
+from .layout import as_loop_view, loop_view, specialize as layout_specialize
 from .linalg import (augmented_mass, invert, invert_unpivoted, lu_factor, lu_factor_small,
                      lu_solve, lu_solve_small)
 
@@ -323,7 +323,8 @@ def assemble(md_, tabs_, h, qk, pk, ws_, jac):
     Leaves ``ws.R``, ``ws.D`` (∂S_u/∂Q^ν), ``ws.G[j]`` (G at the constraint points j ≥ 1)
     and, if ``jac``, ``ws.A``. Returns 0, or ``NONFINITE`` when a callback produced NaN/inf.
     """
-    st = residual(md_, tabs_, h, qk, pk, ws_)
+    # the residual solves nothing: compiled once for dense and structured plans
+    st = residual(md_, tabs_, h, qk, pk, as_loop_view(ws_))
     if st == OK and jac:
         newton_matrix(md_, tabs_, h, qk, ws_)
     return st
@@ -1350,12 +1351,16 @@ def newton_mech(md_, tabs_, opts_, h, qk_, pk_, ws_, out_):
     tol = opts.tol
     qscale = _qscale(qk, n)
     exact = s == 1 and _exact_mechanics(md) and ws.si[SI_SC] == SOLVE_DENSE
+    if m > 0:
+        # here, not in the step: the step is compiled once for every workspace, and only
+        # this stage knows whether G's rows are dense or on a pattern (step_kernel)
+        _mech_rows(md, ws, 0, n, m)
     dprev = np.inf
     it = 0
     while it < opts.max_iter:
         it += 1
         out[S_ITERS] = it
-        st = residual(md_, tabs_, h, qk, pk, ws_)
+        st = residual(md_, tabs_, h, qk, pk, as_loop_view(ws_))
         if st != OK:
             return st
         res = 0.0
@@ -1478,8 +1483,6 @@ def step(md_, tabs_, opts_, h, state_, ws_, first, out_, stages_):
     if not full:
         st = _mass_bar(md, qk, ws, n)
         if st == OK:
-            if m > 0:
-                _mech_rows(md, ws, 0, n, m)
             predict(tabs_, n, m, h, vk, ws_, 0 if first else ws.hold[H_HIST])
             st = stages.newton_mech(md_, tabs_, opts_, h, byref(qk), byref(pk), ws_, out_)
         if st == OK:
@@ -1743,10 +1746,12 @@ def end_momentum(md_, q1_, P_, p1_, v1_, G1_, ws_, out_):
 
 
 # ----------------------------------------------------------------------------- entry point
-#: the compiled step of each kernel type — (model, options, sizes, dense plan) as
-#: :func:`step_kernel` keys them — with its stages, placeholders in the optional ones
+#: the compiled step of each kernel type — (model, options, sizes) as :func:`step_kernel`
+#: keys them: one step for small and large models alike
 _STEPS: dict = {}
-#: the optional stages compiled so far: (kernel type, stage name) -> C function
+#: the stages of a kernel type and plan (dense or structured) compiled so far:
+#: ((kernel type, structured), stage name) -> C function; "base" -> the :class:`Stages`
+#: with placeholders in the optional ones
 _OPTIONAL: dict = {}
 #: the sized stages looked up in numba's disk cache and not found there, in this process
 _NOT_CACHED: set = set()
@@ -1796,15 +1801,17 @@ def cached_cfunc(fn, sig, compile=True, allocates=False):
     return cf
 
 
-class _SizedStage(CalledAs):
-    """A stage compiled for the size-specialized twin of a workspace (:func:`.layout.specialize`),
-    called through the generic stage's signature.
+class _TwinStage(CalledAs):
+    """A stage compiled for a twin of the workspace type the step is compiled for, called
+    through the step's own stage signature: the size-specialized twin
+    (:func:`.layout.specialize`) or the structured one (a plan with banded or sparse
+    solves, :func:`.layout.loop_view`).
 
     numba types it as the generic stage (a first-class function of that signature), so the
-    step and the time loops that hold it are not compiled again for it. The two workspaces
-    have the same layout but for their last field, the sizes, which the sized code takes
-    from its type and never reads from memory, so a pointer to the generic workspace serves
-    the sized code as it is."""
+    step and the time loops that hold it are not compiled again for it. The twins have the
+    workspace's layout, field for field (``tests/test_sparse.py`` compares the offsets): the
+    sizes and the plan's kind are read from the type, never from memory, so a pointer to
+    the generic workspace serves the twin's code as it is."""
 
 
 #: the stages compiled for a workspace's sizes where :func:`step_kernel` is asked to
@@ -1847,7 +1854,7 @@ def _sized(key, md, tabs, opts, ws, stages, compile):
             if cf is None:
                 _NOT_CACHED.add(skey)
                 return None
-            entries[name] = _SizedStage(cf, generic[name])
+            entries[name] = _TwinStage(cf, generic[name])
         _OPTIONAL[skey] = entries
     return stages._replace(**_OPTIONAL[skey])
 
@@ -1863,8 +1870,15 @@ def step_kernel(md, tabs, opts, ws, full=False, sized=False):
     members, a recovery's substeps — calls this one compiled step: numba links a callee's
     code into each of its callers and optimises it again there, so a step called directly
     would be compiled once more in every loop, and so would its stages inside the step. The
-    workspace's sizes (integers, or size markers with ``specialize=True``) and whether its
-    plan is structured are part of its type: one generic step serves every small model.
+    workspace's sizes (integers, or size markers with ``specialize=True``) are part of its
+    type: one generic step serves every model.
+
+    Whether the plan is structured (banded or sparse solves, a large model's) is not: the
+    step and the time loops take the workspace's loop view (:func:`.layout.loop_view`, which
+    callers pass them), and only the stages that solve — the mechanics iteration, the full
+    Newton, the end projection — are compiled for the structured workspace, as twins
+    (:class:`_TwinStage`) that the same step calls. A process that runs small and large
+    models compiles the step and its time loops once.
 
     The full Newton is compiled only when ``full`` is true, ``opts`` asks for it or the
     method's mechanics matrix is singular (or it is compiled already): most runs never take
@@ -1877,52 +1891,71 @@ def step_kernel(md, tabs, opts, ws, full=False, sized=False):
     (compile-time constants, :func:`.layout.specialize`) and puts them in ``stages``;
     ``"cached"`` does so only if they are compiled already (in this process or in numba's
     disk cache); ``False`` keeps the generic stages. The sized stages do the same
-    arithmetic in the same order: the trajectory is the same bit for bit.
+    arithmetic in the same order: the trajectory is the same bit for bit. A structured plan
+    keeps the generic stages.
     """
-    key = (_key(md), _key(opts), _key(ws.dims), ws.structured is None)
-    full = full or opts.mode == NEWTON_FULL or not tabs.mech or (key, "newton_full") in _OPTIONAL
+    key = (_key(md), _key(opts), _key(ws.dims))
+    plan = (key, ws.structured is not None)
+    full = full or opts.mode == NEWTON_FULL or not tabs.mech or (plan, "newton_full") in _OPTIONAL
     timed = md.flags[F_FORCE] != 0 or md.flags[F_TIME] != 0
-    wanted = [name for name, want in (("newton_full", full), ("step_work", timed))
-              if want and (key, name) not in _OPTIONAL]
-    if key not in _STEPS or wanted:
+    # the work of forces and time solves nothing: one stage for both plans
+    wanted = [(where, name) for where, name, want in ((plan, "newton_full", full),
+                                                      ((key, False), "step_work", timed))
+              if want and (where, name) not in _OPTIONAL]
+    if key not in _STEPS or (plan, "base") not in _OPTIONAL or wanted:
         with quiet():  # typing the callbacks draws numba's first-class-function note
-            _compile(key, md, tabs, opts, ws, wanted)
-    stepk, stages = _STEPS[key]
+            _compile(key, plan, md, tabs, opts, ws, wanted)
+    stepk, stages = _STEPS[key], _OPTIONAL[(plan, "base")]
     if full:
-        stages = stages._replace(newton_full=_OPTIONAL[(key, "newton_full")], full=1)
+        stages = stages._replace(newton_full=_OPTIONAL[(plan, "newton_full")], full=1)
     if timed:
-        stages = stages._replace(step_work=_OPTIONAL[(key, "step_work")])
+        stages = stages._replace(step_work=_OPTIONAL[((key, False), "step_work")])
     if sized and ws.structured is None:
         with quiet():
             stages = _sized(key, md, tabs, opts, ws, stages, sized is True) or stages
     return stepk, stages
 
 
-def _compile(key, md, tabs, opts, ws, wanted):
-    """The step of kernel type ``key`` with its placeholder stages (if not compiled yet), and
-    the optional stages ``wanted``, into :data:`_STEPS` and :data:`_OPTIONAL`."""
+def _compile(key, plan, md, tabs, opts, ws, wanted):
+    """The step of kernel type ``key`` (if not compiled yet), the base :class:`Stages` of
+    ``plan`` (if not compiled yet) and the optional stages ``wanted`` (``(where, name)``
+    pairs), into :data:`_STEPS` and :data:`_OPTIONAL`."""
     P, arg, i64, f64 = types.CPointer, numba.typeof, types.int64, types.float64
-    sigs = _stage_signatures(md, tabs, opts, ws)
+    view = loop_view(ws)
+    sigs = _stage_signatures(md, tabs, opts, view)
+    twin = _stage_signatures(md, tabs, opts, ws) if plan[1] else None
+
+    def stage(fn, name):
+        if twin is None:
+            return cached_cfunc(fn.py_func, sigs[name])
+        return _TwinStage(cached_cfunc(fn.py_func, twin[name]), sigs[name])
+
+    if (plan, "base") not in _OPTIONAL:
+        _OPTIONAL[(plan, "base")] = Stages(stage(newton_mech, "newton_mech"),
+                                           cached_cfunc(_no_full_newton, sigs["newton_full"]),
+                                           stage(end_momentum, "end_momentum"),
+                                           cached_cfunc(_no_work, sigs["step_work"]), 0)
     if key not in _STEPS:
-        placeholder = Stages(cached_cfunc(newton_mech.py_func, sigs["newton_mech"]),
-                             cached_cfunc(_no_full_newton, sigs["newton_full"]),
-                             cached_cfunc(end_momentum.py_func, sigs["end_momentum"]),
-                             cached_cfunc(_no_work, sigs["step_work"]), 0)
+        # typed by the stages' signatures alone: every plan's stages fit the one step
+        stages = Stages(*(CalledAs(None, sigs[name]) for name in Stages._fields[:-1]), 0)
         # the step's own body becomes the C function (not a call of the njit `step`, whose
         # code numba would compile once more into the wrapper)
         sig = i64(P(arg(md)), P(arg(tabs)), P(arg(opts)), f64, P(arg(np.zeros((1, 1)))),
-                  P(arg(ws)), types.boolean, P(arg(np.zeros(1))), P(arg(placeholder)))
-        _STEPS[key] = (cached_cfunc(step.py_func, sig), placeholder)
-    for name in wanted:
-        fn = newton_full if name == "newton_full" else _step_work
-        _OPTIONAL[(key, name)] = cached_cfunc(fn.py_func, sigs[name])
+                  P(arg(view)), types.boolean, P(arg(np.zeros(1))), P(arg(stages)))
+        _STEPS[key] = cached_cfunc(step.py_func, sig)
+    for where, name in wanted:
+        if name == "newton_full":
+            _OPTIONAL[(where, name)] = stage(newton_full, name)
+        else:
+            _OPTIONAL[(where, name)] = cached_cfunc(_step_work.py_func, sigs[name])
 
 
 @hot
 def take_step(md, tabs, opts, h, state, ws, first, out, stepk, stages):
     """One step through the compiled entry point ``stepk`` and its ``stages``
     (:func:`step_kernel`), for callers other than the time loops: tests and profiles, from
-    Python or from their own compiled loops. Arguments as :func:`step`, by value."""
+    Python or from their own compiled loops. Arguments as :func:`step`, by value; ``ws``
+    as the time loops take it (:func:`.layout.loop_view`)."""
     return stepk(byref(md), byref(tabs), byref(opts), h, byref(state), byref(ws), first,
                  byref(out), byref(stages))
 
@@ -1932,5 +1965,5 @@ def step_once(md, tabs, opts, h, state, ws, first, out):
     included): advance ``state`` rows (q, p, v) by one step into rows 3–5; returns the
     status code."""
     with quiet():
-        return take_step(md, tabs, opts, h, state, ws, first, out,
+        return take_step(md, tabs, opts, h, state, loop_view(ws), first, out,
                          *step_kernel(md, tabs, opts, ws, full=True))

@@ -1667,8 +1667,9 @@ def tangent_member(i, membersp):
     status."""
     g = own(membersp)
     n, m, s, r, J = g.dims[0], g.dims[1], g.dims[2], g.dims[3], g.dims[4]
-    ws = with_plan(workspace_for(g.dims), g.si, g.sb.copy(), g.structured)
-    # the extended step with the step's plan, as make_tangent_work gives it
+    # the step's workspace as the time loop takes it (layout.loop_view); the extended step's
+    # with the step's plan, as make_tangent_work gives it
+    ws = with_plan(workspace_for(g.dims), g.si, g.sb.copy(), None)
     xws = with_plan(workspace_for((n, m, s + 1, r, J)), g.si, g.sb.copy(), g.structured)
     tw = _started(tangent_work(xws, g.rows, g.cols, g.pidx, g.DQ.shape[1], g.sp, g.pd,
                                g.P.shape[1] - 1), g.DQ[i],

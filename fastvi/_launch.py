@@ -56,7 +56,8 @@ def _key(value):
         return _signature_token(value, value._sig)
     if isinstance(value, WrapperAddressProtocol):
         # typed as the first-class function of its signature, like a CFunc of that signature
-        # (the stages compiled for a model's sizes, fastvi.kernels.step._TwinStage)
+        # (the stages compiled for a model's sizes or a structured plan,
+        # fastvi.kernels.step._TwinStage)
         return _signature_token(value, value.signature())
     if isinstance(value, tuple):
         try:

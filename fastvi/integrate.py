@@ -562,13 +562,13 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
         sub = 2**level
         trial = state.copy()
         ws_sub = structure.workspace(model, meth, model.params if prm is None else prm, solver)
+        loop_sub = lay.loop_view(ws_sub)
         smp_sub = _alloc(1, model.n)
         info_sub = np.zeros(lay.INFO_SIZE)
         info_sub[lay.I_FIRST] = 1
         info_sub[lay.I_T0] = info[lay.I_T0] + info[lay.I_STEPS] * h
         with quiet():
-            st = _RUN(md, tabs, opts, h / sub, trial, lay.loop_view(ws_sub), sub, sub, sub, smp_sub,
-                      info_sub,
+            st = _RUN(md, tabs, opts, h / sub, trial, loop_sub, sub, sub, sub, smp_sub, info_sub,
                       np.zeros(lay.STEP_OUT_SIZE), events_.prepare(model, meth, None, 0),
                       *step_kernel(md, tabs, opts, ws_sub, full=True, sized=sized and "cached"),
                       None)
@@ -586,7 +586,7 @@ def _retry_in_substeps(md, model, meth, h, opts, state, levels, total, every, sm
             sout[lay.S_WORK_F] = info_sub[lay.I_WORK_F]
             k = int(info[lay.I_STEPS]) + 1
             with quiet():
-                drive.accept(md, info[lay.I_T0] + k * h, k == total, state, lay.loop_view(ws_sub), every, smp,
+                drive.accept(md, info[lay.I_T0] + k * h, k == total, state, loop_sub, every, smp,
                              info, sout)
             return sub
     return 0

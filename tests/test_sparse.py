@@ -79,18 +79,24 @@ def test_detected_pattern_of_a_chain_is_its_structure():
     assert pats["newton"].sum() < 0.3 * pats["newton"].size  # sparse: measured 17 %
 
 
-def _pattern_cases():
-    from fastvi.bodies import scenes as bodies_scenes
-    yield "damped_chain12", chain(12, damping=0.3), P2
-    yield "closed_chain14", fastvi.scenes.closed_chain(14), fastvi.method("P3L-Q4G")
-    yield "tree", fastvi.scenes.tree(), P2
-    yield "kapitza_pendulum", fastvi.scenes.kapitza_pendulum(), P2  # rheonomic
+def _bodies():
+    from fastvi.bodies import scenes
+    return scenes
+
+
+#: (model, method) by case, built in the test rather than at collection (as _SCENE_CASES)
+_PATTERN_CASES = {
+    "damped_chain12": lambda: (chain(12, damping=0.3), P2),
+    "closed_chain14": lambda: (fastvi.scenes.closed_chain(14), fastvi.method("P3L-Q4G")),
+    "tree": lambda: (fastvi.scenes.tree(), P2),
+    "kapitza_pendulum": lambda: (fastvi.scenes.kapitza_pendulum(), P2),  # rheonomic
     # a rotation's exact constraint Hessian, with entries at round-off of an analytic zero
-    yield "spatial_slider_crank", bodies_scenes.spatial_slider_crank(), P2
-    yield "flyball_governor", bodies_scenes.flyball_governor(), P2  # forces
+    "spatial_slider_crank": lambda: (_bodies().spatial_slider_crank(), P2),
+    "flyball_governor": lambda: (_bodies().flyball_governor(), P2),  # forces
+}
 
 
-@pytest.mark.parametrize("case", list(_pattern_cases()), ids=lambda c: c[0])
+@pytest.mark.parametrize("case", list(_PATTERN_CASES))
 def test_detected_pattern_is_what_the_assembled_newton_matrix_writes(case, monkeypatch):
     """The Newton matrix's pattern is detected from the residual's dependence on each
     unknown (and G's blocks and the constraint Hessian's, which carry round-off entries),
@@ -98,7 +104,7 @@ def test_detected_pattern_is_what_the_assembled_newton_matrix_writes(case, monke
     matrix the step kernel assembles there, exactly."""
     from fastvi.kernels import step
 
-    _, model, meth = case
+    model, meth = _PATTERN_CASES[case]()
     seen = []
     real = step.residual_dependence
 
@@ -200,25 +206,28 @@ def test_non_diagonal_mass_keeps_dense_schur_and_projection():
     assert p.solvers == dict(newton="banded", schur="dense", projection="dense")
 
 
-def _scene_cases():
-    yield "pendulum", fastvi.scenes.pendulum(), (0.9,)
-    yield "double_pendulum", double_pendulum(), (np.pi / 2, np.pi / 2)
-    yield "triple_pendulum", fastvi.scenes.triple_pendulum(), (0.5, 1.0, 1.5)
-    yield "four_bar", fastvi.scenes.four_bar(), (0.4, 2.0)
-    yield "spherical_pendulum", fastvi.scenes.spherical_pendulum(), (1.0, 0.0, 0.0, 2.0)
-    yield "rotary_rod_slider", fastvi.scenes.rotary_rod_slider(), (0.3,)
-    yield "chain12", chain(12), (np.linspace(0.2, 1.4, 12),)
-    yield "coupled_chain10", _coupled_chain(10), None
-    yield "closed_chain14", fastvi.scenes.closed_chain(14), ()
-    yield "damped_chain12", chain(12, damping=0.3), (np.linspace(0.2, 1.4, 12),)  # forces
-    yield "kapitza_pendulum", fastvi.scenes.kapitza_pendulum(), (2.5,)  # rheonomic constraint
-    yield "slider_crank", fastvi.scenes.slider_crank(), (0.3,)
+#: (model, the arguments of its initial_state) by case; built in the test, not at collection
+#: (a model compiles its callbacks: a dozen at import cost every test process seconds)
+_SCENE_CASES = {
+    "pendulum": lambda: (fastvi.scenes.pendulum(), (0.9,)),
+    "double_pendulum": lambda: (double_pendulum(), (np.pi / 2, np.pi / 2)),
+    "triple_pendulum": lambda: (fastvi.scenes.triple_pendulum(), (0.5, 1.0, 1.5)),
+    "four_bar": lambda: (fastvi.scenes.four_bar(), (0.4, 2.0)),
+    "spherical_pendulum": lambda: (fastvi.scenes.spherical_pendulum(), (1.0, 0.0, 0.0, 2.0)),
+    "rotary_rod_slider": lambda: (fastvi.scenes.rotary_rod_slider(), (0.3,)),
+    "chain12": lambda: (chain(12), (np.linspace(0.2, 1.4, 12),)),
+    "coupled_chain10": lambda: (_coupled_chain(10), None),
+    "closed_chain14": lambda: (fastvi.scenes.closed_chain(14), ()),
+    "damped_chain12": lambda: (chain(12, damping=0.3), (np.linspace(0.2, 1.4, 12),)),  # forces
+    "kapitza_pendulum": lambda: (fastvi.scenes.kapitza_pendulum(), (2.5,)),  # rheonomic constraint
+    "slider_crank": lambda: (fastvi.scenes.slider_crank(), (0.3,)),
+}
 
 
 @pytest.mark.parametrize("newton", ["auto", "full"])
-@pytest.mark.parametrize("case", list(_scene_cases()), ids=lambda c: c[0])
-def test_dense_banded_and_sparse_trajectories_agree(case, newton):
-    name, model, args = case
+@pytest.mark.parametrize("name", list(_SCENE_CASES))
+def test_dense_banded_and_sparse_trajectories_agree(name, newton):
+    model, args = _SCENE_CASES[name]()
     if args is None:
         q0, v0 = chain(10).initial_state(np.linspace(0.2, 1.0, 10))
     else:
@@ -342,12 +351,12 @@ def test_grouped_differences_give_the_exact_hessians_trajectory():
     assert np.abs(a.q - b.q).max() < 1e-11
 
 
-@pytest.mark.parametrize("model", [chain(16, damping=0.3), _chain_without_constraint_hessian(24)],
-                         ids=["damped", "grouped-hessians"])
-def test_the_banded_plans_assembly_over_spans_is_the_dense_one_bit_for_bit(model):
+@pytest.mark.parametrize("case", ["damped", "grouped-hessians"])
+def test_the_banded_plans_assembly_over_spans_is_the_dense_one_bit_for_bit(case):
     """A banded plan assembles the exact Newton matrix over each row's span of the
     coordinates' coupling and of G, and zeroes only those spans: every entry must be the
     dense assembly's, at several states in a row (nothing stale is left outside the spans)."""
+    model = chain(16, damping=0.3) if case == "damped" else _chain_without_constraint_hessian(24)
     ws = structure.workspace(model, P2)
     assert ws.si[lay.SI_A] == lay.SOLVE_BANDED and ws.si[lay.SI_BSPAN] and ws.si[lay.SI_GSPAN]
     si = ws.si.copy()

@@ -33,6 +33,7 @@ import numba as nb
 import numpy as np
 
 from numba.core import types
+from numba.core.imputils import impl_ret_borrowed
 from numba.extending import intrinsic, overload
 
 from .._numba import hot_inline, njit
@@ -441,8 +442,15 @@ def as_loop_view(typingctx, p):
     """``p``, a pointer to a workspace (:func:`fastvi._numba.byref`), as a pointer to its
     :func:`loop_view`: the same memory, typed with ``structured`` None. A structured stage
     passes it to the helpers that solve nothing (the residual), which are then compiled once
-    for both plans."""
-    if not isinstance(p, types.CPointer) or not isinstance(p.dtype, types.BaseNamedTuple):
+    for both plans. A workspace passed by value (tests and profiles call the kernels so) is
+    returned as it is when it is a loop view already."""
+    if not isinstance(p, types.CPointer):
+        if (isinstance(p, types.BaseNamedTuple) and "structured" in p.fields
+                and isinstance(p.types[p.fields.index("structured")], types.NoneType)):
+            return p(p), lambda context, builder, sig, args: impl_ret_borrowed(
+                context, builder, sig.return_type, args[0])
+        return None
+    if not isinstance(p.dtype, types.BaseNamedTuple):
         return None
     t = p.dtype
     at = t.fields.index("structured")

@@ -28,10 +28,10 @@ from .results import (Result, ResultBase, SavedResult, matching_model, result_ar
 
 __all__ = ["adjoint", "AdjointResult"]
 
-#: the memory the default schedule gives the records and checkpoints: every step's records
-#: (nothing retaken) while they fit, else the longest segments that fit, else the
-#: segments of least memory
-KEEP_ALL_BYTES = 64 * 2**20
+#: the memory the default schedule gives the records and checkpoints (``max_memory``):
+#: every step's records (nothing retaken) while they fit, else the longest segments that
+#: fit, else the segments of least memory
+KEEP_ALL_BYTES = 256 * 2**20
 
 #: the forward and backward loops, called through their compiled entry points (_launch.py)
 _FORWARD = Launcher(run_checkpointed)
@@ -119,7 +119,8 @@ class AdjointResult(SavedResult, ResultBase):
 def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
             n_steps: int | None = None, t0: float = 0.0, t_span=None, method="P2L-Q3G",
             param_index=None, initial_state=None, params=None, save_every: int = 1,
-            checkpoint_every: int | None = None, tol: float = valid.DEFAULT_TOL,
+            checkpoint_every: int | None = None, max_memory: int | None = None,
+            tol: float = valid.DEFAULT_TOL,
             max_iter: int = valid.DEFAULT_MAX_ITER, newton: str = "auto", solver: str = "auto",
             check: bool = True, monitor: bool = True, progress: bool = False,
             specialize: bool | None = None, **unsupported) -> AdjointResult:
@@ -143,14 +144,15 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     derivatives by θ point by point (about 0.15 µs a parameter and step on the double
     pendulum), or, for a model without them, adds four residual evaluations a parameter
     and step (five-point differences). The forward run records each step's converged
-    unknowns for the sweep: all of them while they take at most :data:`KEEP_ALL_BYTES`
-    (64 MiB: 288 bytes a step for a double pendulum with ``P2L-Q3G``, about 2.3 × 10⁵
-    steps), so that nothing is solved twice. A longer run is cut into segments of
+    unknowns for the sweep: all of them while they take at most ``max_memory`` bytes
+    (default :data:`KEEP_ALL_BYTES`, 256 MiB: 288 bytes a step for a double pendulum with
+    ``P2L-Q3G``, about 9 × 10⁵ steps; 34 KiB for a chain of 256 links, about 7 700), so
+    that nothing is solved twice. A longer run is cut into segments of
     ``checkpoint_every`` steps, the last ``N`` steps first: the forward run keeps its state
     at the start of each, and the sweep takes the last segment from the records and
     retakes each earlier one from its checkpoint — ``N − C`` steps solved twice for
     segments of ``C``. By default ``C`` is the longest segment whose records and
-    checkpoints fit in :data:`KEEP_ALL_BYTES`; a run too long for it takes the segment of
+    checkpoints fit in ``max_memory``; a run too long for it takes the segment of
     least memory, ``C ≈ √(N c / r)`` for checkpoints of ``c`` bytes and records of ``r``
     bytes a step (memory ∝ √N).
 
@@ -173,8 +175,12 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     checkpoint_every : int, optional
         Steps between checkpoints ``C``: ``N`` keeps every step, smaller values trade time
         (``N − C`` steps retaken) for memory (``∝ N / C + C``). Default: the largest ``C``
-        whose records and checkpoints take at most :data:`KEEP_ALL_BYTES`, else the ``C``
-        of least memory.
+        whose records and checkpoints take at most ``max_memory``, else the ``C`` of
+        least memory.
+    max_memory : int, optional
+        Bytes the records and checkpoints of the default schedule may take (default
+        :data:`KEEP_ALL_BYTES`, 256 MiB). Less memory, more steps retaken; the gradient is
+        the same bit for bit. Give this or ``checkpoint_every``, not both.
 
     Returns
     -------
@@ -191,6 +197,10 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     differentiation, optimal control, and more, SIAM Review 58 (2016) 3–33.
     """
     disc.refuse(unsupported, "fastvi.adjoint")
+    budget = None if max_memory is None else valid.count(max_memory, "max_memory", 1)
+    if budget is not None and checkpoint_every is not None:
+        raise ValueError("give `checkpoint_every` (the segment's steps) or `max_memory` (the "
+                         "bytes that choose it), not both")
     progress = valid.flag(progress, "progress")
     # checked before the run: a bad index is reported without compiling or integrating
     pidx = disc.param_indices(param_index, disc.checked_model(model).params.shape[0],
@@ -204,7 +214,7 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     N = meth.s * n + meth.J * m
     g_size = g_entries(run.ws)
     if checkpoint_every is None:
-        C = _segment_length(run.total, n, m, N, g_size)
+        C = _segment_length(run.total, n, m, N, g_size, budget)
     else:
         C = valid.count(checkpoint_every, "checkpoint_every", 1)
     C = min(C, run.total)

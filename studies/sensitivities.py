@@ -12,6 +12,9 @@ Measurements on the double pendulum (Cartesian, n = 4, m = 2), and on chains of 
   log–log slope;
 * **symplecticity**: ``max |Yᵀ J Y − Zᵀ J Z|`` for a basis ``Z`` of the tangent space at
   the start and its image ``Y`` after ``--steps`` steps, over ``|Y|²``;
+* **adjoint memory**: the peak memory and time of the adjoint of the damped pendulum under
+  ``⌈√N⌉`` checkpoints and with every step kept, and of a damped chain of 256 links under
+  the default schedule for two memory budgets (``segments_table``);
 * **by the number of parameters**: the adjoint by the initial state, and by it and every
   parameter, of damped chains of 2 to 128 links against a plain run (``parameters_table``);
 * **fit**: the damping and the outer rod length of the damped pendulum fitted to its two
@@ -301,6 +304,56 @@ def ensemble_table(members: int = 16, steps: int = 2_000, h: float = 0.01,
             f"Speed-up {serial / t_ens:.2f}; members equal bit for bit: {same}.")
 
 
+def segments_table(links: int = 256, sizes=(1_000, 4_000, 8_000, 16_000),
+                   budgets=(64 * 2**20, None), h: float = 0.01, method: str = "P2L-Q3G",
+                   repeat: int = 3) -> str:
+    """The adjoint's default schedule on a model that records much a step: the gradient by
+    q0 and v0 of a damped chain of ``links`` links, for each memory budget (``None``: the
+    default, ``fastvi.adjoint.KEEP_ALL_BYTES``), its segment, the steps retaken, the peak
+    memory (``tracemalloc``) and the time over a plain run's (the compiled loops, best of
+    ``repeat``)."""
+    import tracemalloc
+
+    import fastvi
+
+    default = sys.modules["fastvi.adjoint"].KEEP_ALL_BYTES  # the module, not the function
+    ch = fastvi.scenes.chain(links, damping=0.3)
+    q0, v0 = chain_start(links)
+
+    def gradient(N, budget):
+        return fastvi.adjoint(ch, q0, v0, lambda r: (np.ones((len(r.t), ch.n)), None), h=h,
+                              n_steps=N, save_every=N, method=method, param_index=[],
+                              max_memory=budget)
+
+    def took(N, budget):
+        A = gradient(N, budget)
+        return A.result.stats["integration_time"] + A.stats["backward_time"]
+
+    def plain(N):
+        return fastvi.integrate(ch, q0, v0, h=h, n_steps=N, save_every=N,
+                                method=method).stats["integration_time"]
+
+    took(10, None)  # compiled
+    out = [f"Damped chain of {links} links (n = {ch.n}, m = {ch.m}), `{method}`, h = {h}: "
+           "one adjoint gradient by q0 and v0 under the default schedule for each memory "
+           f"budget; peak memory by `tracemalloc`, time over a plain run's (best of {repeat}).",
+           "", "| steps N | budget (MiB) | segment × checkpoints | steps retaken | peak (MiB) "
+           "| × integrate |", "|---|---|---|---|---|---|"]
+    for N in sizes:
+        t0 = min(plain(N) for _ in range(repeat))
+        for budget in budgets:
+            tracemalloc.start()
+            A = gradient(N, budget)
+            peak = tracemalloc.get_traced_memory()[1]
+            tracemalloc.stop()
+            C, nck = A.stats["segment"], A.stats["checkpoints"]
+            mib = (default if budget is None else budget) / 2**20
+            ratio = min(took(N, budget) for _ in range(repeat)) / t0
+            out.append(f"| {N} | {mib:.0f} | {C} × {nck} | {N - C} | {peak / 2**20:.0f} | "
+                       f"{ratio:.2f} |")
+    return "\n".join(out)
+
+
 def chain_start(links: int, angle: float = 0.3):
     """A planar chain of ``links`` unit links hanging at ``angle`` from the vertical, at
     rest: ``(q0, v0)`` in Cartesian coordinates."""
@@ -401,6 +454,7 @@ def main(argv=None) -> int:
                        specialize=specialize)
     parts = [("Cost", cost_table(args.steps, args.repeat)), ("Adjoint memory", memory_table()),
              ("Large mechanisms", scaling_table()),
+             ("Adjoint memory of a large mechanism", segments_table(repeat=args.repeat)),
              ("By the number of parameters", parameters_table(repeat=args.repeat)),
              ("Ensembles", ensemble_table()), ("Order", order_table()),
              ("Symplecticity", symplectic_table(args.steps)), ("Fit", fit_table())]

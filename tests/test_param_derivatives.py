@@ -115,6 +115,25 @@ def test_symbolic_constrained_model_generates_constraint_derivatives(curve):
     assert curve.check(q, v, n_random=1).ok
 
 
+def test_the_linearised_steps_output_of_a_derivative_by_theta_fits_the_models_largest(
+        curve, spring_pendulum):
+    """The buffer a derivative callback by θ writes into holds the largest ``out`` of the
+    model's own derivatives (the shapes of ``Model``'s table): k × n × n where ∂M/∂θ is
+    given, k × m × n where ∂G/∂θ is, else k × n or k × m. It held k × n² whatever the
+    model: a gigabyte for a chain of 256 links, whose M and G do not depend on θ."""
+    from fastvi.kernels.tangent import make_tangent_work
+
+    meth = fastvi.tables.method("P2L-Q3G")
+    # chain(4): ∂(∇V)/∂θ, ∂F/∂θ (10, 8), ∂g/∂θ (10, 4); spring pendulum: ∂M/∂θ (4, 2, 2);
+    # curve: ∂G/∂θ (4, 2, 3)
+    for model, size in ((chain(4, damping=0.3), 10 * 8), (spring_pendulum, 4 * 2 * 2),
+                        (curve, 4 * 2 * 3)):
+        k = model.params.shape[0]
+        tw = make_tangent_work(model.n, model.m, meth.s, meth.r, meth.J, 1, list(range(k)),
+                               model.param_derivative_data(), k)
+        assert tw.tho.shape == (size,), model.name
+
+
 def test_symbolic_derivatives_by_the_parameters_declare_their_structural_non_zeros(curve, spring_pendulum):
     rng = np.random.default_rng(4)
     for model, slots in ((curve, {"potential_grad", "constraint"}),

@@ -235,15 +235,21 @@ def test_adjoint_default_schedule_takes_the_longest_segments_that_fit(monkeypatc
     kept = fastvi.adjoint(model, q0, v0, cost, **kw)
     assert kept.stats["segment"] == 200
     # room for 90 steps' records and three checkpoints: segments of 20, 90 and 90 steps
-    monkeypatch.setattr(module, "KEEP_ALL_BYTES", 90 * r + 3 * c)
-    cut = fastvi.adjoint(model, q0, v0, cost, **kw)
+    cut = fastvi.adjoint(model, q0, v0, cost, max_memory=90 * r + 3 * c, **kw)
     assert (cut.stats["segment"], cut.stats["checkpoints"]) == (90, 3)
     assert np.array_equal(cut.gradient, kept.gradient)  # 110 steps retaken, bit for bit
+    # the default budget is the module's
+    monkeypatch.setattr(module, "KEEP_ALL_BYTES", 90 * r + 3 * c)
+    by_default = fastvi.adjoint(model, q0, v0, cost, **kw)
+    assert (by_default.stats["segment"], by_default.stats["checkpoints"]) == (90, 3)
     # no room even for the segment of least memory, ⌈√(200 c / r)⌉ = 17 steps: that one
-    monkeypatch.setattr(module, "KEEP_ALL_BYTES", 1024)
-    tiny = fastvi.adjoint(model, q0, v0, cost, **kw)
+    tiny = fastvi.adjoint(model, q0, v0, cost, max_memory=1024, **kw)
     assert (tiny.stats["segment"], tiny.stats["checkpoints"]) == (17, 12)
     assert np.array_equal(tiny.gradient, kept.gradient)
+    with pytest.raises(ValueError, match="`checkpoint_every`.*or `max_memory`.*not both"):
+        fastvi.adjoint(model, q0, v0, cost, checkpoint_every=10, max_memory=2**20, **kw)
+    with pytest.raises(ValueError, match="`max_memory` must be >= 1"):
+        fastvi.adjoint(model, q0, v0, cost, max_memory=0, **kw)
 
 
 def test_adjoint_with_a_configuration_dependent_mass():

@@ -142,7 +142,7 @@ TangentWork = namedtuple("TangentWork", [
     "out",  # (STEP_OUT_SIZE,) scratch of the projection
     "pd",  # the model's derivatives by θ (.layout.ParamData)
     "Rk",  # (np, N') R_θ of the extended step by the model's derivatives by θ
-    "tho",  # (k · max(n², m n),) a derivative callback's output, flat
+    "tho",  # (k · max(n, m, m n if ∂G/∂θ, n² if ∂M/∂θ),) a derivative callback's output, flat
     "thF", "thP",  # (k, n) ∂F/∂θ and ∂(M v)/∂θ at a quadrature point
     "mu",  # (N',) the adjoint's cotangent on the rows of the extended step
     # Workspace of the extended step (n, m, s + 1, r, J). Last, as the sizes are last in
@@ -223,6 +223,14 @@ def tangent_work(xws, rows, cols, pidx, d, sp, pd, k):
     banded = sp.perm.shape[0] > 0
     Nd = 1 if banded else N
     Nb = band_ld(sp.kl, sp.ku) * N if banded else 1
+    # a derivative callback's output: k × n or k × m, and the k × m × n of ∂G/∂θ or the
+    # k × n × n of ∂M/∂θ only for a model that has them (a gigabyte for a chain of 256
+    # links, whose G and M do not depend on θ)
+    per = max(n, mm)
+    if pd.given[P_CJAC] != 0:
+        per = max(per, m * n)
+    if pd.given[P_MASS] != 0:
+        per = max(per, n * n)
     return TangentWork(
         point_work(n, m, sp), rows, cols, np.zeros((Nd, Nd)), np.zeros(N, dtype=np.int64),
         np.zeros(Nb), np.zeros(N),
@@ -233,7 +241,7 @@ def tangent_work(xws, rows, cols, pidx, d, sp, pd, k):
         np.zeros((d, N)), np.zeros((d, n)), np.zeros((d, n)), np.zeros(sx * n + J * m),
         np.zeros(n), np.zeros(n), np.zeros((mm, n)), np.zeros(mm), np.zeros(mm), np.zeros(n),
         np.zeros(n), np.zeros(n), np.zeros(N), np.zeros(n), np.zeros(n), np.zeros(STEP_OUT_SIZE),
-        pd, np.zeros((npar, sx * n + J * m)), np.zeros(max(k, 1) * n * max(n, m)),
+        pd, np.zeros((npar, sx * n + J * m)), np.zeros(max(k, 1) * per),
         np.zeros((max(k, 1), n)), np.zeros((max(k, 1), n)), np.zeros(sx * n + J * m), xws)
 
 

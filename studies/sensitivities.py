@@ -225,6 +225,39 @@ def fit_table() -> str:
     return "\n".join(out)
 
 
+def _adjoint_runs(model, q0, v0, h, method):
+    """``took(N, **schedule)``: the compiled loops' time of one gradient by q0 and v0 of
+    ``model`` from ``(q0, v0)`` over ``N`` steps (one sample saved at each end, keywords
+    of :func:`fastvi.adjoint` choosing the schedule); ``peak(N, **schedule)``: that
+    gradient and the peak of ``tracemalloc`` while it ran; ``plain(N)``: the time of the
+    same plain run."""
+    import tracemalloc
+
+    import fastvi
+
+    def gradient(N, **schedule):
+        return fastvi.adjoint(model, q0, v0, lambda r: (np.ones((len(r.t), model.n)), None),
+                              h=h, n_steps=N, save_every=N, method=method, param_index=[],
+                              **schedule)
+
+    def took(N, **schedule):
+        A = gradient(N, **schedule)
+        return A.result.stats["integration_time"] + A.stats["backward_time"]
+
+    def peak(N, **schedule):
+        tracemalloc.start()
+        try:
+            return gradient(N, **schedule), tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+
+    def plain(N):
+        return fastvi.integrate(model, q0, v0, h=h, n_steps=N, save_every=N,
+                                method=method).stats["integration_time"]
+
+    return took, peak, plain
+
+
 def memory_table(sizes=(1_000, 10_000, 100_000), h: float = 0.01,
                  method: str = "P2L-Q3G") -> str:
     """Peak memory (``tracemalloc``: the NumPy arrays, checkpoints and records included) and
@@ -232,47 +265,29 @@ def memory_table(sizes=(1_000, 10_000, 100_000), h: float = 0.01,
     (``checkpoint_every = N``, the default within ``fastvi.adjoint.KEEP_ALL_BYTES``), one
     sample saved at each end; times relative to :func:`fastvi.integrate` (sized stages)."""
     import math
-    import tracemalloc
 
     import fastvi
 
     dp = fastvi.scenes.double_pendulum(damping=0.3)
     q0, v0 = dp.initial_state(1.0, 0.5)
     fastvi.integrate(dp, q0, v0, h=h, n_steps=10, method=method, specialize=True)
-
-    def gradient(N, every):
-        return fastvi.adjoint(dp, q0, v0, lambda r: (np.ones((len(r.t), dp.n)), None), h=h,
-                              n_steps=N, save_every=N, method=method, param_index=[],
-                              checkpoint_every=every)
-
-    def peak(N, every):
-        tracemalloc.start()
-        A = gradient(N, every)
-        size = tracemalloc.get_traced_memory()[1]
-        tracemalloc.stop()
-        return size, A.stats["checkpoints"], A.stats["segment"]
-
-    def took(N, every):
-        A = gradient(N, every)
-        return A.result.stats["integration_time"] + A.stats["backward_time"]
-
-    def plain(N):
-        return fastvi.integrate(dp, q0, v0, h=h, n_steps=N, save_every=N,
-                                method=method).stats["integration_time"]
+    took, peak, plain = _adjoint_runs(dp, q0, v0, h, method)
 
     out = [f"Damped double pendulum, `{method}`, h = {h}: peak memory of one adjoint gradient "
            "by q0 and v0 (`tracemalloc`), and its time over a plain run's (the compiled "
            "loops, best of 3).", "",
            "| steps N | checkpoints × segment | peak (KiB) | × integrate | every step kept (KiB) "
            "| × integrate |", "|---|---|---|---|---|---|"]
-    took(100, 10)  # compiled
+    took(100, checkpoint_every=10)  # compiled
     for N in sizes:
         t0 = min(plain(N) for _ in range(3))
         C = math.isqrt(N - 1) + 1
-        size, nck, seg = peak(N, C)
+        A, size = peak(N, checkpoint_every=C)
+        nck, seg = A.stats["checkpoints"], A.stats["segment"]
         out.append(f"| {N} | {nck} × {seg} | {size / 1024:.0f} | "
-                   f"{min(took(N, C) for _ in range(3)) / t0:.1f} | {peak(N, N)[0] / 1024:.0f} | "
-                   f"{min(took(N, N) for _ in range(3)) / t0:.1f} |")
+                   f"{min(took(N, checkpoint_every=C) for _ in range(3)) / t0:.1f} | "
+                   f"{peak(N, checkpoint_every=N)[1] / 1024:.0f} | "
+                   f"{min(took(N, checkpoint_every=N) for _ in range(3)) / t0:.1f} |")
     return "\n".join(out)
 
 
@@ -312,28 +327,12 @@ def segments_table(links: int = 256, sizes=(1_000, 4_000, 8_000, 16_000),
     default, ``fastvi.adjoint.KEEP_ALL_BYTES``), its segment, the steps retaken, the peak
     memory (``tracemalloc``) and the time over a plain run's (the compiled loops, best of
     ``repeat``)."""
-    import tracemalloc
-
     import fastvi
 
     default = sys.modules["fastvi.adjoint"].KEEP_ALL_BYTES  # the module, not the function
     ch = fastvi.scenes.chain(links, damping=0.3)
-    q0, v0 = chain_start(links)
-
-    def gradient(N, budget):
-        return fastvi.adjoint(ch, q0, v0, lambda r: (np.ones((len(r.t), ch.n)), None), h=h,
-                              n_steps=N, save_every=N, method=method, param_index=[],
-                              max_memory=budget)
-
-    def took(N, budget):
-        A = gradient(N, budget)
-        return A.result.stats["integration_time"] + A.stats["backward_time"]
-
-    def plain(N):
-        return fastvi.integrate(ch, q0, v0, h=h, n_steps=N, save_every=N,
-                                method=method).stats["integration_time"]
-
-    took(10, None)  # compiled
+    took, peak, plain = _adjoint_runs(ch, *chain_start(links), h, method)
+    took(10)  # compiled
     out = [f"Damped chain of {links} links (n = {ch.n}, m = {ch.m}), `{method}`, h = {h}: "
            "one adjoint gradient by q0 and v0 under the default schedule for each memory "
            f"budget; peak memory by `tracemalloc`, time over a plain run's (best of {repeat}).",
@@ -342,14 +341,11 @@ def segments_table(links: int = 256, sizes=(1_000, 4_000, 8_000, 16_000),
     for N in sizes:
         t0 = min(plain(N) for _ in range(repeat))
         for budget in budgets:
-            tracemalloc.start()
-            A = gradient(N, budget)
-            peak = tracemalloc.get_traced_memory()[1]
-            tracemalloc.stop()
+            A, size = peak(N, max_memory=budget)
             C, nck = A.stats["segment"], A.stats["checkpoints"]
             mib = (default if budget is None else budget) / 2**20
-            ratio = min(took(N, budget) for _ in range(repeat)) / t0
-            out.append(f"| {N} | {mib:.0f} | {C} × {nck} | {N - C} | {peak / 2**20:.0f} | "
+            ratio = min(took(N, max_memory=budget) for _ in range(repeat)) / t0
+            out.append(f"| {N} | {mib:.0f} | {C} × {nck} | {N - C} | {size / 2**20:.0f} | "
                        f"{ratio:.2f} |")
     return "\n".join(out)
 

@@ -31,7 +31,14 @@ _FAMILY_OF = {f"tests/{name}.py": family for family, names in KERNEL_FAMILIES.it
 def pytest_xdist_make_scheduler(config, log):
     if config.getvalue("dist") != "loadfile":
         return None
+    from pathlib import Path
+
     from xdist.scheduler import LoadFileScheduling
+
+    here = Path(__file__).parent
+    missing = [p for p in _FAMILY_OF if not (here.parent / p).exists()]
+    if missing:  # a renamed file would silently leave its family
+        raise pytest.UsageError(f"tests/conftest.py KERNEL_FAMILIES names no such file: {missing}")
 
     class KernelFamilyScheduling(LoadFileScheduling):
         def _split_scope(self, nodeid):

@@ -58,7 +58,9 @@ class AdjointResult(SavedResult, ResultBase):
     lam_q, lam_p : ndarray (n,)
         The adjoint at ``t0``: ``∂J/∂(q0, p0)`` of the consistent initial state.
     stats : dict
-        ``checkpoints`` kept, ``segment`` (steps between them), ``backward_time`` (s).
+        ``checkpoints`` kept, ``segment`` (steps between them), ``memory`` (bytes of the
+        records and checkpoints, at most ``max_memory`` unless the segment of least memory
+        exceeds it), ``backward_time`` (s).
     status : Status
         The run's (``result.status``); ``success`` and ``message`` as :class:`fastvi.Result`.
     """
@@ -99,7 +101,8 @@ class AdjointResult(SavedResult, ResultBase):
                 f"v0 {norm(self.grad_v0):.3e}, params {norm(self.grad_params):.3e}), "
                 f"status {self._status_text()}, forward: {timing(self.result.stats)}, "
                 f"backward {st.get('backward_time', float('nan')):.3g} s (checkpoints: "
-                f"{st.get('checkpoints', '?')}, every {st.get('segment', '?')} steps)")
+                f"{st.get('checkpoints', '?')}, every {st.get('segment', '?')} steps, "
+                f"{st.get('memory', float('nan')) / 2**20:.3g} MiB)")
 
     def _arrays(self) -> dict:
         return dict(grad_q0=self.grad_q0, grad_v0=self.grad_v0, grad_params=self.grad_params,
@@ -274,8 +277,10 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     dq0, dp0, _, _ = disc.initial_tangent(run, D, initial_state)
     grad = dq0 @ lq + dp0 @ lp
     grad[2 * n:] += lth[:len(pidx)] + direct
+    memory = sum(a.nbytes for a in ck) + sum(a.nbytes for a in rec)
     return AdjointResult(result, grad[:n], grad[n:2 * n], grad[2 * n:], pidx, lq, lp,
-                         dict(checkpoints=ck.steps.shape[0], segment=C, backward_time=back_time))
+                         dict(checkpoints=ck.steps.shape[0], segment=C, memory=memory,
+                              backward_time=back_time))
 
 
 def _record_bytes(n, m, N):

@@ -237,6 +237,7 @@ def test_adjoint_default_schedule_takes_the_longest_segments_that_fit(monkeypatc
     # room for 90 steps' records and three checkpoints: segments of 20, 90 and 90 steps
     cut = fastvi.adjoint(model, q0, v0, cost, max_memory=90 * r + 3 * c, **kw)
     assert (cut.stats["segment"], cut.stats["checkpoints"]) == (90, 3)
+    assert cut.stats["memory"] == 90 * r + 3 * c and kept.stats["memory"] == 200 * r + c
     assert np.array_equal(cut.gradient, kept.gradient)  # 110 steps retaken, bit for bit
     # the default budget is the module's
     monkeypatch.setattr(module, "KEEP_ALL_BYTES", 90 * r + 3 * c)
@@ -659,7 +660,7 @@ def test_adjoint_round_trips_bit_for_bit(adj, damped, tmp_path):
     for name in ("grad_q0", "grad_v0", "grad_params", "lam_q", "lam_p"):
         _same_array(getattr(adj, name), getattr(back, name), name)
     assert back.param_index == adj.param_index == INDEX
-    assert set(adj.stats) == {"checkpoints", "segment", "backward_time"}
+    assert set(adj.stats) == {"checkpoints", "segment", "memory", "backward_time"}
     _same_stats(adj.stats, back.stats, "stats")
     assert repr(back) == repr(adj) and back.summary() == adj.summary()
     with pytest.raises(ValueError, match="`model`"):
@@ -672,6 +673,7 @@ def test_adjoint_summary_gives_the_gradients_norm(adj):
     line = adj.summary()
     assert "\n" not in line and f"|∇J| = {norm:.3e}" in line, line
     assert "3 samples, 2 parameters" in line and "status SUCCESS" in line
+    assert f"{adj.stats['memory'] / 2**20:.3g} MiB" in line, line
     text = repr(adj)
     assert "\n" not in text and len(text) < 200 and f"|grad|={norm:.3g}" in text, text
 

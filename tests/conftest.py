@@ -26,17 +26,6 @@ KERNEL_FAMILIES = {
 }
 _FAMILY_OF = {f"tests/{name}.py": family for family, names in KERNEL_FAMILIES.items()
               for name in names}
-#: files with few tests that take long (subprocesses, kernels compiled for a model's sizes).
-#: The work units start in the order: the families, these, then the others by their number
-#: of tests (pytest-xdist's own order, which would start these last and leave one worker
-#: idle while the other finishes one of them)
-LONG_FILES = ("test_examples", "test_specialize", "test_memory_safety", "test_symbolic")
-_EARLY = [*KERNEL_FAMILIES, *(f"tests/{name}.py" for name in LONG_FILES)]
-
-
-def _work_unit(nodeid):
-    path = nodeid.split("::", 1)[0]
-    return _FAMILY_OF.get(path, path)
 
 
 def pytest_xdist_make_scheduler(config, log):
@@ -46,31 +35,20 @@ def pytest_xdist_make_scheduler(config, log):
 
     from xdist.scheduler import LoadFileScheduling
 
-    root = Path(__file__).parent.parent
-    missing = [p for p in [*_FAMILY_OF, *_EARLY[len(KERNEL_FAMILIES):]] if not (root / p).exists()]
-    if missing:  # a renamed file would silently leave its family or its place
-        raise pytest.UsageError(f"tests/conftest.py names no such test file: {missing}")
-    config.option.loadscopereorder = False  # the workers' collection is in order already
+    here = Path(__file__).parent
+    missing = [p for p in _FAMILY_OF if not (here.parent / p).exists()]
+    if missing:  # a renamed file would silently leave its family
+        raise pytest.UsageError(f"tests/conftest.py KERNEL_FAMILIES names no such file: {missing}")
 
     class KernelFamilyScheduling(LoadFileScheduling):
         def _split_scope(self, nodeid):
-            return _work_unit(nodeid)
+            path = super()._split_scope(nodeid)
+            return _FAMILY_OF.get(path, path)
 
     return KernelFamilyScheduling(config, log)
 
 
 def pytest_collection_modifyitems(config, items):
-    if hasattr(config, "workerinput"):  # a pytest-xdist worker: the order of the work units
-        sizes = {}
-        for item in items:
-            unit = _work_unit(item.nodeid)
-            sizes[unit] = sizes.get(unit, 0) + 1
-
-        def rank(item):
-            unit = _work_unit(item.nodeid)
-            return (0, _EARLY.index(unit)) if unit in _EARLY else (1, -sizes[unit])
-
-        items.sort(key=rank)  # stable: a unit's tests keep their order
     if config.getoption("--run-slow"):
         return
     skip = pytest.mark.skip(reason="slow study: run with `make test-slow`")

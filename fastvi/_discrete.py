@@ -148,7 +148,7 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
     compile_time = time.perf_counter()
     md = model.kernel_data(prm, t0)
     tabs = meth.kernel_tables
-    ws = structure.workspace(model, meth, prm, solver)
+    ws = structure.workspace(model, meth, prm, solver, newton=False)
     # the structured paths of the linearised step are compiled for structured workspaces
     # only (_numba.only_if): a model whose plan keeps every solve dense gets none of them
     patterns = structure.plan(model, meth, prm, solver).patterns if ws.structured else {}

@@ -394,7 +394,7 @@ def integrate(
     M0 = model.mass_matrix(q0, prm)
     state = np.zeros((6, n))
     state[0], state[1], state[2] = q0, M0 @ v0, v0
-    ws = structure.workspace(model, meth, prm, solver)
+    ws = structure.workspace(model, meth, prm, solver, newton=False)
     # an adaptive run has no step count (total is a cap): its steps are ε / ρ with a density
     # ρ ≥ 1 (fastvi.kernels.adapt), about span / ε of them at least, what its stages are
     # sized by

@@ -108,7 +108,8 @@ def detect_pattern(model, meth, prm=None, n_states: int = PATTERN_STATES, seed: 
     n, m, s, J = model.n, model.m, meth.s, meth.J
     N = s * n + J * m
     md = model.kernel_data(prm)
-    ws = lay.make_workspace(n, m, s, meth.r, J)
+    # the residual alone: no full Newton's matrix
+    ws = lay.make_workspace(n, m, s, meth.r, J, frozenset(lay.NEWTON_FIELDS))
     PG = np.zeros((m, n), dtype=bool)
     PA = np.zeros((N, N), dtype=bool)
     R0 = np.zeros(N)
@@ -490,10 +491,13 @@ def plan(model, meth, prm=None, solver: str = "auto") -> Plan:
     return result
 
 
-def workspace(model, meth, prm=None, solver: str = "auto"):
-    """:func:`fastvi.kernels.layout.make_workspace` with the plan of :func:`plan` in it."""
+def workspace(model, meth, prm=None, solver: str = "auto", newton: bool = True):
+    """:func:`fastvi.kernels.layout.make_workspace` with the plan of :func:`plan` in it
+    (``newton=False``: without the full Newton's fields until
+    :func:`fastvi.kernels.step.step_kernel` returns stages that take it)."""
     p = plan(model, meth, prm, solver)
-    ws = lay.make_workspace(model.n, model.m, meth.s, meth.r, meth.J)
+    unused = lay.unused_fields(model.kernel_data(prm).flags, p.si, newton)
+    ws = lay.make_workspace(model.n, model.m, meth.s, meth.r, meth.J, unused)
     if np.any(p.si[:lay.SI_HEADER]):  # something structured: a solve or grouped differences
         ws = ws._replace(si=p.si.copy(), sb=p.sb.copy(), structured=True)
     return ws

@@ -5,6 +5,7 @@ import pytest
 
 import fastvi
 from fastvi import IntegrationError, Status
+from fastvi.kernels import layout as lay
 from tests.kernel_helpers import one_step
 
 from . import models
@@ -173,10 +174,11 @@ def test_stable_runs_do_not_trip_the_monitor(name, double_pendulum, dp_start):
         assert r.stats["monitor_energy"] < 0.5 and r.stats["monitor_displacement"] < 0.5
 
 
-def test_the_full_newton_compiled_on_first_need_gives_the_same_run():
+def test_the_full_newton_compiled_on_first_need_gives_the_same_run(monkeypatch):
     """A run that first meets the full Newton mid-way (the stiff rod–slider: the mechanics
-    iteration fails there) retakes that step once the stage is compiled: the same samples,
-    events and dense output, bit for bit, as a run that had the stage from the start."""
+    iteration fails there) retakes that step once the stage is compiled, or, compiled
+    already, once its workspace has the stage's fields: the same samples, events and dense
+    output, bit for bit, as a run that had the stage from the start."""
     from fastvi.kernels import step as step_kernels
     from studies import peers
 
@@ -189,18 +191,23 @@ def test_the_full_newton_compiled_on_first_need_gives_the_same_run():
 
     kw = dict(h=0.01, n_steps=300, method="P2L-Q2G", events=crossing, dense_output=True)
     fastvi.integrate(model, q0, v0, **kw)  # compiles the full Newton (lazily, if first)
-    eager = fastvi.integrate(model, q0, v0, **kw)  # has it from the start
+    lazy = fastvi.integrate(model, q0, v0, **kw)  # its workspace is made without its fields
+    # with every field, a compiled full Newton is taken from the start
+    monkeypatch.setattr(lay, "unused_fields", lambda flags, si, newton: frozenset())
+    eager = fastvi.integrate(model, q0, v0, **kw)
     assert eager.stats["full_newton_steps"] > 0
     # forget that the full Newton was compiled: the next run starts with the placeholder
-    for key in [k_ for k_ in step_kernels._OPTIONAL if k_[1] == "newton_full"]:
-        del step_kernels._OPTIONAL[key]
-    lazy = fastvi.integrate(model, q0, v0, **kw)
-    for name in ("t", "q", "v", "p", "energy", "newton_iterations"):
-        assert np.array_equal(getattr(lazy, name), getattr(eager, name)), name
-    assert lazy.stats["full_newton_steps"] == eager.stats["full_newton_steps"]
-    assert np.array_equal(lazy.t_events[0], eager.t_events[0]) and len(eager.t_events[0]) > 0
+    monkeypatch.setattr(step_kernels, "_OPTIONAL", {
+        key: stage for key, stage in step_kernels._OPTIONAL.items() if key[1] != "newton_full"})
+    lazy_compiled = fastvi.integrate(model, q0, v0, **kw)
+    assert any(key[1] == "newton_full" for key in step_kernels._OPTIONAL)
     ts = np.linspace(0.0, float(eager.t[-1]), 37)
-    assert np.array_equal(lazy.sol(ts)[0], eager.sol(ts)[0])
+    for run in (lazy, lazy_compiled):
+        for name in ("t", "q", "v", "p", "energy", "newton_iterations"):
+            assert np.array_equal(getattr(run, name), getattr(eager, name)), name
+        assert run.stats["full_newton_steps"] == eager.stats["full_newton_steps"]
+        assert np.array_equal(run.t_events[0], eager.t_events[0]) and len(eager.t_events[0]) > 0
+        assert np.array_equal(run.sol(ts)[0], eager.sol(ts)[0])
 
 
 @pytest.mark.parametrize("what", ["sensitivity", "adjoint"])
@@ -225,7 +232,9 @@ def test_derivatives_compile_the_full_newton_on_first_need_with_the_same_results
             A = fastvi.adjoint(model, q0, v0, lambda r: (r.q, r.v), **kw)
             return A.result, (A.grad_q0, A.grad_v0, A.grad_params)
     derive()  # compiles the full Newton (lazily, if first)
-    eager, eager_d = derive()  # has it from the start
+    with monkeypatch.context() as patch:  # every field: a compiled full Newton from the start
+        patch.setattr(lay, "unused_fields", lambda flags, si, newton: frozenset())
+        eager, eager_d = derive()
     assert eager.stats["full_newton_steps"] > 0
     monkeypatch.setattr(step_kernels, "_OPTIONAL", {
         key: stage for key, stage in step_kernels._OPTIONAL.items() if key[1] != "newton_full"})

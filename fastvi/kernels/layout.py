@@ -387,17 +387,76 @@ _WS_INT = {"piv", "pivm", "pivn", "pivp", "pivs", "hold", "si"}
 assert tuple(_WS_SHAPES) + ("structured", "dims") == Workspace._fields
 
 
-def make_workspace(n, m, s, r, J):
-    """Scratch arrays for one trajectory (allocated once, outside the time loop), in NumPy.
+#: the fields the full Newton reads and writes (:func:`.step.newton_matrix`, ``Ma`` as its
+#: difference scratch): ``(s n + J m)² + 5 n²`` floats, most of a large mechanism's
+#: workspace. A step whose stages have no full Newton (``Stages.full == 0``,
+#: :func:`.step.step_kernel`) returns ``NEEDS_FULL_NEWTON`` before it would touch them, so
+#: its workspace may leave them empty (:func:`unused_fields`); ``step_kernel`` allocates
+#: them (:func:`fit_newton_fields`) when it returns stages that take it.
+NEWTON_FIELDS = ("A", "Aq", "Cq", "Hc", "Fv", "Ma")
 
-    Every linear system is solved densely; :func:`fastvi.structure.workspace` replaces
-    ``si``/``sb`` with a structured plan for large models."""
+
+def unused_fields(flags, si, newton):
+    """The workspace fields that a step of a model with these ``flags``, under the plan
+    ``si`` (:func:`fastvi.structure.plan`), never reads: each one's rule mirrors the test
+    that guards its use in the kernels.
+
+    * ``Mi``, M at the quadrature points: a mass function's alone (``F_MASSFN``);
+    * ``Mb``, the factors of M̄: not a constant diagonal mass's, whose reciprocals
+      (``minv``) the step multiplies by (``F_DIAG`` without ``F_AUGMENT``);
+    * ``Sc``, the dense Schur complement of the mechanics matrix: not where the plan solves
+      it banded (``si[SI_SC]``);
+    * without the full Newton (``newton`` false), :data:`NEWTON_FIELDS`, but ``Ma`` where
+      the end projection is dense (``si[SI_S]``): it factors M(q_{k+1}) there."""
+    out = set()
+    if flags[F_MASSFN] == 0:
+        out.add("Mi")
+    if flags[F_DIAG] != 0 and flags[F_AUGMENT] == 0:
+        out.add("Mb")
+    if si[SI_SC] != SOLVE_DENSE:
+        out.add("Sc")
+    if not newton:
+        out.update(NEWTON_FIELDS)
+        if si[SI_S] == SOLVE_DENSE:
+            out.discard("Ma")
+    return frozenset(out)
+
+
+def _sizes_env(n, m, s, r, J):
     env = dict(n=int(n), m=int(m), s=int(s), r=int(r), J=int(J), H_SIZE=H_SIZE, SI_HEADER=SI_HEADER)
     env.update(N=env["s"] * env["n"] + env["J"] * env["m"], mm=max(env["m"], 1),
                Jm=max(env["J"] * env["m"], 1))
-    fields = [np.zeros(eval(shape, {}, env), dtype=np.int64 if name in _WS_INT else np.float64)  # noqa: S307
-              for name, shape in _WS_SHAPES.items()]
+    return env
+
+
+def _field(name, env):
+    return np.zeros(eval(_WS_SHAPES[name], {}, env),  # noqa: S307 - the table above
+                    dtype=np.int64 if name in _WS_INT else np.float64)
+
+
+def make_workspace(n, m, s, r, J, unused=frozenset()):
+    """Scratch arrays for one trajectory (allocated once, outside the time loop), in NumPy.
+
+    Every linear system is solved densely; :func:`fastvi.structure.workspace` replaces
+    ``si``/``sb`` with a structured plan for large models, and leaves empty the fields its
+    step never reads (``unused``: names of :func:`unused_fields`; an empty field has shape
+    ``(0, 0)``, the type of every field it may name)."""
+    env = _sizes_env(n, m, s, r, J)
+    fields = [np.zeros((0, 0)) if name in unused else _field(name, env) for name in _WS_SHAPES]
     return Workspace(*fields, None, (env["n"], env["m"], env["s"], env["r"], env["J"]))
+
+
+def fit_newton_fields(ws):
+    """Allocate the full Newton's fields (:data:`NEWTON_FIELDS`) that ``ws`` left empty, in
+    place: the arrays themselves grow (to zeros), so every tuple that holds them — ``ws``,
+    its loop view (:func:`loop_view`), a run's record of it — sees them. What
+    :func:`.step.step_kernel` does whenever the stages it returns take the full Newton."""
+    env = None
+    for name in NEWTON_FIELDS:
+        a = getattr(ws, name)
+        if a.size == 0:
+            env = env or _sizes_env(*(int(x) for x in ws.dims))
+            a.resize(eval(_WS_SHAPES[name], {}, env), refcheck=False)  # noqa: S307 - the table
 
 
 def _workspace_for_source():

@@ -51,7 +51,7 @@ from .layout import (FD_T, FD_T_POINTS, CHESS, CJAC, CON, F_AUGMENT, F_DIAG, F_E
                      SI_HC_BCOL,
                      SI_HC_COLS, SI_HC_CPTR, SI_HC_NG, SI_HC_PPTR, SI_HC_ROWS, SI_S, SI_SC, SINGULAR,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, SOLVE_BANDED, SOLVE_DENSE, is_timed,
-                     linear_potential, make_workspace, sizes)
+                     fit_newton_fields, linear_potential, make_workspace, sizes)
 from .layout import as_loop_view, loop_view, specialize as layout_specialize
 from .linalg import (augmented_mass, invert, invert_unpivoted, lu_factor, lu_factor_small,
                      lu_solve, lu_solve_small)
@@ -1881,8 +1881,10 @@ def step_kernel(md, tabs, opts, ws, full=False, sized=False):
     models compiles the step and its time loops once.
 
     The full Newton is compiled only when ``full`` is true, ``opts`` asks for it or the
-    method's mechanics matrix is singular (or it is compiled already): most runs never take
-    it, and its assembly is a fifth of the step's code. Until then a step that would need it
+    method's mechanics matrix is singular (or it is compiled already, for a workspace that
+    has its fields): most runs never take it, and its assembly is a fifth of the step's
+    code. Stages that take it allocate the fields a workspace made without them
+    (:func:`.layout.fit_newton_fields`). Until then a step that would need it
     returns ``NEEDS_FULL_NEWTON`` with nothing kept, and the driver asks again with
     ``full=True`` and retakes the step — the same trajectory, bit for bit. The work of forces
     and time over a step is compiled only for a model with forces or time.
@@ -1896,7 +1898,11 @@ def step_kernel(md, tabs, opts, ws, full=False, sized=False):
     """
     key = (_key(md), _key(opts), _key(ws.dims))
     plan = (key, ws.structured is not None)
-    full = full or opts.mode == NEWTON_FULL or not tabs.mech or (plan, "newton_full") in _OPTIONAL
+    # compiled already, the full Newton is taken from the start — but not by a workspace
+    # made without its fields (layout.unused_fields): that one gets it on a step's first
+    # need, the same trajectory, and holds its memory only if a step takes it
+    compiled = (plan, "newton_full") in _OPTIONAL and ws.A.size > 0
+    full = full or opts.mode == NEWTON_FULL or not tabs.mech or compiled
     timed = md.flags[F_FORCE] != 0 or md.flags[F_TIME] != 0
     # the work of forces and time solves nothing: one stage for both plans
     wanted = [(where, name) for where, name, want in ((plan, "newton_full", full),
@@ -1908,6 +1914,7 @@ def step_kernel(md, tabs, opts, ws, full=False, sized=False):
     stepk, stages = _STEPS[key], _OPTIONAL[(plan, "base")]
     if full:
         stages = stages._replace(newton_full=_OPTIONAL[(plan, "newton_full")], full=1)
+        fit_newton_fields(ws)  # of a workspace made without them (layout.unused_fields)
     if timed:
         stages = stages._replace(step_work=_OPTIONAL[((key, False), "step_work")])
     if sized and ws.structured is None:

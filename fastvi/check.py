@@ -433,7 +433,7 @@ class _Callbacks:
             self.pattern[_theta(slot)] = mask.ravel()
         n, m = self.n, self.m
         self.pad = n * n + 2 * n + GUARD_MARGIN
-        self.layout, self.buf, self.size = {}, {}, {}
+        self.layout, self.length, self.size = {}, {}, {}
         for slot, shape in self.shape.items():
             size = int(np.prod(shape)) if shape else 1
             nv = m if slot == "constraint_hessian" else n
@@ -443,12 +443,18 @@ class _Callbacks:
                 at += length + self.pad
             self.layout[slot] = np.array([size, n, nv, self.k] + starts[1:], dtype=np.int64)
             self.size[slot] = size
-            f = np.empty(at)
-            self.buf[slot] = (f, f.view(np.uint64))
+            self.length[slot] = at
+        # one buffer for every slot, each guarded evaluation filling the head it needs: the
+        # guards take four n² each, per slot a large model's first check held hundreds of MB
+        self._buffer = None
 
     def _run(self, slot: str, q, v, fill: int):
-        """One guarded evaluation: ``(status, buffer as float64, as uint64)``."""
-        f, u = self.buf[slot]
+        """One guarded evaluation: ``(status, buffer as float64, as uint64)``, the buffer
+        valid until the next evaluation."""
+        if self._buffer is None:
+            self._buffer = np.empty(max(self.length.values()))
+        f = self._buffer[:self.length[slot]]
+        u = f.view(np.uint64)
         lay = self.layout[slot]
         # the entry point below takes these as C-contiguous float64 vectors without checking
         q = np.ascontiguousarray(q, dtype=np.float64)
@@ -738,26 +744,30 @@ def _fd_by_groups(f, q: np.ndarray, pattern: np.ndarray):
 
 def _fd_contracted_by_groups(G, q: np.ndarray, E: np.ndarray, pattern: np.ndarray):
     r""":func:`_fd` of the constraint Jacobian ``G(q)`` (m, n) by :func:`_fd_by_groups`,
-    contracted with each row ``η_j`` of ``E``: ``(refs, ests, fscale, hmin)`` with
-    ``refs[j] ≈ Σ_c η_jc ∂G_c/∂q`` (the constraint Hessian, (n, n)) and
-    ``ests[j] = Σ_c |η_jc| est_c``; nothing of size ``m n²`` is formed."""
+    contracted with each row ``η_j`` of ``E``: ``(contracted, fscale, hmin)``, where
+    ``contracted(j)`` gives ``(ref, est)`` with ``ref ≈ Σ_c η_jc ∂G_c/∂q`` (the constraint
+    Hessian, (n, n)) and ``est = Σ_c |η_jc| est_c``. The groups' differences are kept (a
+    few coordinates' worth per constraint) and each contraction is formed when asked: two
+    ``n × n`` arrays at a time, nothing of size ``m n²`` or ``len(E) n²``."""
     n = pattern.shape[1]
-    # accumulated transposed, (j, b, a): each group adds whole rows b
-    refs_t, ests_t = np.zeros((E.shape[0], n, n)), np.zeros((E.shape[0], n, n))
+    groups = list(_fd_by_groups(G, q, pattern))
+    fscale, hmin = groups.pop()
     absE = np.abs(E)
-    for item in _fd_by_groups(G, q, pattern):
-        if len(item) == 2:
-            return refs_t.transpose(0, 2, 1), ests_t.transpose(0, 2, 1), *item
-        rr, b, r2, err = item
-        # refs[j, a, b_c] += η_jc ∂G_ca/∂q_b over the rows c: a sparse sum per η into the
-        # columns of the group's coordinates alone
-        ub, at = np.unique(b, return_inverse=True)
-        cols_rr = np.arange(rr.size)
-        for j in range(E.shape[0]):
+
+    def contracted(j):
+        # accumulated transposed, (b, a): each group adds whole rows b; refs[a, b_c] +=
+        # η_jc ∂G_ca/∂q_b over the rows c, a sparse sum into the group's coordinates alone
+        ref_t, est_t = np.zeros((n, n)), np.zeros((n, n))
+        for rr, b, r2, err in groups:
+            ub, at = np.unique(b, return_inverse=True)
+            cols_rr = np.arange(rr.size)
             S = sp.csr_matrix((E[j, rr], (at, cols_rr)), shape=(ub.size, rr.size))
-            refs_t[j, ub] += S @ r2
+            ref_t[ub] += S @ r2
             S = sp.csr_matrix((absE[j, rr], (at, cols_rr)), shape=(ub.size, rr.size))
-            ests_t[j, ub] += S @ err
+            est_t[ub] += S @ err
+        return ref_t.T, est_t.T
+
+    return contracted, fscale, hmin
 
 
 def _declared_zero(callback: str, state: int, f, x: np.ndarray, rtol: float, note: str,
@@ -1054,13 +1064,14 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
             dG, est, fscale, hmin = _fd(G, qk)  # (m, n, n)
             refs = np.einsum("jc,cab->jab", E, dG)
             ests = np.einsum("jc,cab->jab", np.abs(E), est)
+            contracted = lambda j: (refs[j], ests[j])  # noqa: E731
         else:  # a large model's: its G's pattern, O(n²) memory instead of O(m n²)
-            refs, ests, fscale, hmin = _fd_contracted_by_groups(G, qk, E, pattern)
+            contracted, fscale, hmin = _fd_contracted_by_groups(G, qk, E, pattern)
         rows = []
         for j, eta in enumerate(etas):
             note = f"η = e_{int(np.argmax(eta))}" if j < n_units else "random η"
             rows.append(_compare(slot, k, cb(slot, qk, eta),
-                                 (refs[j], ests[j], fscale * np.abs(eta).sum(), hmin), rtol, note))
+                                 (*contracted(j), fscale * np.abs(eta).sum(), hmin), rtol, note))
         return rows
 
     for slot in ("kinetic_hessian", "potential_hessian", "constraint_hessian"):

@@ -380,8 +380,8 @@ def test_the_banded_plans_assembly_over_spans_is_the_dense_one_bit_for_bit(case)
 def test_a_workspace_allocates_the_full_newtons_fields_only_with_its_stage():
     """A run's workspace leaves empty what its step never reads (``layout.unused_fields``):
     for a chain (constant diagonal mass, banded Schur complement and projection) the fields
-    of a mass function, of M̄'s factors, the dense Schur complement and, until the step
-    takes the full Newton, that Newton's matrix and blocks. ``step_kernel`` allocates
+    of a mass function, of M̄'s factors, the dense Schur complement and projection and,
+    until the step takes the full Newton, that Newton's matrix, blocks and scratch. ``step_kernel`` allocates
     those in place when it returns the full Newton: every tuple holding them sees them."""
     from fastvi.kernels import step as step_mod
     model = chain(16)
@@ -389,15 +389,22 @@ def test_a_workspace_allocates_the_full_newtons_fields_only_with_its_stage():
     ws = structure.workspace(model, P2, newton=False)
     view = lay.loop_view(ws)
     assert {f for f in lay.Workspace._fields[:-4] if getattr(ws, f).size == 0} == {
-        *lay.NEWTON_FIELDS, "Mi", "Mb", "Sc"}
+        *lay.NEWTON_FIELDS, "Mi", "Mb", "Sc", "S"}
     opts = lay.NewtonOptions(1e-14, 30, lay.NEWTON_AUTO)
     step_mod.step_kernel(model.kernel_data(), P2.kernel_tables, opts, ws, full=True)
     assert ws.A.shape == (N, N) and view.A is ws.A and not ws.A.any()
     assert all(getattr(view, f).shape == (n, n) for f in ("Aq", "Cq", "Hc", "Fv", "Ma"))
-    assert ws.Mb.size == 0 and ws.Sc.size == 0  # still never read
+    assert view.Gp.shape == view.Gm.shape == (model.m, n)
+    assert ws.Mb.size == ws.Sc.size == ws.S.size == 0  # still never read
     # a small model's dense Schur complement and projection keep theirs
     small = structure.workspace(double_pendulum(), P2, newton=False)
     assert small.Sc.shape == (P2.J * 2, P2.J * 2) and small.Ma.shape == (4, 4)
+    assert small.S.shape == (2, 2) and small.Gp.shape == (2, 4) and small.Gm.size == 0
+    # the work of time over a step reads ∂g/∂t into Gp, whatever the projection's solve
+    flags, si = model.kernel_data().flags.copy(), ws.si.copy()
+    assert si[lay.SI_S] != lay.SOLVE_DENSE and "Gp" in lay.unused_fields(flags, si, False)
+    flags[lay.F_TIME] = 1
+    assert "Gp" not in lay.unused_fields(flags, si, False)
 
 
 @pytest.mark.parametrize("newton", ["auto", "full"])
@@ -419,7 +426,7 @@ def test_a_workspace_without_its_unread_fields_gives_the_same_run(name, newton, 
 def test_a_plain_run_of_a_large_mechanism_holds_no_dense_newton_matrix():
     """A 128-link chain's run (its model checked, its plan made, its kernels compiled by a
     first run) allocates less than its dense Newton matrix alone, 8 N² bytes with
-    N = s n + J m = 768: measured 3.2 MiB, where the workspace with every field took
+    N = s n + J m = 768: measured 2.6 MiB, where the workspace with every field took
     11.7 MiB."""
     import tracemalloc
     model = chain(128)

@@ -387,13 +387,13 @@ _WS_INT = {"piv", "pivm", "pivn", "pivp", "pivs", "hold", "si"}
 assert tuple(_WS_SHAPES) + ("structured", "dims") == Workspace._fields
 
 
-#: the fields the full Newton reads and writes (:func:`.step.newton_matrix`, ``Ma`` as its
-#: difference scratch): ``(s n + J m)² + 5 n²`` floats, most of a large mechanism's
-#: workspace. A step whose stages have no full Newton (``Stages.full == 0``,
+#: the fields the full Newton reads and writes (:func:`.step.newton_matrix`; ``Ma``, ``Gp``
+#: and ``Gm`` as its difference scratch): ``(s n + J m)² + 5 n² + 2 m n`` floats, most of
+#: a large mechanism's workspace. A step whose stages have no full Newton (``Stages.full == 0``,
 #: :func:`.step.step_kernel`) returns ``NEEDS_FULL_NEWTON`` before it would touch them, so
 #: its workspace may leave them empty (:func:`unused_fields`); ``step_kernel`` allocates
 #: them (:func:`fit_newton_fields`) when it returns stages that take it.
-NEWTON_FIELDS = ("A", "Aq", "Cq", "Hc", "Fv", "Ma")
+NEWTON_FIELDS = ("A", "Aq", "Cq", "Hc", "Fv", "Ma", "Gp", "Gm")
 
 
 def unused_fields(flags, si, newton):
@@ -405,9 +405,13 @@ def unused_fields(flags, si, newton):
     * ``Mb``, the factors of M̄: not a constant diagonal mass's, whose reciprocals
       (``minv``) the step multiplies by (``F_DIAG`` without ``F_AUGMENT``);
     * ``Sc``, the dense Schur complement of the mechanics matrix: not where the plan solves
-      it banded (``si[SI_SC]``);
-    * without the full Newton (``newton`` false), :data:`NEWTON_FIELDS`, but ``Ma`` where
-      the end projection is dense (``si[SI_S]``): it factors M(q_{k+1}) there."""
+      it banded (``si[SI_SC]``); ``S``, the dense ``G M⁻¹ Gᵀ`` of the end projection: not
+      where the plan solves that one banded or sparse (``si[SI_S]``);
+    * without the full Newton (``newton`` false), :data:`NEWTON_FIELDS`, but ``Ma`` and
+      ``Gp`` where the end projection is dense (it factors M(q_{k+1}) there, and forms
+      M⁻¹Gᵀ), and ``Gp`` for a time-dependent model (the work of time over a step reads
+      ∂g/∂t into it)."""
+    dense_projection = si[SI_S] == SOLVE_DENSE
     out = set()
     if flags[F_MASSFN] == 0:
         out.add("Mi")
@@ -415,10 +419,14 @@ def unused_fields(flags, si, newton):
         out.add("Mb")
     if si[SI_SC] != SOLVE_DENSE:
         out.add("Sc")
+    if not dense_projection:
+        out.add("S")
     if not newton:
         out.update(NEWTON_FIELDS)
-        if si[SI_S] == SOLVE_DENSE:
-            out.discard("Ma")
+        if dense_projection:
+            out -= {"Ma", "Gp"}
+        if flags[F_TIME] != 0:
+            out.discard("Gp")
     return frozenset(out)
 
 

@@ -444,15 +444,17 @@ class _Callbacks:
             self.layout[slot] = np.array([size, n, nv, self.k] + starts[1:], dtype=np.int64)
             self.size[slot] = size
             self.length[slot] = at
-        # one buffer for every slot, each guarded evaluation filling the head it needs: the
-        # guards take four n² each, per slot a large model's first check held hundreds of MB
-        self._buffer = None
+        # one buffer for every slot, each guarded evaluation filling the head it needs, as
+        # long as the longest slot evaluated so far: the guards take four n² each, and a
+        # buffer per slot held hundreds of MB for a large model (and reserved k n² for the
+        # derivatives by θ of its n × n slots, which few models give)
+        self._buffer = np.empty(0)
 
     def _run(self, slot: str, q, v, fill: int):
         """One guarded evaluation: ``(status, buffer as float64, as uint64)``, the buffer
         valid until the next evaluation."""
-        if self._buffer is None:
-            self._buffer = np.empty(max(self.length.values()))
+        if self._buffer.shape[0] < self.length[slot]:
+            self._buffer = np.empty(self.length[slot])
         f = self._buffer[:self.length[slot]]
         u = f.view(np.uint64)
         lay = self.layout[slot]

@@ -499,6 +499,25 @@ def test_checking_a_large_model_holds_a_few_n_squared_floats():
     assert peak < 24 * 8 * model.n ** 2, peak / (8 * model.n ** 2)
 
 
+def test_checking_the_derivatives_by_theta_holds_no_k_n_squared_buffer():
+    """With the derivatives by θ (k = 130 parameters of a damped 64-link chain, n = 128) the
+    check holds buffers for the callbacks it evaluates alone: measured 24 n² floats at its
+    peak, where a buffer for every derivative by θ, those of the n × n callbacks the model
+    does not give included, reserved 2.4 k n² (a 1024-link chain's check asked for 64 GiB)."""
+    import tracemalloc
+    model = fastvi.scenes.chain(64, damping=0.3)
+    q, v = model.initial_state(np.linspace(0.2, 1.4, 64))
+    model.kernel_arguments()
+    tracemalloc.start()
+    try:
+        report = model.check(q, v, n_random=1)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert report.ok and any(name.endswith("/θ") for name in report.checked)
+    assert peak < 64 * 8 * model.n ** 2, peak / (8 * model.n ** 2)
+
+
 def _hessian_forgets_a_curvature(q, eta, p, out):  # the chain's, but for one entry
     chain_constraint_hessian_dense(q, eta, p, out)
     out[-1, -1] = 0.0  # ∂²g_last/∂y_last² = 1 forgotten

@@ -440,3 +440,20 @@ def test_a_plain_run_of_a_large_mechanism_holds_no_dense_newton_matrix():
         tracemalloc.stop()
     N = P2.s * model.n + P2.J * model.m
     assert peak < 8 * N * N, peak
+
+
+@pytest.mark.parametrize("case", ["damped_chain12", "closed_chain14", "coupled_chain10"])
+def test_pattern_detection_over_gs_declared_pattern_finds_the_dense_residuals_pattern(
+        case, monkeypatch):
+    """With G's pattern declared, the residuals of the pattern detection form Gᵀη over it
+    (``structure._g_pattern_plan``), as a structured step does: the same patterns as the
+    residuals that form it densely."""
+    model = _SCENE_CASES[case]()[0]
+    assert model.constraint_jacobian_pattern is not None
+    over_pattern = structure.detect_pattern(model, P2)
+    monkeypatch.setattr(structure, "_g_pattern_plan",
+                        lambda PG: np.zeros(lay.SI_HEADER, dtype=np.int64))
+    dense = structure.detect_pattern(model, P2)
+    for name in ("G", "newton"):
+        assert np.array_equal(over_pattern[name], dense[name]), name
+    assert over_pattern["newton"].sum() < 0.2 * over_pattern["newton"].size

@@ -513,7 +513,7 @@ def workspace(model, meth, prm=None, solver: str = "auto", newton: bool = True):
     (``newton=False``: without the full Newton's fields until
     :func:`fastvi.kernels.step.step_kernel` returns stages that take it)."""
     p = plan(model, meth, prm, solver)
-    unused = lay.unused_fields(model.kernel_data(prm).flags, p.si, newton)
+    unused = lay.unused_fields(model.kernel_arguments()[1], p.si, newton)
     ws = lay.make_workspace(model.n, model.m, meth.s, meth.r, meth.J, unused)
     if np.any(p.si[:lay.SI_HEADER]):  # something structured: a solve or grouped differences
         ws = ws._replace(si=p.si.copy(), sb=p.sb.copy(), structured=True)

@@ -437,9 +437,12 @@ def _sizes_env(n, m, s, r, J):
     return env
 
 
+def _shape(name, env):
+    return eval(_WS_SHAPES[name], {}, env)  # noqa: S307 - the table above
+
+
 def _field(name, env):
-    return np.zeros(eval(_WS_SHAPES[name], {}, env),  # noqa: S307 - the table above
-                    dtype=np.int64 if name in _WS_INT else np.float64)
+    return np.zeros(_shape(name, env), dtype=np.int64 if name in _WS_INT else np.float64)
 
 
 def make_workspace(n, m, s, r, J, unused=frozenset()):
@@ -464,7 +467,7 @@ def fit_newton_fields(ws):
         a = getattr(ws, name)
         if a.size == 0:
             env = env or _sizes_env(*(int(x) for x in ws.dims))
-            a.resize(eval(_WS_SHAPES[name], {}, env), refcheck=False)  # noqa: S307 - the table
+            a.resize(_shape(name, env), refcheck=False)
 
 
 def _workspace_for_source():

@@ -322,7 +322,7 @@ def initial_tangent(run: Run, D: np.ndarray, initial_state=None):
             d = theta_derivative(lambda p: np.concatenate(_state_of(initial_state, p, n)), prm, l)
             dq += np.outer(dth[:, j], d[:n])
             dv += np.outer(dth[:, j], d[n:])
-    M, G, _, Hv, Cq = point_terms(run.model_data, q0, v0, np.zeros(m))
+    M, G, Hv, Cq = _start_terms(run)
     theta = {l: (theta_derivative(lambda p: model.constraint_value(q0, p, run.t0), prm, l),
                  theta_derivative(lambda p: model.constraint_jacobian_value(q0, p, run.t0) @ v0
                                   + model.constraint_time_derivative_value(q0, p, run.t0),
@@ -333,12 +333,51 @@ def initial_tangent(run: Run, D: np.ndarray, initial_state=None):
     gv_th = np.array([theta[l][1] for l in pidx]).reshape(len(pidx), m) if theta else np.zeros((len(pidx), m))
     mv_th = np.array([theta[l][2] for l in pidx]).reshape(len(pidx), n) if theta else np.zeros((len(pidx), n))
     if m:
-        W = np.linalg.solve(M, G.T)
+        # a large mechanism's constant diagonal mass: M⁻¹Gᵀ by its reciprocals, O(m n)
+        diagonal = run.ws.structured and lay.reciprocal_mass.py_func(run.model_data.flags)
+        W = G.T / np.diag(M)[:, None] if diagonal else np.linalg.solve(M, G.T)
         S = G @ W
         dq = dq - np.linalg.solve(S, G @ dq.T + g_th.T @ dth.T).T @ W.T
         dv = dv - np.linalg.solve(S, G @ dv.T + Hv @ dq.T + gv_th.T @ dth.T).T @ W.T
     dp = dv @ M.T + dq @ Cq.T + dth @ mv_th
     return np.ascontiguousarray(dq), np.ascontiguousarray(dp), pidx, np.ascontiguousarray(dth)
+
+
+def _start_terms(run: Run):
+    """``(M, G, H_v, C_q)`` at the run's consistent start (:func:`.kernels.tangent.point`),
+    ``H_v = ∂(G v)/∂q``. A large model with G's pattern declared, an exact constraint
+    Hessian, a constant mass and no time in its constraints takes ``H_v`` by groups of
+    constraints that share no coordinate, one Hessian a group (:func:`_rate_jacobian`):
+    ``point`` takes one a constraint, O(m n²)."""
+    model, q0, v0 = run.model, run.q0, run.v0
+    if not (run.ws.structured and model.m and model.constraint_jacobian_pattern is not None
+            and "constraint_hessian" in model.callbacks and not model.time_dependent
+            and model.mass_matrix_constant is not None):
+        M, G, _, Hv, Cq = point_terms(run.model_data, q0, v0, np.zeros(model.m))
+        return M, G, Hv, Cq
+    M = model.mass_matrix(q0, run.prm)
+    G = model.constraint_jacobian_value(q0, run.prm, run.t0)
+    return M, G, _rate_jacobian(model, run.prm, q0, v0), np.zeros((model.n, model.n))
+
+
+def _rate_jacobian(model: Model, prm, q, v):
+    """``∂(G v)/∂q`` (m, n), row c ``(∇²g_c v)ᵀ``, of a model with G's pattern declared:
+    constraints that share no coordinate (a greedy colouring of ``P Pᵀ``) take one
+    Hessian, of ``Σ_{c in the group} g_c``; row ``c`` of it is ``∇²g_c``'s on the
+    constraint's own coordinates, zero elsewhere."""
+    import scipy.sparse as sp
+    P = sp.csr_matrix(model.constraint_jacobian_pattern.astype(np.int64))
+    colour = structure.greedy_colours(((P @ P.T) > 0).tolil().rows)
+    Hv = np.zeros(P.shape)
+    for g in range(int(colour.max()) + 1):
+        rows = np.flatnonzero(colour == g)
+        eta = np.zeros(P.shape[0])
+        eta[rows] = 1.0
+        H = model.callback_value("constraint_hessian", q, eta, params=prm)
+        for c in rows:
+            a = P.indices[P.indptr[c]:P.indptr[c + 1]]
+            Hv[c, a] = H[np.ix_(a, a)] @ v[a]
+    return Hv
 
 
 def _state_of(initial_state, p, n):

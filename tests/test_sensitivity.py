@@ -796,3 +796,31 @@ def test_adjoint_progress_reports_both_sweeps_and_changes_no_bit(damped, start, 
     assert np.array_equal(quiet_run.result.q, shown.result.q)
     with pytest.raises(TypeError, match="`progress` must be True or False"):
         fastvi.adjoint(damped, *start, cost, h=H, n_steps=3, progress="yes")
+
+
+def test_a_large_models_start_terms_take_one_constraint_hessian_a_group():
+    """The initial tangent of a large model with G's pattern declared takes ∂(G v)/∂q by
+    groups of constraints that share no coordinate, one Hessian a group (a chain: two),
+    and M⁻¹Gᵀ by the mass's reciprocals: the same terms, bit for bit, as one Hessian a
+    constraint (``point``), which costs O(m n²)."""
+    from fastvi import _discrete as disc
+    from fastvi.kernels.tangent import point_terms
+    N = 24
+    ch = fastvi.scenes.chain(N, damping=0.3)
+    q0, v0 = ch.initial_state(np.linspace(0.2, 1.4, N), 0.3 * np.sin(np.arange(N)))
+    run = disc.prepare(ch, q0, v0, h=0.01, t_end=None, n_steps=2, t0=0.0, t_span=None,
+                       method="P2L-Q3G", save_every=1, tol=1e-14, max_iter=50, newton="auto",
+                       params=None, solver="auto", check=False, monitor=True, what="the test")
+    assert run.ws.structured
+    calls = []
+    value = ch.callback_value
+    ch.callback_value = lambda slot, *a, **k: calls.append(slot) or value(slot, *a, **k)
+    try:
+        M, G, Hv, Cq = disc._start_terms(run)
+    finally:
+        del ch.callback_value
+    assert calls.count("constraint_hessian") == 2 < ch.m
+    M0, G0, _, Hv0, Cq0 = point_terms(run.model_data, run.q0, run.v0, np.zeros(ch.m))
+    assert np.abs(Hv0).max() > 0.1  # a moving chain: H_v matters
+    for x, y in ((M, M0), (G, G0), (Hv, Hv0), (Cq, Cq0)):
+        assert np.array_equal(x, y)

@@ -327,6 +327,8 @@ def initial_tangent(run: Run, D: np.ndarray, initial_state=None):
                  theta_derivative(lambda p: model.constraint_jacobian_value(q0, p, run.t0) @ v0
                                   + model.constraint_time_derivative_value(q0, p, run.t0),
                                   prm, l),
+                 # a constant mass is not a parameter's: its differences are zeros
+                 np.zeros(n) if model.mass_matrix_constant is not None else
                  theta_derivative(lambda p: model.mass_matrix(q0, p) @ v0, prm, l))
              for l in pidx} if (m or model.mass_matrix_constant is None) else {}
     g_th = np.array([theta[l][0] for l in pidx]).reshape(len(pidx), m) if theta else np.zeros((len(pidx), m))

@@ -347,37 +347,34 @@ def initial_tangent(run: Run, D: np.ndarray, initial_state=None):
 
 def _start_terms(run: Run):
     """``(M, G, H_v, C_q)`` at the run's consistent start (:func:`.kernels.tangent.point`),
-    ``H_v = ∂(G v)/∂q``. A large model with G's pattern declared, an exact constraint
-    Hessian, a constant mass and no time in its constraints takes ``H_v`` by groups of
-    constraints that share no coordinate, one Hessian a group (:func:`_rate_jacobian`):
-    ``point`` takes one a constraint, O(m n²)."""
+    ``H_v = ∂(G v)/∂q``. Where the linearised step takes ``H_v`` by groups of constraints
+    that share no coordinate (``run.sparsity``, :func:`fastvi.structure.linearisation_patterns`),
+    so does the start, for a model with an exact constraint Hessian, a constant mass and
+    no time in its constraints (:func:`_rate_jacobian`): ``point`` takes one Hessian a
+    constraint, O(m n²)."""
     model, q0, v0 = run.model, run.q0, run.v0
-    if not (run.ws.structured and model.m and model.constraint_jacobian_pattern is not None
-            and "constraint_hessian" in model.callbacks and not model.time_dependent
-            and model.mass_matrix_constant is not None):
+    if not (run.sparsity.gsta.shape[0] > 0 and "constraint_hessian" in model.callbacks
+            and not model.time_dependent and model.mass_matrix_constant is not None):
         M, G, _, Hv, Cq = point_terms(run.model_data, q0, v0, np.zeros(model.m))
         return M, G, Hv, Cq
     M = model.mass_matrix(q0, run.prm)
     G = model.constraint_jacobian_value(q0, run.prm, run.t0)
-    return M, G, _rate_jacobian(model, run.prm, q0, v0), np.zeros((model.n, model.n))
+    return M, G, _rate_jacobian(model, run.sparsity, run.prm, q0, v0), np.zeros((model.n, model.n))
 
 
-def _rate_jacobian(model: Model, prm, q, v):
-    """``∂(G v)/∂q`` (m, n), row c ``(∇²g_c v)ᵀ``, of a model with G's pattern declared:
-    constraints that share no coordinate (a greedy colouring of ``P Pᵀ``) take one
-    Hessian, of ``Σ_{c in the group} g_c``; row ``c`` of it is ``∇²g_c``'s on the
-    constraint's own coordinates, zero elsewhere."""
-    import scipy.sparse as sp
-    P = sp.csr_matrix(model.constraint_jacobian_pattern.astype(np.int64))
-    colour = structure.greedy_colours(((P @ P.T) > 0).tolil().rows)
-    Hv = np.zeros(P.shape)
-    for g in range(int(colour.max()) + 1):
-        rows = np.flatnonzero(colour == g)
-        eta = np.zeros(P.shape[0])
+def _rate_jacobian(model: Model, sp, prm, q, v):
+    """``∂(G v)/∂q`` (m, n), row c ``(∇²g_c v)ᵀ``, by the groups of the :class:`Sparsity`
+    ``sp`` (constraints whose patterns share no coordinate), as the linearised step's
+    ``_grouped_hv``: one Hessian of ``Σ_{c in the group} g_c`` a group, whose rows on
+    constraint c's own coordinates are ``∇²g_c``'s."""
+    Hv = np.zeros((model.m, model.n))
+    for k in range(sp.gsta.shape[0] - 1):
+        rows = sp.grow[sp.gsta[k]:sp.gsta[k + 1]]
+        eta = np.zeros(model.m)
         eta[rows] = 1.0
         H = model.callback_value("constraint_hessian", q, eta, params=prm)
         for c in rows:
-            a = P.indices[P.indptr[c]:P.indptr[c + 1]]
+            a = sp.gcol[sp.gptr[c]:sp.gptr[c + 1]]
             Hv[c, a] = H[np.ix_(a, a)] @ v[a]
     return Hv
 

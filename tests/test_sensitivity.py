@@ -802,8 +802,8 @@ def test_adjoint_progress_reports_both_sweeps_and_changes_no_bit(damped, start, 
 
 
 def test_a_large_models_start_terms_take_one_constraint_hessian_a_group():
-    """The initial tangent of a large model with G's pattern declared takes ∂(G v)/∂q by
-    groups of constraints that share no coordinate, one Hessian a group (a chain: two),
+    """The initial tangent of a large model takes ∂(G v)/∂q by the linearised step's groups
+    of constraints that share no coordinate, one Hessian a group (a chain: two),
     and M⁻¹Gᵀ by the mass's reciprocals: the same terms, bit for bit, as one Hessian a
     constraint (``point``), which costs O(m n²)."""
     from fastvi import _discrete as disc

@@ -137,3 +137,41 @@ def test_the_spans_change_no_bit(monkeypatch):
                         lambda PG, PA, s, J, diagonal_mass=False: patterns(PG, PA, s, J))
     for a, b in zip(spans, derivatives()):
         assert np.array_equal(a, b)
+
+
+@pytest.mark.slow
+def test_the_band_assembly_changes_no_bit(monkeypatch):
+    """A large mechanism's linearised step assembles the extended Newton matrix straight
+    into the band storage that its LU factors, through a map of each entry's place, instead
+    of a dense (N + n)² matrix packed into that storage afterwards: the same derivatives,
+    bit for bit, from storage that grows like N, not N²."""
+    from fastvi import _discrete as disc
+    from fastvi.kernels import tangent
+
+    q0, v0 = _chain_start(LINKS)
+    rng = np.random.default_rng(6)
+    N, every = 90, 30
+    K = N // every + 1
+    Lq, Lv = rng.normal(size=(K, 2 * LINKS)), rng.normal(size=(K, 2 * LINKS))
+    model = fastvi.scenes.chain(LINKS, damping=0.2)
+
+    def derivatives(limit):
+        monkeypatch.setattr(tangent, "BAND_ASSEMBLY_BYTES", limit)
+        run = disc.prepare(model, q0, v0, h=0.01, t_end=None, n_steps=2, t0=0.0, t_span=None,
+                           method="P2L-Q3G", save_every=1, tol=1e-14, max_iter=50,
+                           newton="auto", params=None, solver="auto", check=False,
+                           monitor=True, what="x")
+        size = disc.tangent_work(run, 1, np.arange(0)).ws.A.size
+        rows = (run.meth.s + 1) * model.n + run.meth.J * model.m  # of the extended matrix
+        S = fastvi.sensitivity(model, q0, v0, h=0.01, n_steps=N, save_every=every,
+                               wrt=("q0", "v0", "params"))
+        A = fastvi.adjoint(model, q0, v0, lambda r: (Lq, Lv), h=0.01, n_steps=N,
+                           save_every=every, checkpoint_every=7)
+        return size, rows, (S.dq, S.dv, A.grad_q0, A.grad_v0, A.grad_params)
+
+    dense_size, rows, dense = derivatives(1 << 62)
+    band_size, _, band = derivatives(0)
+    assert dense_size == rows ** 2 and band_size < dense_size / 2
+    assert np.abs(dense[0]).max() > 0.0 and np.abs(dense[4]).max() > 0.0
+    for a, b in zip(dense, band):
+        assert np.array_equal(a, b)

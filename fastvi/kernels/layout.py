@@ -199,11 +199,24 @@ SOLVE_DENSE, SOLVE_BANDED, SOLVE_SPARSE = 0, 1, 2
  # entries outside them are never written (they stay the zeros of the allocation); and of
  # the declared ``force_jacobian_pattern`` (n rows, 0: none), over which ∂F/∂v is added
  # without scanning each row for its non-zeros
- SI_BSPAN, SI_GSPAN, SI_FSPAN) = range(36)
+ SI_BSPAN, SI_GSPAN, SI_FSPAN,
+ # the extended step of the derivatives (kernels/tangent.py) with a banded Newton matrix:
+ # the offset in si of the map by which its assembly writes straight into band storage
+ # (:data:`XMAP_HEADER`; 0: into the dense ``ws.A``)
+ SI_XMAP) = range(37)
 #: length of the header of ``ws.si``; with ``si[SI_SC]`` or ``si[SI_S]`` structured the
 #: kernels use the pattern of G (a diagonal constant mass is then required), as with
 #: ``si[SI_HC_NG]`` non-zero
-SI_HEADER = 36
+SI_HEADER = 37
+#: the map at ``si[SI_XMAP]`` (kernels/step.py, ``_offset``): ``N``, ``n``, ``kl``, ``ku``;
+#: for each of the extended matrix's ``N + n`` rows (and columns: the same set) its index in
+#: the step's matrix ``K``, or ``N + a`` for the extended step's own row (column) ``a``; for
+#: each index of ``K`` its position in the banded ordering; ``(base, lo, hi)`` of each of
+#: the ``N + n`` rows of ``T_q`` (its columns ``lo … hi − 1`` from ``base`` in the storage)
+#: and of each of the ``N`` columns of ``P_X`` (its rows ``lo … hi − 1``); the offset of
+#: the spare cell
+(XM_N, XM_SIZE, XM_KL, XM_KU) = range(4)
+XMAP_HEADER = 4
 #: descriptor of a sparse LU in ``ws.si`` (sparse_lu.py): offsets in si of its arrays, for
 #: an N-row system in its fill-reducing order — position in the factor storage of each
 #: pivot; of each column's entries below the diagonal (pointers, rows, positions); of each

@@ -56,7 +56,8 @@ from .drive import run, step_hook
 from .layout import specialize as layout_specialize
 from .layout import (CHESS, CJAC, F_AUGMENT, F_CH_PATTERN, F_EX_CHESS, F_EX_MJAC, F_MASSFN,
                      F_TIME, F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SI_A,
-                     SI_A_KL, SI_A_KU, SI_A_PERM, SI_S, SINGULAR, SOLVE_BANDED, SOLVE_DENSE,
+                     SI_A_KL, SI_A_KU, SI_A_PERM, SI_BSPAN, SI_GSPAN, SI_S, SI_XMAP, SINGULAR,
+                     SOLVE_BANDED, SOLVE_DENSE,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, P_CJAC, P_CON,
                      P_FORCE, P_KGRAD, P_MASS, P_PGRAD, ModelData, Samples, is_timed,
                      make_workspace, reciprocal_mass, sizes, with_plan, workspace_for)
@@ -66,7 +67,7 @@ from .banded import (band_factor, band_ld, band_solve, band_solve_transposed, gm
 from .linalg import lu_factor_small, lu_solve_small
 from .step import (ASSEMBLE_SIGNATURE, add_block, assemble_function, cached_cfunc,
                    fd_constraint_hessian, fd_momentum_jacobian, end_momentum, jacobian_rate,
-                   linear_force, plan_spans)
+                   linear_force, plan_spans, assembly_map, assembly_offset)
 
 __all__ = ["PointWork", "TangentWork", "extended_tables", "make_point_work",
            "make_tangent_work", "point", "point_terms", "linearise", "push", "pull",
@@ -259,11 +260,73 @@ def make_tangent_work(n, m, s, r, J, d, pidx, pd, k, sp=None, step_ws=None):
     ``G M⁻¹ Gᵀ``): :func:`tangent_work` run by Python (compiling it costs 2.4 s; the
     ensemble's members run it compiled)."""
     rows, cols = index_maps(n, m, s, J)
-    xws = make_workspace(n, m, s + 1, r, J)
-    if step_ws is not None and step_ws.structured:
+    sp = make_sparsity() if sp is None else sp
+    structured = step_ws is not None and step_ws.structured
+    into_band = structured and _assembles_into_band(step_ws.si, sp, n, s * n + J * m)
+    xws = make_workspace(n, m, s + 1, r, J, unused=frozenset({"A"}) if into_band else frozenset())
+    if into_band:
+        si, A = _band_assembly(step_ws.si, sp, rows, n, m, s * n + J * m)
+        xws = xws._replace(A=A, si=si, sb=step_ws.sb.copy(), structured=True)
+    elif structured:
         xws = xws._replace(si=step_ws.si, sb=step_ws.sb.copy(), structured=True)
-    return tangent_work.py_func(xws, rows, cols, np.asarray(pidx, dtype=np.int64), int(d),
-                                make_sparsity() if sp is None else sp, pd, int(k))
+    tw = tangent_work.py_func(xws, rows, cols, np.asarray(pidx, dtype=np.int64), int(d), sp, pd,
+                              int(k))
+    if into_band:  # the factors where the assembly left K
+        tw = tw._replace(ab=xws.A[0, :tw.ab.shape[0]])
+    return tw
+
+
+#: the size of the dense extended matrix above which it is assembled into band storage
+BAND_ASSEMBLY_BYTES = 16 * 2 ** 20
+
+
+def _assembles_into_band(si, sp, n, N):
+    """Whether the extended step of a structured model whose step's plan is ``si`` and whose
+    :class:`Sparsity` is ``sp`` (``n`` coordinates, ``N`` unknowns) assembles its matrix
+    straight into band storage: where ``K`` is banded, its own rows and columns are read
+    over their patterns, the assembly writes over the rows' spans (a constant diagonal
+    mass), and the dense matrix would be large. Both give the same matrix bit for bit;
+    the map costs each entry a few loads, which a dense matrix too large for the caches
+    costs more (docs/decisions/0033-the-extended-matrix-in-band-storage.md)."""
+    large = 8 * (N + n) ** 2 > BAND_ASSEMBLY_BYTES
+    return large and sp.perm.shape[0] > 0 and sp.tptr.shape[0] > 0 and si[SI_BSPAN] != 0
+
+
+def _band_assembly(si, sp, rows, n, m, N):
+    """The extended step's plan and matrix storage for an assembly into band storage:
+    ``si`` with the map of :data:`.layout.XMAP_HEADER` appended (at ``si[SI_XMAP]``), and
+    ``A`` (1, L), the storage :func:`.step.assembly_offset` addresses: ``K``'s band (the
+    :func:`.banded.band_factor` storage), the rows of ``T_q`` and the columns of ``P_X``
+    each over its span of the coupling (of G for a constraint's), and one spare cell —
+    O(N (kl + ku + w)), ``w`` the widest span, in place of the dense (N + n)²."""
+    kl, ku = int(sp.kl), int(sp.ku)
+    ext = np.arange(N + n)
+    index = np.empty(N + n, dtype=np.int64)
+    index[rows] = np.arange(N)
+    own = np.setdiff1d(ext, rows)  # the translation's rows and columns, s n … s n + n − 1
+    index[own] = N + np.arange(n)
+    position = np.empty(N, dtype=np.int64)
+    position[sp.perm] = np.arange(N)
+    # each extended row's (and column's) span: its coordinate's, or its constraint's
+    first = own[-1] + 1  # (s + 1) n: the first constraint row, and impulse column
+    span = np.empty((N + n, 2), dtype=np.int64)
+    span[:first] = si[si[SI_BSPAN]: si[SI_BSPAN] + 2 * n].reshape(n, 2)[ext[:first] % n]
+    if m:
+        gspan = si[si[SI_GSPAN]: si[SI_GSPAN] + 2 * m].reshape(m, 2)
+        span[first:] = gspan[(ext[first:] - first) % m]
+    tspan = np.empty_like(span)
+    tspan[index] = span  # row i of T_q: the extended row of index i
+    xspan = tspan[:N]  # column j of P_X: the extended column of index j (rows, cols alike)
+    tlen, xlen = tspan[:, 1] - tspan[:, 0], xspan[:, 1] - xspan[:, 0]
+    band = band_ld(kl, ku) * N
+    tbase = band + np.cumsum(tlen) - tlen
+    xbase = band + tlen.sum() + np.cumsum(xlen) - xlen
+    spare = band + tlen.sum() + xlen.sum()
+    xsi = np.concatenate([si, [N, n, kl, ku], index, position,
+                          np.column_stack([tbase, tspan]).ravel(),
+                          np.column_stack([xbase, xspan]).ravel(), [spare]]).astype(np.int64)
+    xsi[SI_XMAP] = si.shape[0]
+    return xsi, np.zeros((1, spare + 1))
 
 
 def step_band(ws):
@@ -898,7 +961,8 @@ def linearise(md_, h, argsp):
         for nu in range(s + 1):
             cl = tx.Lc[nu, 0]
             if cl != 0.0:
-                add_block(A, nu * n, tcol, -cl, Hs, n, n, wx.si, plan_spans(byref(wx))[0])
+                add_block(A, nu * n, tcol, -cl, Hs, n, n, wx.si, plan_spans(byref(wx))[0],
+                          assembly_map(byref(wx)))
     sp = tw.pt.sp
     banded = sp.perm.shape[0] > 0
     if sp.tptr.shape[0] > 0:  # over the patterns: O(nnz)
@@ -1004,8 +1068,12 @@ def _factor_projection(md, tw, wx, pw, sp, n, m):
 def _band_factor(ws, A, rows, cols, sp, ab, piv, N):
     """Factor the band storage ``ab`` of ``K[perm][:, perm]`` (``sp.perm``), ``K`` the
     step's rows and columns of the extended matrix ``A``: :func:`.banded.band_pack` without
-    forming ``K``, then :func:`.banded.band_factor`. Returns its status."""
+    forming ``K``, then :func:`.banded.band_factor`; or, where the assembly wrote ``K``
+    straight into ``ab`` (``ws.si[SI_XMAP]``), the factorisation alone. Returns its
+    status."""
     kl, ku, perm = sp.kl, sp.ku, sp.perm
+    if ws.si[SI_XMAP] != 0:
+        return band_factor(ab, piv, N, kl, ku)
     kv = kl + ku
     ld = band_ld(kl, ku)
     for k in range(ld * N):
@@ -1036,7 +1104,19 @@ def _band_solve(ws, sp, ab, piv, t, y, N, transposed):
 @hot
 def _sparse_blocks(ws, A, rows, cols, sp, tv, xv, N, n, sn):
     """``tv``, ``xv`` ← ``R_q``, ``P_q`` and ``P_X`` of the extended matrix ``A`` over the
-    patterns of ``sp`` (``sn = s n``: the translation's column, and the first row of P)."""
+    patterns of ``sp`` (``sn = s n``: the translation's column, and the first row of P);
+    from the storage that the map ``ws.si[SI_XMAP]`` gave them where there is one."""
+    si = ws.si
+    xm = assembly_map(ws)
+    if xm[0] != 0:  # where the assembly put them (step.assembly_offset)
+        for i in range(N + n):
+            ri = rows[i] if i < N else sn + i - N
+            for k in range(sp.tptr[i], sp.tptr[i + 1]):
+                tv[k] = A[0, assembly_offset(si, xm, ri, sn + sp.tcol[k])]
+        for a in range(n):
+            for k in range(sp.xptr[a], sp.xptr[a + 1]):
+                xv[k] = A[0, assembly_offset(si, xm, sn + a, cols[sp.xcol[k]])]
+        return
     for i in range(N + n):
         ri = rows[i] if i < N else sn + i - N
         for k in range(sp.tptr[i], sp.tptr[i + 1]):

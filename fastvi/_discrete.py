@@ -30,7 +30,8 @@ from .status import Status
 from .tables import Method
 
 __all__ = ["Run", "refuse", "prepare", "with_full_newton", "checked_model", "directions",
-           "param_indices", "tangent_work", "initial_tangent", "theta_derivative",
+           "param_indices", "tangent_work", "initial_tangent", "initial_cotangent",
+           "theta_derivative",
            "velocity_derivatives", "finish"]
 
 
@@ -311,17 +312,65 @@ def initial_tangent(run: Run, D: np.ndarray, initial_state=None):
     ``initial_state(params) -> (q0, v0)``, if given, adds its own derivative by the
     parameters to ``(δq, δv)`` (five-point differences). Returns ``(dq, dp, pidx, dth)``
     with ``pidx`` the parameters some direction moves and ``dth`` (d, len(pidx)).
+    :func:`initial_cotangent` is its transpose.
     """
-    model, prm, q0, v0 = run.model, run.prm, run.q0, run.v0
-    n, m, k = model.n, model.m, prm.shape[0]
+    n = run.model.n
     dq, dv, dth_all = D[:, :n].copy(), D[:, n:2 * n].copy(), D[:, 2 * n:]
-    pidx = [l for l in range(k) if np.any(dth_all[:, l] != 0.0)]
+    pidx = [l for l in range(run.prm.shape[0]) if np.any(dth_all[:, l] != 0.0)]
     dth = dth_all[:, pidx]
-    if initial_state is not None and pidx:
-        for j, l in enumerate(pidx):
-            d = theta_derivative(lambda p: np.concatenate(_state_of(initial_state, p, n)), prm, l)
-            dq += np.outer(dth[:, j], d[:n])
-            dv += np.outer(dth[:, j], d[n:])
+    M, G, Hv, Cq, W, S, g_th, gv_th, mv_th, dstate = _start_parts(run, pidx, initial_state)
+    for j in range(len(pidx) if dstate is not None else 0):
+        dq += np.outer(dth[:, j], dstate[j, :n])
+        dv += np.outer(dth[:, j], dstate[j, n:])
+    if G.shape[0]:
+        dq = dq - np.linalg.solve(S, G @ dq.T + g_th.T @ dth.T).T @ W.T
+        dv = dv - np.linalg.solve(S, G @ dv.T + Hv @ dq.T + gv_th.T @ dth.T).T @ W.T
+    dp = dv @ M.T + dq @ Cq.T + dth @ mv_th
+    return np.ascontiguousarray(dq), np.ascontiguousarray(dp), pidx, np.ascontiguousarray(dth)
+
+
+def initial_cotangent(run: Run, lq, lp, pidx, initial_state=None) -> np.ndarray:
+    r"""``λᵀ ∂(q0*, p0*)/∂(q0, v0, θ_pidx)`` (2n + len(pidx),): the cotangent ``(λ_q, λ_p)``
+    on the consistent initial state pulled back to the raw initial data and the
+    parameters ``pidx`` — the transpose of :func:`initial_tangent` (its formulas read
+    backwards), in O(m n) for a given ``S``'s factors instead of the ``(2n + k) × n``
+    tangent: with ``a_v = Mᵀ λ_p``, ``b = S⁻ᵀ Wᵀ a_v``, ``c = λ_q + C_qᵀ λ_p − H_vᵀ b`` and
+    ``e = S⁻ᵀ Wᵀ c``::
+
+        λ_{q0} = c − Gᵀ e,    λ_{v0} = a_v − Gᵀ b,
+        λ_θ = (M_θ v)ᵀ λ_p − (G_θ v)ᵀ b − g_θᵀ e
+              (+ the derivative of ``initial_state(params)`` applied to (λ_{q0}, λ_{v0}))
+    """
+    M, G, Hv, Cq, W, S, g_th, gv_th, mv_th, dstate = _start_parts(run, pidx, initial_state)
+    av = M.T @ lp
+    c = lq + Cq.T @ lp
+    lth = mv_th @ lp
+    if G.shape[0]:
+        b = np.linalg.solve(S.T, W.T @ av)
+        c = c - Hv.T @ b
+        e = np.linalg.solve(S.T, W.T @ c)
+        lq0, lv0 = c - G.T @ e, av - G.T @ b
+        lth = lth - gv_th @ b - g_th @ e
+    else:
+        lq0, lv0 = c, av
+    if dstate is not None:
+        lth = lth + dstate @ np.concatenate([lq0, lv0])
+    return np.concatenate([lq0, lv0, lth])
+
+
+def _start_parts(run: Run, pidx, initial_state):
+    """What :func:`initial_tangent` and :func:`initial_cotangent` read at the consistent
+    start: ``M, G, H_v, C_q`` (:func:`_start_terms`), ``W = M⁻¹Gᵀ`` and ``S = G W`` (None
+    without constraints), the derivatives by each parameter in ``pidx`` of ``g``, ``G v``
+    and ``M v`` ((len(pidx), m), (len(pidx), m), (len(pidx), n); five-point differences, a
+    constant mass's exactly zero), and that of ``initial_state(params)`` (len(pidx), 2n)
+    (None without it)."""
+    model, prm, q0, v0 = run.model, run.prm, run.q0, run.v0
+    n, m = model.n, model.m
+    dstate = None
+    if initial_state is not None and len(pidx):
+        dstate = np.array([theta_derivative(lambda p: np.concatenate(_state_of(initial_state, p, n)),
+                                            prm, l) for l in pidx]).reshape(len(pidx), 2 * n)
     M, G, Hv, Cq = _start_terms(run)
     theta = {l: (theta_derivative(lambda p: model.constraint_value(q0, p, run.t0), prm, l),
                  theta_derivative(lambda p: model.constraint_jacobian_value(q0, p, run.t0) @ v0
@@ -334,15 +383,13 @@ def initial_tangent(run: Run, D: np.ndarray, initial_state=None):
     g_th = np.array([theta[l][0] for l in pidx]).reshape(len(pidx), m) if theta else np.zeros((len(pidx), m))
     gv_th = np.array([theta[l][1] for l in pidx]).reshape(len(pidx), m) if theta else np.zeros((len(pidx), m))
     mv_th = np.array([theta[l][2] for l in pidx]).reshape(len(pidx), n) if theta else np.zeros((len(pidx), n))
+    W = S = None
     if m:
         # a large mechanism's constant diagonal mass: M⁻¹Gᵀ by its reciprocals, O(m n)
         diagonal = run.ws.structured and lay.reciprocal_mass.py_func(run.model_data.flags)
         W = G.T / np.diag(M)[:, None] if diagonal else np.linalg.solve(M, G.T)
         S = G @ W
-        dq = dq - np.linalg.solve(S, G @ dq.T + g_th.T @ dth.T).T @ W.T
-        dv = dv - np.linalg.solve(S, G @ dv.T + Hv @ dq.T + gv_th.T @ dth.T).T @ W.T
-    dp = dv @ M.T + dq @ Cq.T + dth @ mv_th
-    return np.ascontiguousarray(dq), np.ascontiguousarray(dp), pidx, np.ascontiguousarray(dth)
+    return M, G, Hv, Cq, W, S, g_th, gv_th, mv_th, dstate
 
 
 def _start_terms(run: Run):

@@ -212,7 +212,7 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
                        method=method, save_every=save_every, tol=tol, max_iter=max_iter,
                        newton=newton, params=params, solver=solver, check=check,
                        monitor=monitor, what="the adjoint", specialize=specialize)
-    n, m, k = model.n, model.m, run.prm.shape[0]
+    n, m = model.n, model.m
     meth = run.meth
     N = meth.s * n + meth.J * m
     g_size = g_entries(run.ws)
@@ -272,10 +272,8 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     if status != 0:
         run.info[:] = info
         disc.finish(run, int(status), loop_time, 0.0, "the adjoint")
-    # through the consistent initial state: its derivative by each raw input
-    D = np.eye(2 * n + k)[list(range(2 * n)) + [2 * n + l for l in pidx]]
-    dq0, dp0, _, _ = disc.initial_tangent(run, D, initial_state)
-    grad = dq0 @ lq + dp0 @ lp
+    # through the consistent initial state: the transpose of its derivative
+    grad = disc.initial_cotangent(run, lq, lp, pidx, initial_state)
     grad[2 * n:] += lth[:len(pidx)] + direct
     memory = sum(a.nbytes for a in ck) + sum(a.nbytes for a in rec)
     return AdjointResult(result, grad[:n], grad[n:2 * n], grad[2 * n:], pidx, lq, lp,

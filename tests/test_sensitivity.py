@@ -827,3 +827,38 @@ def test_a_large_models_start_terms_take_one_constraint_hessian_a_group():
     assert np.abs(Hv0).max() > 0.1  # a moving chain: H_v matters
     for x, y in ((M, M0), (G, G0), (Hv, Hv0), (Cq, Cq0)):
         assert np.array_equal(x, y)
+
+
+@pytest.mark.parametrize("scene", ["double_pendulum", "rotary_rod_slider"])
+def test_the_initial_cotangent_is_the_transpose_of_the_initial_tangent(scene):
+    """The adjoint pulls its cotangent on the consistent start back to the raw data and the
+    parameters by the transposed formulas (``_discrete.initial_cotangent``), in O(m n),
+    instead of forming the (2n + k) × n initial tangent: ⟨λ, T d⟩ = ⟨Tᵀ λ, d⟩ to round-off
+    for random ``d`` and ``λ``, with a start defined by the parameters, constraints that
+    the parameters move, and a configuration-dependent mass."""
+    from fastvi import _discrete as disc
+
+    if scene == "double_pendulum":
+        model = fastvi.scenes.double_pendulum(damping=0.3)
+        q0, v0 = _start(model.params)
+        initial_state, pidx = _start, [2, 3, 5]  # the rod lengths move the start too
+    else:
+        model = fastvi.scenes.rotary_rod_slider(k=100.0)
+        q0, v0 = fastvi.consistent_state(model, [0.3, 1.1, 0.3], [0.5, 0.2, 0.5])
+        initial_state, pidx = None, [2, 3]
+    n, k = model.n, len(model.params)
+    run = disc.prepare(model, q0, v0, h=0.01, t_end=None, n_steps=2, t0=0.0, t_span=None,
+                       method="P2L-Q3G", save_every=1, tol=1e-14, max_iter=50, newton="auto",
+                       params=None, solver="auto", check=False, monitor=True, what="x")
+    rng = np.random.default_rng(7)
+    D = np.zeros((5, 2 * n + k))
+    D[:, :2 * n] = rng.normal(size=(5, 2 * n))
+    D[:, [2 * n + l for l in pidx]] = rng.normal(size=(5, len(pidx)))
+    dq, dp, moved, _ = disc.initial_tangent(run, D, initial_state)
+    assert moved == pidx
+    lq, lp = rng.normal(size=n), rng.normal(size=n)
+    pulled = disc.initial_cotangent(run, lq, lp, pidx, initial_state)
+    forward = dq @ lq + dp @ lp
+    backward = D[:, list(range(2 * n)) + [2 * n + l for l in pidx]] @ pulled
+    assert np.abs(dq).max() > 0.1 and np.abs(pulled[2 * n:]).max() > 0.01  # θ moves the start
+    assert np.allclose(backward, forward, rtol=1e-12, atol=1e-13 * np.abs(forward).max())

@@ -120,8 +120,8 @@ TangentWork = namedtuple("TangentWork", [
     # K in band storage, factored in the order ``sp.perm`` (banded plans only), and a
     # permuted right-hand side (N,)
     "ab", "t",
-    "Tq",  # (N + n, n) R_q, then P_q, at fixed increments
-    "PX",  # (n, N) P_X: ∂P/∂X
+    "Tq",  # (N + n, n) R_q, then P_q, at fixed increments (empty: kept over their patterns)
+    "PX",  # (n, N) P_X: ∂P/∂X (empty, as Tq)
     "tval", "xval",  # R_q, P_q and P_X over the patterns of ``sp`` (where it has them)
     "pidx",  # (np,) int64: the parameters differentiated
     "Rth",  # (N + n, np) R_θ, then P_θ
@@ -224,6 +224,10 @@ def tangent_work(xws, rows, cols, pidx, d, sp, pd, k):
     banded = sp.perm.shape[0] > 0
     Nd = 1 if banded else N
     Nb = band_ld(sp.kl, sp.ku) * N if banded else 1
+    # R_q, P_q and P_X dense only where they are not kept over their patterns
+    Nt, nt = N + n, n
+    if sp.tptr.shape[0] > 0:
+        Nt, nt = 0, 0
     # a derivative callback's output: k × n or k × m, and the k × m × n of ∂G/∂θ or the
     # k × n × n of ∂M/∂θ only for a model that has them (a gigabyte for a chain of 256
     # links, whose G and M do not depend on θ)
@@ -235,7 +239,7 @@ def tangent_work(xws, rows, cols, pidx, d, sp, pd, k):
     return TangentWork(
         point_work(n, m, sp), rows, cols, np.zeros((Nd, Nd)), np.zeros(N, dtype=np.int64),
         np.zeros(Nb), np.zeros(N),
-        np.zeros((N + n, n)), np.zeros((n, N)), np.zeros(max(sp.tcol.shape[0], 1)),
+        np.zeros((Nt, nt)), np.zeros((nt, N)), np.zeros(max(sp.tcol.shape[0], 1)),
         np.zeros(max(sp.xcol.shape[0], 1)), pidx, np.zeros((N + n, npar)),
         np.zeros((n, npar)), np.zeros((mm, n)), np.zeros((mm, mm)), np.zeros(mm, dtype=np.int64),
         np.zeros(n, dtype=np.int64), np.zeros((d, n)), np.zeros((d, n)), np.zeros((d, npar)),

@@ -190,9 +190,12 @@ def tangent_work(run: Run, d: int, pidx):
     ``pidx``, with the model's derivatives by θ where it gives them
     (:meth:`fastvi.Model.param_derivative_data`), and its constant −∇V set."""
     meth = run.meth
-    tw = make_tangent_work(run.model.n, run.model.m, meth.s, meth.r, meth.J, d, pidx,
-                           run.model.param_derivative_data(), len(run.prm), run.sparsity,
-                           run.ws)
+    pd = run.model.param_derivative_data()
+    # the model's derivatives by θ give the step's (tangent._exact_in_theta): the adjoint
+    # then contracts them and needs no columns R_θ
+    exact = pd.exact != 0 and run.model_data.flags[lay.F_AUGMENT] == 0
+    tw = make_tangent_work(run.model.n, run.model.m, meth.s, meth.r, meth.J, d, pidx, pd,
+                           len(run.prm), run.sparsity, run.ws, exact=exact)
     _linear_part(run, tw)
     return tw
 

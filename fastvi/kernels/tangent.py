@@ -208,12 +208,12 @@ def make_sparsity(band=None, patterns=None):
 
 
 @njit
-def tangent_work(xws, rows, cols, pidx, d, sp, pd, k):
+def tangent_work(xws, rows, cols, pidx, d, sp, pd, k, exact):
     """A :class:`TangentWork` for ``d`` directions around the extended step's workspace
     ``xws`` (sizes ``n, m, s + 1, r, J``), differentiating by the parameters ``pidx``
     (int64) of the ``k`` of a model whose derivatives by them are ``pd``
-    (:class:`.layout.ParamData`); ``rows``, ``cols`` from :func:`index_maps`; ``sp`` the
-    model's :class:`Sparsity`."""
+    (:class:`.layout.ParamData`), which give the step's (``exact``, :func:`_exact_in_theta`);
+    ``rows``, ``cols`` from :func:`index_maps`; ``sp`` the model's :class:`Sparsity`."""
     n, m, sx, J = xws.dims[0], xws.dims[1], xws.dims[2], xws.dims[4]
     s = sx - 1
     N = s * n + J * m
@@ -228,6 +228,14 @@ def tangent_work(xws, rows, cols, pidx, d, sp, pd, k):
     Nt, nt = N + n, n
     if sp.tptr.shape[0] > 0:
         Nt, nt = 0, 0
+    # the columns R_θ, P_θ: formed by differences, or from the model's derivatives (Rk)
+    # for forward directions; the adjoint by the model's derivatives contracts them
+    # unformed (a 1024-link chain by its 2 049 parameters: 256 MiB)
+    Rr, Rc, Kr, Kc = N + n, npar, 0, 0
+    if exact and d == 0:
+        Rr, Rc = 0, 0
+    if d > 0:
+        Kr, Kc = npar, sx * n + J * m
     # a derivative callback's output: k × n or k × m, and the k × m × n of ∂G/∂θ or the
     # k × n × n of ∂M/∂θ only for a model that has them (a gigabyte for a chain of 256
     # links, whose G and M do not depend on θ)
@@ -240,13 +248,13 @@ def tangent_work(xws, rows, cols, pidx, d, sp, pd, k):
         point_work(n, m, sp), rows, cols, np.zeros((Nd, Nd)), np.zeros(N, dtype=np.int64),
         np.zeros(Nb), np.zeros(N),
         np.zeros((Nt, nt)), np.zeros((nt, N)), np.zeros(max(sp.tcol.shape[0], 1)),
-        np.zeros(max(sp.xcol.shape[0], 1)), pidx, np.zeros((N + n, npar)),
-        np.zeros((n, npar)), np.zeros((mm, n)), np.zeros((mm, mm)), np.zeros(mm, dtype=np.int64),
+        np.zeros(max(sp.xcol.shape[0], 1)), pidx, np.zeros((Rr, Rc)),
+        np.zeros((min(Rr, n), Rc)), np.zeros((mm, n)), np.zeros((mm, mm)), np.zeros(mm, dtype=np.int64),
         np.zeros(n, dtype=np.int64), np.zeros((d, n)), np.zeros((d, n)), np.zeros((d, npar)),
         np.zeros((d, N)), np.zeros((d, n)), np.zeros((d, n)), np.zeros(sx * n + J * m),
         np.zeros(n), np.zeros(n), np.zeros((mm, n)), np.zeros(mm), np.zeros(mm), np.zeros(n),
         np.zeros(n), np.zeros(n), np.zeros(N), np.zeros(n), np.zeros(n), np.zeros(STEP_OUT_SIZE),
-        pd, np.zeros((npar, sx * n + J * m)), np.zeros(max(k, 1) * per),
+        pd, np.zeros((Kr, Kc)), np.zeros(max(k, 1) * per),
         np.zeros((max(k, 1), n)), np.zeros((max(k, 1), n)), np.zeros(sx * n + J * m), xws)
 
 
@@ -255,14 +263,16 @@ def make_point_work(n, m):
     return point_work.py_func(int(n), int(m), make_sparsity())
 
 
-def make_tangent_work(n, m, s, r, J, d, pidx, pd, k, sp=None, step_ws=None):
+def make_tangent_work(n, m, s, r, J, d, pidx, pd, k, sp=None, step_ws=None, exact=False):
     """A :class:`TangentWork` for ``d`` directions, differentiating by the parameters
     ``pidx`` of the ``k`` of a model whose derivatives by them are ``pd``
     (:meth:`fastvi.Model.param_derivative_data`), of :class:`Sparsity` ``sp`` (None: dense) whose step has the
     workspace ``step_ws`` (its structured-solve plan, if any, serves the extended step:
     grouped differences of the constraint Hessian, the projection's banded or sparse
     ``G M⁻¹ Gᵀ``): :func:`tangent_work` run by Python (compiling it costs 2.4 s; the
-    ensemble's members run it compiled)."""
+    ensemble's members run it compiled). ``exact``: ``pd`` gives the step's derivatives by
+    θ (:func:`_exact_in_theta`), so that an adjoint (``d = 0``) forms no columns ``R_θ``;
+    the default keeps room for them."""
     rows, cols = index_maps(n, m, s, J)
     sp = make_sparsity() if sp is None else sp
     structured = step_ws is not None and step_ws.structured
@@ -274,7 +284,7 @@ def make_tangent_work(n, m, s, r, J, d, pidx, pd, k, sp=None, step_ws=None):
     elif structured:
         xws = xws._replace(si=step_ws.si, sb=step_ws.sb.copy(), structured=True)
     tw = tangent_work.py_func(xws, rows, cols, np.asarray(pidx, dtype=np.int64), int(d), sp, pd,
-                              int(k))
+                              int(k), bool(exact))
     if into_band:  # the factors where the assembly left K
         tw = tw._replace(ab=xws.A[0, :tw.ab.shape[0]])
     return tw
@@ -1576,6 +1586,8 @@ def theta_kind(md, tw):
     if tw.pidx.shape[0] == 0:
         return THETA_NONE
     if not _exact_in_theta.py_func(md, tw):
+        # the columns R_θ, P_θ are then formed: make_tangent_work(exact=False) keeps them
+        assert tw.Rth.shape[0] > 0, "the linearised step's work has no room for R_θ"
         return THETA_BY_DIFFERENCES
     return THETA_BY_MODEL if tw.dq.shape[0] > 0 else THETA_PULL_BY_MODEL
 
@@ -1764,7 +1776,7 @@ def tangent_member(i, membersp):
     ws = with_plan(workspace_for(g.dims), g.si, g.sb.copy(), None)
     xws = with_plan(workspace_for((n, m, s + 1, r, J)), g.si, g.sb.copy(), g.structured)
     tw = _started(tangent_work(xws, g.rows, g.cols, g.pidx, g.DQ.shape[1], g.sp, g.pd,
-                               g.P.shape[1] - 1), g.DQ[i],
+                               g.P.shape[1] - 1, True), g.DQ[i],
                   g.DP[i], g.TH[i])
     state = np.zeros((6, n))
     for a in range(n):

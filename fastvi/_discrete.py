@@ -375,17 +375,25 @@ def _start_parts(run: Run, pidx, initial_state):
         dstate = np.array([theta_derivative(lambda p: np.concatenate(_state_of(initial_state, p, n)),
                                             prm, l) for l in pidx]).reshape(len(pidx), 2 * n)
     M, G, Hv, Cq = _start_terms(run)
-    theta = {l: (theta_derivative(lambda p: model.constraint_value(q0, p, run.t0), prm, l),
-                 theta_derivative(lambda p: model.constraint_jacobian_value(q0, p, run.t0) @ v0
-                                  + model.constraint_time_derivative_value(q0, p, run.t0),
-                                  prm, l),
-                 # a constant mass is not a parameter's: its differences are zeros
-                 np.zeros(n) if model.mass_matrix_constant is not None else
-                 theta_derivative(lambda p: model.mass_matrix(q0, p) @ v0, prm, l))
-             for l in pidx} if (m or model.mass_matrix_constant is None) else {}
-    g_th = np.array([theta[l][0] for l in pidx]).reshape(len(pidx), m) if theta else np.zeros((len(pidx), m))
-    gv_th = np.array([theta[l][1] for l in pidx]).reshape(len(pidx), m) if theta else np.zeros((len(pidx), m))
-    mv_th = np.array([theta[l][2] for l in pidx]).reshape(len(pidx), n) if theta else np.zeros((len(pidx), n))
+    kp = len(pidx)
+    g_th, gv_th, mv_th = np.zeros((kp, m)), np.zeros((kp, m)), np.zeros((kp, n))
+
+    def by_differences(f, size):
+        return np.array([theta_derivative(f, prm, l) for l in pidx]).reshape(kp, size)
+
+    # the model's derivatives by θ where it gives them, as the linearised step takes them;
+    # five-point differences of the callbacks elsewhere
+    if m and kp:
+        if "constraint" in model.param_derivatives:
+            g_th = model.param_derivative_value("constraint", q0, v0, prm, run.t0)[list(pidx)]
+        else:
+            g_th = by_differences(lambda p: model.constraint_value(q0, p, run.t0), m)
+        if ("constraint_jacobian" not in model.param_derivatives_zero
+                or model.time_dependent):  # else G v is not a parameter's
+            gv_th = by_differences(lambda p: model.constraint_jacobian_value(q0, p, run.t0) @ v0
+                                   + model.constraint_time_derivative_value(q0, p, run.t0), m)
+    if model.mass_matrix_constant is None and kp:  # a constant mass is not a parameter's
+        mv_th = by_differences(lambda p: model.mass_matrix(q0, p) @ v0, n)
     W = S = None
     if m:
         # a large mechanism's constant diagonal mass: M⁻¹Gᵀ by its reciprocals, O(m n)

@@ -915,6 +915,12 @@ class Model:
         return frozenset(self._param_functions) | self._param_zero
 
     @property
+    def param_derivatives_zero(self) -> frozenset:
+        """The slots (:data:`PARAM_SLOTS`) whose derivative by the parameters the model
+        declared ``0``: the callback does not depend on θ."""
+        return frozenset(self._param_zero)
+
+    @property
     def param_derivatives_exact(self) -> bool:
         """Whether the derivatives by θ cover every callback θ can enter: ``mass`` when it is
         a function, ``kinetic_grad``, ``potential_grad``, ``constraint`` and

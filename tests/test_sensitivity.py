@@ -862,3 +862,30 @@ def test_the_initial_cotangent_is_the_transpose_of_the_initial_tangent(scene):
     backward = D[:, list(range(2 * n)) + [2 * n + l for l in pidx]] @ pulled
     assert np.abs(dq).max() > 0.1 and np.abs(pulled[2 * n:]).max() > 0.01  # θ moves the start
     assert np.allclose(backward, forward, rtol=1e-12, atol=1e-13 * np.abs(forward).max())
+
+
+def test_the_start_takes_the_models_derivative_of_the_constraint_by_theta():
+    """The tangent of the consistent start reads ``g_θ`` from the model's derivatives by θ
+    (and drops ``G_θ v`` for ``constraint_jacobian=0``), as the steps do: it agrees with
+    the twin model without derivatives, whose start takes five-point differences, and its
+    tangent satisfies ``G δq + g_θ δθ = 0`` with the model's own ``g_θ`` to round-off."""
+    from fastvi import _discrete as disc
+
+    exact = fastvi.scenes.double_pendulum(damping=0.3)
+    twin = models.damped_double_pendulum_by_differences(0.3)
+    assert {"constraint", "constraint_jacobian"} <= exact.param_derivatives
+    assert "constraint_jacobian" in exact.param_derivatives_zero and not twin.param_derivatives
+    q0, v0 = exact.initial_state(0.9, -0.4, 0.3, 1.1)
+    D = np.random.default_rng(3).normal(size=(4, 2 * exact.n + len(exact.params)))
+    tangents = []
+    for model in (exact, twin):
+        run = disc.prepare(model, q0, v0, h=0.01, t_end=None, n_steps=2, t0=0.0, t_span=None,
+                           method="P2L-Q3G", save_every=1, tol=1e-14, max_iter=50,
+                           newton="auto", params=None, solver="auto", check=False,
+                           monitor=True, what="x")
+        tangents.append(disc.initial_tangent(run, D))
+    (dq, dp, pidx, dth), (dq2, dp2, _, _) = tangents
+    assert np.allclose(dq, dq2, rtol=0, atol=1e-9) and np.allclose(dp, dp2, rtol=0, atol=1e-9)
+    g_th = exact.param_derivative_value("constraint", q0)[pidx]  # (k, m)
+    G = exact.constraint_jacobian_value(q0)
+    assert np.abs(dq @ G.T + dth @ g_th).max() < 1e-14 * np.abs(dq).max()

@@ -415,6 +415,15 @@ def _jacobian(md, exact, slot, of, kind, q, v, out, s1, s2, s3, n):
         _fd_vec_jacobian(md.fns[of], kind, q, v, md.prm, out, s1, s2, s3, n)
 
 
+@hot_inline
+def _over_span(si, o, x, spare):
+    """The place of entry ``x`` of a row (column) stored over its span, ``(base, lo, hi)``
+    at ``si[o]``; ``spare`` outside it."""
+    if x < si[o + 1] or x >= si[o + 2]:
+        return spare
+    return si[o] + x - si[o + 1]
+
+
 @hot
 def assembly_offset(si, xm, r, c):
     """Where entry ``(r, c)`` of the extended step's matrix sits in the storage ``A[0]`` of
@@ -429,17 +438,9 @@ def assembly_offset(si, xm, r, c):
     i = si[at + r]
     j = si[at + c]
     if j >= N:  # T_q: (base, lo, hi) of each row
-        o = tq + 3 * i
-        b = j - N
-        if b < si[o + 1] or b >= si[o + 2]:
-            return spare
-        return si[o] + b - si[o + 1]
+        return _over_span(si, tq + 3 * i, j - N, spare)
     if i >= N:  # P_X: (base, lo, hi) of each column
-        o = px + 3 * j
-        a = i - N
-        if a < si[o + 1] or a >= si[o + 2]:
-            return spare
-        return si[o] + a - si[o + 1]
+        return _over_span(si, px + 3 * j, i - N, spare)
     pj = si[pos + j]
     d = si[pos + i] - pj
     if d > kl or d < -ku:

@@ -10,6 +10,7 @@ bit; :mod:`fastvi.kernels.tangent` differentiates each step after it.
 from __future__ import annotations
 
 import time
+from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
@@ -321,14 +322,14 @@ def initial_tangent(run: Run, D: np.ndarray, initial_state=None):
     dq, dv, dth_all = D[:, :n].copy(), D[:, n:2 * n].copy(), D[:, 2 * n:]
     pidx = [l for l in range(run.prm.shape[0]) if np.any(dth_all[:, l] != 0.0)]
     dth = dth_all[:, pidx]
-    M, G, Hv, Cq, W, S, g_th, gv_th, mv_th, dstate = _start_parts(run, pidx, initial_state)
-    for j in range(len(pidx) if dstate is not None else 0):
-        dq += np.outer(dth[:, j], dstate[j, :n])
-        dv += np.outer(dth[:, j], dstate[j, n:])
-    if G.shape[0]:
-        dq = dq - np.linalg.solve(S, G @ dq.T + g_th.T @ dth.T).T @ W.T
-        dv = dv - np.linalg.solve(S, G @ dv.T + Hv @ dq.T + gv_th.T @ dth.T).T @ W.T
-    dp = dv @ M.T + dq @ Cq.T + dth @ mv_th
+    t = _start_parts(run, pidx, initial_state)
+    for j in range(len(pidx) if t.dstate is not None else 0):
+        dq += np.outer(dth[:, j], t.dstate[j, :n])
+        dv += np.outer(dth[:, j], t.dstate[j, n:])
+    if t.G.shape[0]:
+        dq = dq - np.linalg.solve(t.S, t.G @ dq.T + t.g_th.T @ dth.T).T @ t.W.T
+        dv = dv - np.linalg.solve(t.S, t.G @ dv.T + t.Hv @ dq.T + t.gv_th.T @ dth.T).T @ t.W.T
+    dp = dv @ t.M.T + dq @ t.Cq.T + dth @ t.mv_th
     return np.ascontiguousarray(dq), np.ascontiguousarray(dp), pidx, np.ascontiguousarray(dth)
 
 
@@ -344,30 +345,40 @@ def initial_cotangent(run: Run, lq, lp, pidx, initial_state=None) -> np.ndarray:
         λ_θ = (M_θ v)ᵀ λ_p − (G_θ v)ᵀ b − g_θᵀ e
               (+ the derivative of ``initial_state(params)`` applied to (λ_{q0}, λ_{v0}))
     """
-    M, G, Hv, Cq, W, S, g_th, gv_th, mv_th, dstate = _start_parts(run, pidx, initial_state)
-    av = M.T @ lp
-    c = lq + Cq.T @ lp
-    lth = mv_th @ lp
-    if G.shape[0]:
-        b = np.linalg.solve(S.T, W.T @ av)
-        c = c - Hv.T @ b
-        e = np.linalg.solve(S.T, W.T @ c)
-        lq0, lv0 = c - G.T @ e, av - G.T @ b
-        lth = lth - gv_th @ b - g_th @ e
+    t = _start_parts(run, pidx, initial_state)
+    av = t.M.T @ lp
+    c = lq + t.Cq.T @ lp
+    lth = t.mv_th @ lp
+    if t.G.shape[0]:
+        b = np.linalg.solve(t.S.T, t.W.T @ av)
+        c = c - t.Hv.T @ b
+        e = np.linalg.solve(t.S.T, t.W.T @ c)
+        lq0, lv0 = c - t.G.T @ e, av - t.G.T @ b
+        lth = lth - t.gv_th @ b - t.g_th @ e
     else:
         lq0, lv0 = c, av
-    if dstate is not None:
-        lth = lth + dstate @ np.concatenate([lq0, lv0])
+    if t.dstate is not None:
+        lth = lth + t.dstate @ np.concatenate([lq0, lv0])
     return np.concatenate([lq0, lv0, lth])
 
 
-def _start_parts(run: Run, pidx, initial_state):
-    """What :func:`initial_tangent` and :func:`initial_cotangent` read at the consistent
-    start: ``M, G, H_v, C_q`` (:func:`_start_terms`), ``W = M⁻¹Gᵀ`` and ``S = G W`` (None
-    without constraints), the derivatives by each parameter in ``pidx`` of ``g``, ``G v``
-    and ``M v`` ((len(pidx), m), (len(pidx), m), (len(pidx), n); five-point differences, a
-    constant mass's exactly zero), and that of ``initial_state(params)`` (len(pidx), 2n)
-    (None without it)."""
+#: what :func:`initial_tangent` and :func:`initial_cotangent` read at the consistent start
+#: (:func:`_start_parts`)
+StartParts = namedtuple("StartParts", [
+    "M", "G", "Hv", "Cq",  # :func:`_start_terms`
+    "W", "S",  # M⁻¹Gᵀ and G W (None without constraints)
+    # (len(pidx), m), (len(pidx), m), (len(pidx), n): the derivatives by each parameter in
+    # pidx of g, G v (+ ∂g/∂t) and M v
+    "g_th", "gv_th", "mv_th",
+    "dstate",  # (len(pidx), 2n) that of initial_state(params) (None without it)
+])
+
+
+def _start_parts(run: Run, pidx, initial_state) -> StartParts:
+    """The :class:`StartParts` of ``run`` by the parameters ``pidx``: the derivatives by θ
+    from the model's where it gives them (``constraint``; ``G v`` is zero for a declared
+    ``constraint_jacobian=0``, a constant mass's ``M v`` always), else five-point
+    differences of the callbacks."""
     model, prm, q0, v0 = run.model, run.prm, run.q0, run.v0
     n, m = model.n, model.m
     dstate = None
@@ -400,7 +411,7 @@ def _start_parts(run: Run, pidx, initial_state):
         diagonal = run.ws.structured and lay.reciprocal_mass.py_func(run.model_data.flags)
         W = G.T / np.diag(M)[:, None] if diagonal else np.linalg.solve(M, G.T)
         S = G @ W
-    return M, G, Hv, Cq, W, S, g_th, gv_th, mv_th, dstate
+    return StartParts(M, G, Hv, Cq, W, S, g_th, gv_th, mv_th, dstate)
 
 
 def _start_terms(run: Run):

@@ -60,7 +60,8 @@ from .layout import (CHESS, CJAC, F_AUGMENT, F_CH_PATTERN, F_EX_CHESS, F_EX_MJAC
                      SOLVE_BANDED, SOLVE_DENSE,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, P_CJAC, P_CON,
                      P_FORCE, P_KGRAD, P_MASS, P_PGRAD, ModelData, Samples, is_timed,
-                     make_workspace, reciprocal_mass, sizes, with_plan, workspace_for)
+                     make_workspace, reciprocal_mass, sizes, with_plan, workspace_for, XM_KL,
+                     XM_KU, XM_N, XM_SIZE, XMAP_HEADER)
 from .banded import (band_factor, band_ld, band_solve, band_solve_transposed, gmg_factor,
                      gmg_solve)
 # inlined: with the sizes as constants (sized_twin) the factorisations and solves unroll
@@ -336,7 +337,9 @@ def _band_assembly(si, sp, rows, n, m, N):
     tbase = band + np.cumsum(tlen) - tlen
     xbase = band + tlen.sum() + np.cumsum(xlen) - xlen
     spare = band + tlen.sum() + xlen.sum()
-    xsi = np.concatenate([si, [N, n, kl, ku], index, position,
+    header = np.zeros(XMAP_HEADER, dtype=np.int64)
+    header[[XM_N, XM_SIZE, XM_KL, XM_KU]] = N, n, kl, ku
+    xsi = np.concatenate([si, header, index, position,
                           np.column_stack([tbase, tspan]).ravel(),
                           np.column_stack([xbase, xspan]).ravel(), [spare]]).astype(np.int64)
     xsi[SI_XMAP] = si.shape[0]

@@ -22,7 +22,7 @@ from ._launch import Launcher
 from ._numba import quiet
 from .ensemble import PROGRESS_GROUPS, parallel_section
 from .integrate import IntegrationError
-from .kernels.layout import Samples
+from .kernels.layout import Samples, without_map
 from .kernels.drive import member_function, run_members
 from .kernels.tangent import Members, differentiator, index_maps, tangent_member
 from .model import Model
@@ -237,7 +237,9 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
     each, lin = differentiator(md, first.state, first.loop_ws, first.info, first.tx,
                                disc.tangent_work(first, d, pidx), dQ[0], first.sized)
     group = Members(md.fns, md.flags, md.Mc, KP, first.tabs, first.tx, first.opts, first.h,
-                    ws.dims, ws.si, ws.sb, ws.structured, X0, first.total, first.every, smp,
+                    # the plan without the single run's map: each member assembles densely
+                    ws.dims, without_map(ws.si), ws.sb, ws.structured, X0, first.total,
+                    first.every, smp,
                     infos, ev, first.stepk, first.stages, rows, cols,
                     np.asarray(pidx, dtype=np.int64), first.sparsity,
                     model.param_derivative_data(), DQ, DP, TH, dQ, dP, each, lin)

@@ -514,9 +514,18 @@ def workspace(model, meth, prm=None, solver: str = "auto", newton: bool = True):
     :func:`fastvi.kernels.step.step_kernel` returns stages that take it)."""
     p = plan(model, meth, prm, solver)
     unused = lay.unused_fields(model.kernel_arguments()[1], p.si, newton)
-    ws = lay.make_workspace(model.n, model.m, meth.s, meth.r, meth.J, unused)
+    si, N = p.si, meth.s * model.n + meth.J * model.m
+    # a long chain's full Newton assembles into band storage: O(N), not the dense N²
+    into_band = (si[lay.SI_A] == lay.SOLVE_BANDED and si[lay.SI_BSPAN] != 0
+                 and lay.too_large_to_hold(N))
+    ws = lay.make_workspace(model.n, model.m, meth.s, meth.r, meth.J,
+                            (unused | {"A"}) if into_band else unused)
+    if into_band:
+        a = int(si[lay.SI_A_PERM])
+        si, L = lay.assembly_into_band(si, N, int(si[lay.SI_A_KL]), int(si[lay.SI_A_KU]), si[a: a + N])
+        ws = ws._replace(A=np.zeros((0, 0) if "A" in unused else (1, L)))
     if np.any(p.si[:lay.SI_HEADER]):  # something structured: a solve or grouped differences
-        ws = ws._replace(si=p.si.copy(), sb=p.sb.copy(), structured=True)
+        ws = ws._replace(si=si.copy(), sb=p.sb.copy(), structured=True)
     return ws
 
 

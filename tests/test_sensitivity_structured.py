@@ -146,7 +146,7 @@ def test_the_band_assembly_changes_no_bit(monkeypatch):
     of a dense (N + n)² matrix packed into that storage afterwards: the same derivatives,
     bit for bit, from storage that grows like N, not N²."""
     from fastvi import _discrete as disc
-    from fastvi.kernels import tangent
+    from fastvi.kernels import layout
 
     q0, v0 = _chain_start(LINKS)
     rng = np.random.default_rng(6)
@@ -156,7 +156,7 @@ def test_the_band_assembly_changes_no_bit(monkeypatch):
     model = fastvi.scenes.chain(LINKS, damping=0.2)
 
     def derivatives(limit):
-        monkeypatch.setattr(tangent, "BAND_ASSEMBLY_BYTES", limit)
+        monkeypatch.setattr(layout, "BAND_ASSEMBLY_BYTES", limit)
         run = disc.prepare(model, q0, v0, h=0.01, t_end=None, n_steps=2, t0=0.0, t_span=None,
                            method="P2L-Q3G", save_every=1, tol=1e-14, max_iter=50,
                            newton="auto", params=None, solver="auto", check=False,

@@ -306,12 +306,16 @@ def test_a_diagonal_mass_given_as_a_vector_is_the_matrix():
         fastvi.Model(2 * N, N, mass=-masses, **kw)
 
 
-def _chain_without_constraint_hessian(N):
-    prm = (*([1.0] * N), *([1.0] * N), 9.81)
+def _chain_without_constraint_hessian(N, damping=None):
+    """A chain whose full Newton differences G for its constraint Hessian; with ``damping``,
+    a dashpot on every mass (the last parameter) whose ∂F/∂v it differences too."""
+    from fastvi.scenes import damping as dashpot
+    prm = (*([1.0] * N), *([1.0] * N), 9.81, *(() if damping is None else (damping,)))
+    force = {} if damping is None else dict(force=dashpot.force, force_jacobian_q=0)
     return fastvi.Model(2 * N, N, params=prm, mass=np.ones(2 * N), potential=_V,
                         potential_grad=_dV, potential_hessian=0, constraint=_g,
                         constraint_jacobian=_G, constraint_jacobian_pattern=pattern(N),
-                        name=f"nohess{N}")
+                        name=f"nohess{N}" + ("" if damping is None else "-damped"), **force)
 
 
 def test_grouped_differences_of_the_constraint_hessian_are_the_column_by_column_ones():
@@ -352,10 +356,12 @@ def test_grouped_differences_give_the_exact_hessians_trajectory():
 
 
 @pytest.mark.parametrize("case", ["damped", "grouped-hessians"])
-def test_the_banded_plans_assembly_over_spans_is_the_dense_one_bit_for_bit(case):
+def test_the_banded_plans_assembly_over_spans_is_the_dense_one_bit_for_bit(case, monkeypatch):
     """A banded plan assembles the exact Newton matrix over each row's span of the
     coordinates' coupling and of G, and zeroes only those spans: every entry must be the
-    dense assembly's, at several states in a row (nothing stale is left outside the spans)."""
+    dense assembly's, at several states in a row (nothing stale is left outside the spans).
+    So must the band of the assembly straight into band storage (the map of a long chain,
+    its threshold lowered here), in the plan's banded ordering."""
     model = chain(16, damping=0.3) if case == "damped" else _chain_without_constraint_hessian(24)
     ws = structure.workspace(model, P2)
     assert ws.si[lay.SI_A] == lay.SOLVE_BANDED and ws.si[lay.SI_BSPAN] and ws.si[lay.SI_GSPAN]
@@ -363,18 +369,25 @@ def test_the_banded_plans_assembly_over_spans_is_the_dense_one_bit_for_bit(case)
     si[lay.SI_BSPAN] = si[lay.SI_GSPAN] = 0  # the same plan, assembled densely
     dense = lay.make_workspace(model.n, model.m, P2.s, P2.r, P2.J)._replace(
         si=si, sb=ws.sb.copy(), structured=True)
+    monkeypatch.setattr(lay, "BAND_ASSEMBLY_BYTES", 0)
+    mapped = structure.workspace(model, P2)
+    N, kl, ku = ws.A.shape[0], int(ws.si[lay.SI_A_KL]), int(ws.si[lay.SI_A_KU])
+    perm = ws.si[ws.si[lay.SI_A_PERM]:][:N]
+    assert mapped.A.shape[0] == 1 and mapped.A.size < N * N / 2
     md = model.kernel_data()
     rng = np.random.default_rng(3)
     n = model.n
     for _ in range(3):
         q, p = rng.standard_normal(n), rng.standard_normal(n)
         X = 0.1 * rng.standard_normal(ws.X.size)
-        for w in (ws, dense):
+        for w in (ws, dense, mapped):
             w.X[:] = X
             w.G[0] = model.constraint_jacobian_value(q)
             assert assemble_at(md, P2.kernel_tables, 0.02, q, p, w, True) == lay.OK
         assert np.array_equal(ws.A, dense.A)
         assert np.count_nonzero(ws.A) > 3 * ws.A.shape[0]  # something was assembled
+        band = _to_band(dense.A[perm][:, perm], kl, ku)
+        assert np.array_equal(mapped.A[0, :band.size], band)
 
 
 def test_a_workspace_allocates_the_full_newtons_fields_only_with_its_stage():
@@ -393,8 +406,18 @@ def test_a_workspace_allocates_the_full_newtons_fields_only_with_its_stage():
     opts = lay.NewtonOptions(1e-14, 30, lay.NEWTON_AUTO)
     step_mod.step_kernel(model.kernel_data(), P2.kernel_tables, opts, ws, full=True)
     assert ws.A.shape == (N, N) and view.A is ws.A and not ws.A.any()
-    assert all(getattr(view, f).shape == (n, n) for f in ("Aq", "Cq", "Hc", "Fv", "Ma"))
-    assert view.Gp.shape == view.Gm.shape == (model.m, n)
+    assert view.Aq.shape == view.Hc.shape == (n, n)
+    # a constant mass, no force, the constraint Hessian given: no ∂(Mv)/∂q, no ∂F/∂v, no
+    # differences of G or of M, whose blocks and scratch the full Newton never reads
+    assert all(getattr(view, f).size == 0 for f in ("Cq", "Fv", "Ma", "Gp", "Gm"))
+    damped = chain(16, damping=0.3)
+    ws = structure.workspace(damped, P2, newton=False)
+    step_mod.step_kernel(damped.kernel_data(), P2.kernel_tables, opts, ws, full=True)
+    assert ws.Fv.shape == (n, n) and ws.Cq.size == ws.Ma.size == 0
+    fd = _chain_without_constraint_hessian(16)
+    ws = structure.workspace(fd, P2, newton=False)
+    step_mod.step_kernel(fd.kernel_data(), P2.kernel_tables, opts, ws, full=True)
+    assert ws.Gp.shape == ws.Gm.shape == (fd.m, n)
     assert ws.Mb.size == ws.Sc.size == ws.S.size == 0  # still never read
     # a small model's dense Schur complement and projection keep theirs
     small = structure.workspace(double_pendulum(), P2, newton=False)
@@ -407,15 +430,46 @@ def test_a_workspace_allocates_the_full_newtons_fields_only_with_its_stage():
     assert "Gp" not in lay.unused_fields(flags, si, False)
 
 
-@pytest.mark.parametrize("newton", ["auto", "full"])
-@pytest.mark.parametrize("name", ["chain12", "coupled_chain10", "damped_chain12",
-                                  "rotary_rod_slider", "kapitza_pendulum"])
-def test_a_workspace_without_its_unread_fields_gives_the_same_run(name, newton, monkeypatch):
-    """The same trajectory, bit for bit, as with every field allocated: whether the full
-    Newton is taken from the start or on a step's first need."""
+@pytest.mark.parametrize("name", ["damped_chain12", "coupled_chain10"])
+def test_the_full_newton_assembled_into_band_storage_gives_the_same_run(name, monkeypatch):
+    """A long chain's full Newton assembles its matrix straight into the band storage that
+    its LU factors, through a map of each entry's place (``layout.assembly_into_band``),
+    instead of a dense N² matrix packed into that storage afterwards: the same trajectory
+    bit for bit, from storage that grows like N. The threshold is lowered so that a small
+    chain takes that path; an ensemble's members, which keep a dense matrix of their own,
+    must not read the map (they get the plan without it)."""
     model, args = _SCENE_CASES[name]()
     q0, v0 = (chain(10).initial_state(np.linspace(0.2, 1.0, 10)) if args is None
               else model.initial_state(*args))
+    N = P2.s * model.n + P2.J * model.m
+    dense = fastvi.integrate(model, q0, v0, h=0.01, n_steps=40, newton="full", check=False)
+    assert structure.workspace(model, P2).A.shape == (N, N)
+    monkeypatch.setattr(lay, "BAND_ASSEMBLY_BYTES", 0)
+    ws = structure.workspace(model, P2, newton=False)
+    assert ws.si[lay.SI_XMAP] != 0 and ws.A.size == 0
+    lay.fit_newton_fields(ws, model.kernel_data().flags)  # what the full Newton's first need does
+    assert ws.A.shape[0] == 1 and ws.A.size < N * N / 2
+    band = fastvi.integrate(model, q0, v0, h=0.01, n_steps=40, newton="full", check=False)
+    assert np.array_equal(band.q, dense.q) and np.array_equal(band.p, dense.p)
+    ens = fastvi.integrate_ensemble(model, np.stack([q0, q0]), np.stack([v0, v0]), h=0.01,
+                                    n_steps=40, newton="full", threads=1)
+    assert np.array_equal(ens.q[1], dense.q[-1])  # the final states
+
+
+@pytest.mark.parametrize("newton", ["auto", "full"])
+@pytest.mark.parametrize("name", ["chain12", "coupled_chain10", "damped_chain12",
+                                  "differenced_chain12", "rotary_rod_slider",
+                                  "kapitza_pendulum"])
+def test_a_workspace_without_its_unread_fields_gives_the_same_run(name, newton, monkeypatch):
+    """The same trajectory, bit for bit, as with every field allocated: whether the full
+    Newton is taken from the start or on a step's first need."""
+    if name == "differenced_chain12":  # the full Newton's differences of G and of ∂F/∂v
+        model = _chain_without_constraint_hessian(12, damping=0.3)
+        q0, v0 = chain(12).initial_state(np.linspace(0.2, 1.4, 12))
+    else:
+        model, args = _SCENE_CASES[name]()
+        q0, v0 = (chain(10).initial_state(np.linspace(0.2, 1.0, 10)) if args is None
+                  else model.initial_state(*args))
     lean = fastvi.integrate(model, q0, v0, h=0.01, n_steps=40, newton=newton)
     monkeypatch.setattr(lay, "unused_fields", lambda flags, si, newton: frozenset())
     every = fastvi.integrate(model, q0, v0, h=0.01, n_steps=40, newton=newton)

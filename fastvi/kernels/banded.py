@@ -17,20 +17,28 @@ entry ``(i, j)`` of the permuted matrix sits at ``ab[kv + i − j + ld j]`` (col
 one flat array); the top ``kl`` rows take the fill of row interchanges. Hand-written rather
 than LAPACK through ``cython_lapack``: the bands here are narrow (``kl + ku`` ≈ 10–20) and
 a plain numba loop needs no function pointer baked into a cached kernel.
+
+A Newton matrix too large to hold densely (the full Newton's of a long chain, or the
+derivatives' extended step's) is assembled straight into that band storage: each write
+goes through a map stored in ``ws.si`` (:func:`assembly_offset`, built in NumPy by
+:func:`.layout.assembly_into_band`), and the factorisation then works in place.
 """
 
 import numpy as np
+from numba.core import types
+from numba.extending import overload
 
 from .._numba import hot, hot_inline, only_if, own
 from .layout import (NONFINITE, OK, S_GV, SI_A_BAND, SI_A_KL, SI_A_KU, SI_A_PERM, SI_GCOL, SI_GPTR,
-                     SI_RHS, SI_S, SI_S_BAND, SI_S_DST, SI_S_IPERM, SI_S_KL, SI_S_KU, SI_S_LEN, SI_S_LU, SI_S_PERM,
+                     SI_RHS, SI_XMAP, XM_KL, XM_KU, XM_N, XM_SIZE, XMAP_HEADER, SI_S, SI_S_BAND, SI_S_DST, SI_S_IPERM, SI_S_KL, SI_S_KU, SI_S_LEN, SI_S_LU, SI_S_PERM,
                      SI_SC, SI_SC_BAND, SI_SC_DST, SI_SC_KL, SI_SC_KU, SI_SC_LEN, SI_SC_LU,
                      SI_SC_PERM, SI_SCOL, SI_SPTR, SINGULAR_CONSTRAINTS, SOLVE_BANDED)
 from .sparse_lu import sparse_factor, sparse_solve
 
 __all__ = ["band_factor", "band_solve", "band_solve_transposed", "band_pack", "newton_banded", "schur_structured",
            "schur_solve_structured", "mech_impulses_structured", "g_times", "gt_times", "band_ld",
-           "mech_rows_sparse", "project_structured", "gmg_factor", "gmg_solve"]
+           "mech_rows_sparse", "project_structured", "gmg_factor", "gmg_solve", "assembly_map",
+           "assembly_offset", "add_entry", "put_entry", "clear_band"]
 
 
 @hot_inline
@@ -149,18 +157,154 @@ def band_pack(A, perm, ab, N, kl, ku):
             ab[ld * j + kv + i - j] = A[perm[i], pj]
 
 
+@hot_inline
+def _over_span(si, o, x, spare):
+    """The place of entry ``x`` of a row (column) stored over its span, ``(base, lo, hi)``
+    at ``si[o]``; ``spare`` outside it."""
+    if x < si[o + 1] or x >= si[o + 2]:
+        return spare
+    return si[o] + x - si[o + 1]
+
+
+@hot
+def assembly_offset(si, xm, r, c):
+    """Where entry ``(r, c)`` of a Newton matrix sits in the storage ``A[0]`` of an assembly
+    by the map ``xm`` (:func:`assembly_map`): in the band storage of the step's matrix
+    ``K`` in its banded ordering (as :func:`band_pack` would leave it); for the
+    derivatives' extended step, in the extended rows' own columns ``T_q`` (each row over
+    its span), or in the extended step's own rows ``P_X`` (stored by columns of ``K``, each
+    over its span). An entry
+    outside these (zero: the band and the spans were chosen to hold the pattern) goes to
+    the last cell, which no one reads. Called, not inlined: typed once, not at every
+    write of the assembly."""
+    at, N, kl, ku, tq, px, spare, pos = xm[1], xm[2], xm[3], xm[4], xm[5], xm[6], xm[7], xm[8]
+    i = si[at + r]
+    j = si[at + c]
+    if j >= N:  # T_q: (base, lo, hi) of each row
+        return _over_span(si, tq + 3 * i, j - N, spare)
+    if i >= N:  # P_X: (base, lo, hi) of each column
+        return _over_span(si, px + 3 * j, i - N, spare)
+    pj = si[pos + j]
+    d = si[pos + i] - pj
+    if d > kl or d < -ku:
+        return spare
+    return (2 * kl + ku + 1) * pj + kl + ku + d
+
+
+# The writes of the assembly: ``xm`` is None for a small model's workspace (its type says
+# it has no map), and the overloads below then compile to the plain store alone; a
+# run-time branch would leave the map's code to be typed at every write all the same.
+def add_entry(A, si, xm, r, c, x):
+    """``A[r, c] += x``; by the map ``xm`` where there is one (:func:`assembly_offset`)."""
+
+
+def put_entry(A, si, xm, r, c, x):
+    """``A[r, c] = x``, as :func:`add_entry`."""
+
+
+def clear_band(A, xm):
+    """The band of an assembly by the map ``xm`` ← 0 (nothing without one)."""
+
+
+def _add_plain(A, si, xm, r, c, x):
+    A[r, c] += x
+
+
+def _add_mapped(A, si, xm, r, c, x):
+    if xm[0] == 0:
+        A[r, c] += x
+    else:
+        A[0, assembly_offset(si, xm, r, c)] += x
+
+
+def _put_plain(A, si, xm, r, c, x):
+    A[r, c] = x
+
+
+def _put_mapped(A, si, xm, r, c, x):
+    if xm[0] == 0:
+        A[r, c] = x
+    else:
+        A[0, assembly_offset(si, xm, r, c)] = x
+
+
+def _zero_band_plain(A, xm):
+    pass
+
+
+def _zero_band_mapped(A, xm):
+    if xm[0] != 0:  # the whole band, which the last factorisation filled
+        for k in range((2 * xm[3] + xm[4] + 1) * xm[2]):
+            A[0, k] = 0.0
+
+
+@overload(add_entry, jit_options=dict(_nrt=False))
+def _add_typed(A, si, xm, r, c, x):
+    return _add_plain if isinstance(xm, types.NoneType) else _add_mapped
+
+
+@overload(put_entry, jit_options=dict(_nrt=False))
+def _put_typed(A, si, xm, r, c, x):
+    return _put_plain if isinstance(xm, types.NoneType) else _put_mapped
+
+
+@overload(clear_band, jit_options=dict(_nrt=False))
+def _zero_band_typed(A, xm):
+    return _zero_band_plain if isinstance(xm, types.NoneType) else _zero_band_mapped
+
+
+def mapped(xm):
+    """Whether ``xm`` (:func:`assembly_map`) is a map: false by type for None."""
+
+
+@overload(mapped, jit_options=dict(_nrt=False))
+def _mapped_typed(xm):
+    if isinstance(xm, types.NoneType):
+        return lambda xm: False
+    return lambda xm: xm[0] != 0
+
+
+@hot
+def _assembly_map(ws_):
+    """The map by which a structured workspace's Newton matrix is assembled into band
+    storage (:func:`assembly_offset`), read once from ``si[SI_XMAP]``: ``(offset, at, N, kl,
+    ku, tq, px, spare, pos)``, ``at`` the offset in si of the extended indices' indices in
+    K (the identity for the step's own matrix), ``tq``, ``px`` of the spans of ``T_q`` and
+    ``P_X`` (the extended step's), ``spare`` the spare cell's
+    offset in ``A[0]``, ``pos`` the offset of the positions in the banded ordering; all 0
+    where there is none (the first: whether there is one)."""
+    ws = own(ws_)
+    si = ws.si
+    xm = si[SI_XMAP]
+    if xm == 0:
+        return (xm, xm, xm, xm, xm, xm, xm, xm, xm)
+    N, n = si[xm + XM_N], si[xm + XM_SIZE]
+    at = xm + XMAP_HEADER
+    tq = at + 2 * N + n
+    px = tq + 3 * (N + n)
+    return (xm, at, N, si[xm + XM_KL], si[xm + XM_KU], tq, px, si[px + 3 * N], at + N + n)
+
+
+#: None for a small model's workspace: its writes compile to plain stores
+assembly_map = only_if(_assembly_map, "structured", None)
+
+
 @hot
 def newton_banded(ws_, N):
-    """Full Newton: ``ws.R`` ← ``A⁻¹ ws.R`` through the banded LU of the permuted ``ws.A``.
-    Returns 0, or non-zero when a pivot vanished."""
+    """Full Newton: ``ws.R`` ← ``A⁻¹ ws.R`` through the banded LU of the permuted ``ws.A``,
+    packed into band storage, or factored where the assembly wrote it (a map,
+    :func:`assembly_map`). Returns 0, or non-zero when a pivot vanished."""
     ws = own(ws_)
     si, sb = ws.si, ws.sb
     kl = si[SI_A_KL]
     ku = si[SI_A_KU]
     perm = si[si[SI_A_PERM]: si[SI_A_PERM] + N]
-    ab = sb[si[SI_A_BAND]: si[SI_A_BAND] + band_ld(kl, ku) * N]
     t = sb[si[SI_RHS]: si[SI_RHS] + N]
-    band_pack(ws.A, perm, ab, N, kl, ku)
+    if mapped(assembly_map(ws_)):
+        ab = ws.A[0, :band_ld(kl, ku) * N]
+    else:
+        ab = sb[si[SI_A_BAND]: si[SI_A_BAND] + band_ld(kl, ku) * N]
+        band_pack(ws.A, perm, ab, N, kl, ku)
     if band_factor(ab, ws.piv, N, kl, ku) != 0:
         return 1
     R = ws.R

@@ -200,23 +200,26 @@ SOLVE_DENSE, SOLVE_BANDED, SOLVE_SPARSE = 0, 1, 2
  # the declared ``force_jacobian_pattern`` (n rows, 0: none), over which ∂F/∂v is added
  # without scanning each row for its non-zeros
  SI_BSPAN, SI_GSPAN, SI_FSPAN,
- # the extended step of the derivatives (kernels/tangent.py) with a banded Newton matrix:
- # the offset in si of the map by which its assembly writes straight into band storage
- # (:data:`XMAP_HEADER`; 0: into the dense ``ws.A``)
+ # a banded Newton matrix too large to hold densely (the full Newton's, or the extended
+ # step's of the derivatives, kernels/tangent.py): the offset in si of the map by which its
+ # assembly writes straight into band storage (:data:`XMAP_HEADER`; 0: into the dense
+ # ``ws.A``). It belongs to the workspace whose ``A`` was shaped for it: a workspace built
+ # from another's plan takes that plan :func:`without_map`
  SI_XMAP) = range(37)
 #: length of the header of ``ws.si``; with ``si[SI_SC]`` or ``si[SI_S]`` structured the
 #: kernels use the pattern of G (a diagonal constant mass is then required), as with
 #: ``si[SI_HC_NG]`` non-zero
 SI_HEADER = 37
-#: the map at ``si[SI_XMAP]`` (kernels/step.py, ``_offset``): ``N``, ``n``, ``kl``, ``ku``;
-#: for each of the extended matrix's ``N + n`` rows (and columns: the same set) its index in
-#: the step's matrix ``K``, or ``N + a`` for the extended step's own row (column) ``a``; for
-#: each index of ``K`` its position in the banded ordering; ``(base, lo, hi)`` of each of
-#: the ``N + n`` rows of ``T_q`` (its columns ``lo … hi − 1`` from ``base`` in the storage)
-#: and of each of the ``N`` columns of ``P_X`` (its rows ``lo … hi − 1``); the offset of
-#: the spare cell
-(XM_N, XM_SIZE, XM_KL, XM_KU) = range(4)
-XMAP_HEADER = 4
+#: the map at ``si[SI_XMAP]`` (:func:`assembly_into_band`, read by
+#: :func:`.banded.assembly_offset`): ``N``, ``n`` (0 for the step's own matrix), ``kl``,
+#: ``ku`` and the length of the storage; for each of the matrix's ``N + n`` rows (and
+#: columns: the same set) its index in the step's matrix ``K``, or ``N + a`` for the
+#: extended step's own row (column) ``a``; for each index of ``K`` its position in the
+#: banded ordering; ``(base, lo, hi)`` of each of the ``N + n`` rows of ``T_q`` (its columns
+#: ``lo … hi − 1`` from ``base`` in the storage) and of each of the ``N`` columns of ``P_X``
+#: (its rows ``lo … hi − 1``); the offset of the spare cell
+(XM_N, XM_SIZE, XM_KL, XM_KU, XM_LEN) = range(5)
+XMAP_HEADER = 5
 #: descriptor of a sparse LU in ``ws.si`` (sparse_lu.py): offsets in si of its arrays, for
 #: an N-row system in its fill-reducing order — position in the factor storage of each
 #: pivot; of each column's entries below the diagonal (pointers, rows, positions); of each
@@ -401,8 +404,8 @@ assert tuple(_WS_SHAPES) + ("structured", "dims") == Workspace._fields
 
 
 #: the fields the full Newton reads and writes (:func:`.step.newton_matrix`; ``Ma``, ``Gp``
-#: and ``Gm`` as its difference scratch): ``(s n + J m)² + 5 n² + 2 m n`` floats, most of
-#: a large mechanism's workspace. A step whose stages have no full Newton (``Stages.full == 0``,
+#: and ``Gm`` as its difference scratch): up to ``(s n + J m)² + 5 n² + 2 m n`` floats, most
+#: of a large mechanism's workspace. A step whose stages have no full Newton (``Stages.full == 0``,
 #: :func:`.step.step_kernel`) returns ``NEEDS_FULL_NEWTON`` before it would touch them, so
 #: its workspace may leave them empty (:func:`unused_fields`); ``step_kernel`` allocates
 #: them (:func:`fit_newton_fields`) when it returns stages that take it.
@@ -420,10 +423,11 @@ def unused_fields(flags, si, newton):
     * ``Sc``, the dense Schur complement of the mechanics matrix: not where the plan solves
       it banded (``si[SI_SC]``); ``S``, the dense ``G M⁻¹ Gᵀ`` of the end projection: not
       where the plan solves that one banded or sparse (``si[SI_S]``);
-    * without the full Newton (``newton`` false), :data:`NEWTON_FIELDS`, but ``Ma`` and
-      ``Gp`` where the end projection is dense (it factors M(q_{k+1}) there, and forms
-      M⁻¹Gᵀ), and ``Gp`` for a time-dependent model (the work of time over a step reads
-      ∂g/∂t into it)."""
+    * without the full Newton (``newton`` false), :data:`NEWTON_FIELDS`; with it, those of
+      its blocks and scratch that the model's terms never need (:func:`_newton_unused`);
+    * but ``Ma`` and ``Gp`` where the end projection is dense (it factors M(q_{k+1})
+      there, and forms M⁻¹Gᵀ), and ``Gp`` for a time-dependent model (the work of time over
+      a step reads ∂g/∂t into it)."""
     dense_projection = si[SI_S] == SOLVE_DENSE
     out = set()
     if flags[F_MASSFN] == 0:
@@ -434,13 +438,30 @@ def unused_fields(flags, si, newton):
         out.add("Sc")
     if not dense_projection:
         out.add("S")
-    if not newton:
-        out.update(NEWTON_FIELDS)
-        if dense_projection:
-            out -= {"Ma", "Gp"}
-        if flags[F_TIME] != 0:
-            out.discard("Gp")
+    out.update(NEWTON_FIELDS if not newton else _newton_unused(flags))
+    if dense_projection:
+        out -= {"Ma", "Gp"}
+    if flags[F_TIME] != 0:
+        out.discard("Gp")
     return frozenset(out)
+
+
+def _newton_unused(flags):
+    """The full Newton's fields that :func:`.step.newton_matrix` never reads for a model
+    with these ``flags``: ``Cq`` = ∂(M v)/∂q without a mass function; ``Fv`` = ∂F/∂v
+    without a force; ``Gp``, ``Gm``, the differences of G, where the model gives its
+    constraint Hessian; ``Ma``, the scratch of a mass function's differences, without one.
+    Each ``n × n`` or ``m × n``: 32 MiB apiece for a chain of 1 024 links. A wrong rule
+    here would let a kernel write past an empty array: each one is the guard of the
+    field's only uses in ``newton_matrix``, word for word."""
+    out = set()
+    if flags[F_MASSFN] == 0:
+        out.update(("Cq", "Ma"))
+    if flags[F_FORCE] == 0:
+        out.add("Fv")
+    if flags[F_EX_CHESS] != 0:
+        out.update(("Gp", "Gm"))
+    return out
 
 
 def _sizes_env(n, m, s, r, J):
@@ -470,17 +491,74 @@ def make_workspace(n, m, s, r, J, unused=frozenset()):
     return Workspace(*fields, None, (env["n"], env["m"], env["s"], env["r"], env["J"]))
 
 
-def fit_newton_fields(ws):
-    """Allocate the full Newton's fields (:data:`NEWTON_FIELDS`) that ``ws`` left empty, in
-    place: the arrays themselves grow (to zeros), so every tuple that holds them — ``ws``,
-    its loop view (:func:`loop_view`), a run's record of it — sees them. What
-    :func:`.step.step_kernel` does whenever the stages it returns take the full Newton."""
+def fit_newton_fields(ws, flags):
+    """Allocate the full Newton's fields (:data:`NEWTON_FIELDS`) that ``ws`` left empty and
+    a model with these ``flags`` reads (:func:`unused_fields`), in place: the arrays
+    themselves grow (to zeros), so every tuple that holds them — ``ws``, its loop view
+    (:func:`loop_view`), a run's record of it — sees them. What :func:`.step.step_kernel`
+    does whenever the stages it returns take the full Newton. ``A`` takes the shape of its
+    band storage where ``ws.si`` has a map for it."""
     env = None
+    unused = unused_fields(flags, ws.si, True)
     for name in NEWTON_FIELDS:
         a = getattr(ws, name)
-        if a.size == 0:
+        if a.size == 0 and name not in unused:
             env = env or _sizes_env(*(int(x) for x in ws.dims))
-            a.resize(_shape(name, env), refcheck=False)
+            shape = _shape(name, env)
+            if name == "A" and ws.si[SI_XMAP] != 0:
+                shape = (1, int(ws.si[ws.si[SI_XMAP] + XM_LEN]))
+            a.resize(shape, refcheck=False)
+
+
+#: the size of a dense Newton matrix above which a banded one is assembled straight into
+#: band storage (:func:`assembly_into_band`): about a chain of 190 links. Below it, a dense
+#: matrix that fits in the caches costs less than the map's few loads a write
+#: (docs/decisions/0033-the-extended-matrix-in-band-storage.md).
+BAND_ASSEMBLY_BYTES = 16 * 2 ** 20
+
+
+def too_large_to_hold(N):
+    """Whether a dense ``N × N`` Newton matrix exceeds :data:`BAND_ASSEMBLY_BYTES`."""
+    return 8 * N * N > BAND_ASSEMBLY_BYTES
+
+
+def assembly_into_band(si, N, kl, ku, perm, index=None, tspan=None, xspan=None):
+    """``(si', L)``: the plan ``si`` with the map of an assembly into band storage appended
+    (at ``si'[SI_XMAP]``, :data:`XMAP_HEADER`), and the length ``L`` of the storage ``A[0]``
+    it addresses (:func:`.banded.assembly_offset`): the band (``2 kl + ku + 1`` by ``N``, in
+    the ordering ``perm``: :func:`.banded.band_factor`'s storage), then the extended step's
+    rows of ``T_q`` over their spans ``tspan`` and columns of ``P_X`` over ``xspan``
+    (``(lo, hi)`` pairs), then one spare cell for the entries outside them, which no one
+    reads. ``index``: the index in ``K`` of each of the matrix's ``N + n`` rows and columns
+    (``N + a`` for the extended step's own row ``a``). Without them the map is the step's
+    own ``N × N`` matrix's. O(N (kl + ku + w)) floats, ``w`` the widest span, in place of
+    the dense matrix."""
+    if index is None:
+        index, tspan, xspan = np.arange(N), np.zeros((N, 2), np.int64), np.zeros((N, 2), np.int64)
+    n = index.shape[0] - N
+    position = np.empty(N, dtype=np.int64)
+    position[perm] = np.arange(N)
+    tlen, xlen = tspan[:, 1] - tspan[:, 0], xspan[:, 1] - xspan[:, 0]
+    band = (2 * kl + ku + 1) * N
+    tbase = band + np.cumsum(tlen) - tlen
+    xbase = band + tlen.sum() + np.cumsum(xlen) - xlen
+    spare = band + tlen.sum() + xlen.sum()
+    header = np.zeros(XMAP_HEADER, dtype=np.int64)
+    header[[XM_N, XM_SIZE, XM_KL, XM_KU, XM_LEN]] = N, n, kl, ku, spare + 1
+    out = np.concatenate([si, header, index, position, np.column_stack([tbase, tspan]).ravel(),
+                          np.column_stack([xbase, xspan]).ravel(), [spare]]).astype(np.int64)
+    out[SI_XMAP] = si.shape[0]
+    return out, int(spare + 1)
+
+
+def without_map(si):
+    """The plan ``si`` without its map of :func:`assembly_into_band` (the map is its last
+    part): for a workspace whose ``A`` is shaped otherwise."""
+    if si[SI_XMAP] == 0:
+        return si
+    out = si[:si[SI_XMAP]].copy()
+    out[SI_XMAP] = 0
+    return out
 
 
 def _workspace_for_source():

@@ -35,20 +35,18 @@ import numba
 import numpy as np
 from numba.core import sigutils, types
 from numba.core.ccallback import CFunc
-from numba.extending import overload
-
 from .._launch import _key
 from .._numba import CalledAs, byref, hot, hot_inline, only_if, own, ptr, quiet
-from .banded import (gt_times, mech_impulses_structured, mech_rows_sparse, newton_banded,
-                     project_structured, schur_structured)
+from .banded import (add_entry, assembly_map, clear_band, gt_times, mech_impulses_structured,
+                     mech_rows_sparse, newton_banded, project_structured, put_entry,
+                     schur_structured)
 from .layout import (FD_T, FD_T_POINTS, CHESS, CJAC, CON, F_AUGMENT, F_DIAG, F_EX_CHESS, F_EX_FJQ,
                      F_EX_FJV, F_EX_GT, F_EX_KHESS, F_EX_MJAC, F_EX_PHESS, F_CH_PATTERN, F_FJ_PATTERN,
                      F_FORCE,
                      F_FORCE_Q0, F_LINPOT, F_M, F_MASSFN, F_TIME, F_TSLOT, FJQ, FJV, FORCE, GT, H_FG, H_FULL, H_HIST, H_MBAR, KGRAD, MASS, MJAC,
                      NEEDS_FULL_NEWTON, NEWTON_FAILED, NEWTON_FULL, NONFINITE, OK, PGRAD, PHESS,
                      POT, KHESS, S_FULL,
-                     S_G, S_GV, S_ITERS, S_RES, S_WORK, S_WORK_F, SI_A, SI_BSPAN, SI_XMAP,
-                     XM_KL, XM_KU, XM_N, XM_SIZE, XMAP_HEADER, SI_FSPAN, SI_GCOL,
+                     S_G, S_GV, S_ITERS, S_RES, S_WORK, S_WORK_F, SI_A, SI_BSPAN, SI_FSPAN, SI_GCOL,
                      SI_GPTR, SI_GSPAN,
                      SI_HC_BCOL,
                      SI_HC_COLS, SI_HC_CPTR, SI_HC_NG, SI_HC_PPTR, SI_HC_ROWS, SI_S, SI_SC, SINGULAR,
@@ -61,7 +59,7 @@ from .linalg import (augmented_mass, invert, invert_unpivoted, lu_factor, lu_fac
 __all__ = ["make_workspace", "assemble", "assemble_at", "residual_dependence", "newton_matrix", "add_block", "plan_spans", "residual", "linear_force", "step", "step_kernel",
            "take_step", "step_once", "cached_cfunc", "assemble_function", "ASSEMBLE_SIGNATURE",
            "end_momentum", "velocity_residual", "hidden_residual", "constraint_rate",
-           "jacobian_rate", "assembly_map", "assembly_offset"]
+           "jacobian_rate"]
 
 _FD_REL = 6.0554544523933395e-06  # cbrt(machine epsilon): central differences' best step
 #: the mechanics matrix is abandoned for the full Newton when successive increments shrink
@@ -416,129 +414,10 @@ def _jacobian(md, exact, slot, of, kind, q, v, out, s1, s2, s3, n):
 
 
 @hot_inline
-def _over_span(si, o, x, spare):
-    """The place of entry ``x`` of a row (column) stored over its span, ``(base, lo, hi)``
-    at ``si[o]``; ``spare`` outside it."""
-    if x < si[o + 1] or x >= si[o + 2]:
-        return spare
-    return si[o] + x - si[o + 1]
-
-
-@hot
-def assembly_offset(si, xm, r, c):
-    """Where entry ``(r, c)`` of the extended step's matrix sits in the storage ``A[0]`` of
-    an assembly by the map ``xm`` (:func:`assembly_map`): in the band storage of the step's
-    matrix ``K`` in its banded ordering (as :func:`.banded.band_pack` would leave it), in
-    the extended rows' own columns ``T_q`` (each row over its span), or in the extended
-    step's own rows ``P_X`` (stored by columns of ``K``, each over its span); an entry
-    outside these (zero: the band and the spans were chosen to hold the pattern) goes to
-    the last cell, which no one reads. Called, not inlined: typed once, not at every
-    write of the assembly."""
-    at, N, kl, ku, tq, px, spare, pos = xm[1], xm[2], xm[3], xm[4], xm[5], xm[6], xm[7], xm[8]
-    i = si[at + r]
-    j = si[at + c]
-    if j >= N:  # T_q: (base, lo, hi) of each row
-        return _over_span(si, tq + 3 * i, j - N, spare)
-    if i >= N:  # P_X: (base, lo, hi) of each column
-        return _over_span(si, px + 3 * j, i - N, spare)
-    pj = si[pos + j]
-    d = si[pos + i] - pj
-    if d > kl or d < -ku:
-        return spare
-    return (2 * kl + ku + 1) * pj + kl + ku + d
-
-
-# The writes of the assembly: ``xm`` is None for a small model's workspace (its type says
-# it has no map), and the overloads below then compile to the plain store alone; a
-# run-time branch would leave the map's code to be typed at every write all the same.
-def _add(A, si, xm, r, c, x):
-    """``A[r, c] += x``; by the map ``xm`` where there is one (:func:`assembly_offset`)."""
-
-
-def _put(A, si, xm, r, c, x):
-    """``A[r, c] = x``, as :func:`_add`."""
-
-
-def _zero_band(A, xm):
-    """The band of an assembly by the map ``xm`` ← 0 (nothing without one)."""
-
-
-def _add_plain(A, si, xm, r, c, x):
-    A[r, c] += x
-
-
-def _add_mapped(A, si, xm, r, c, x):
-    if xm[0] == 0:
-        A[r, c] += x
-    else:
-        A[0, assembly_offset(si, xm, r, c)] += x
-
-
-def _put_plain(A, si, xm, r, c, x):
-    A[r, c] = x
-
-
-def _put_mapped(A, si, xm, r, c, x):
-    if xm[0] == 0:
-        A[r, c] = x
-    else:
-        A[0, assembly_offset(si, xm, r, c)] = x
-
-
-def _zero_band_plain(A, xm):
-    pass
-
-
-def _zero_band_mapped(A, xm):
-    if xm[0] != 0:  # the whole band, which the last factorisation filled
-        for k in range((2 * xm[3] + xm[4] + 1) * xm[2]):
-            A[0, k] = 0.0
-
-
-@overload(_add, jit_options=dict(_nrt=False))
-def _add_typed(A, si, xm, r, c, x):
-    return _add_plain if isinstance(xm, types.NoneType) else _add_mapped
-
-
-@overload(_put, jit_options=dict(_nrt=False))
-def _put_typed(A, si, xm, r, c, x):
-    return _put_plain if isinstance(xm, types.NoneType) else _put_mapped
-
-
-@overload(_zero_band, jit_options=dict(_nrt=False))
-def _zero_band_typed(A, xm):
-    return _zero_band_plain if isinstance(xm, types.NoneType) else _zero_band_mapped
-
-
-@hot
-def _assembly_map(ws_):
-    """The map by which a structured workspace's Newton matrix is assembled into band
-    storage (:func:`assembly_offset`), read once from ``si[SI_XMAP]``: ``(offset, at, N, kl,
-    ku, tq, px, spare, pos)``, ``at`` the offset in si of the extended indices' indices in
-    K, ``tq``, ``px`` of the spans of ``T_q`` and ``P_X``, ``spare`` the spare cell's
-    offset in ``A[0]``, ``pos`` the offset of the positions in the banded ordering; all 0
-    where there is none (the first: whether there is one)."""
-    ws = own(ws_)
-    si = ws.si
-    xm = si[SI_XMAP]
-    if xm == 0:
-        return (xm, xm, xm, xm, xm, xm, xm, xm, xm)
-    N, n = si[xm + XM_N], si[xm + XM_SIZE]
-    at = xm + XMAP_HEADER
-    tq = at + 2 * N + n
-    px = tq + 3 * (N + n)
-    return (xm, at, N, si[xm + XM_KL], si[xm + XM_KU], tq, px, si[px + 3 * N], at + N + n)
-
-
-#: None for a small model's workspace: its writes compile to plain stores
-assembly_map = only_if(_assembly_map, "structured", None)
-
-
-@hot_inline
 def _add_row(A, si, xm, r, c0, coef, B, a, lo, hi):
     """``A[r, c0 + c] += coef · B[a, c]`` for ``c`` in ``lo … hi − 1``."""
     for c in range(lo, hi):
-        _add(A, si, xm, r, c0 + c, coef * B[a, c])
+        add_entry(A, si, xm, r, c0 + c, coef * B[a, c])
 
 
 @hot_inline
@@ -583,11 +462,11 @@ def add_block(A, r0, c0, coef, B, rows, n, si, sp, xm):
     if sp != 0:
         for a in range(rows):
             for c in range(si[sp + 2 * a], si[sp + 2 * a + 1]):
-                _add(A, si, xm, r0 + a, c0 + c, coef * B[a, c])
+                add_entry(A, si, xm, r0 + a, c0 + c, coef * B[a, c])
     else:
         for a in range(rows):
             for c in range(n):
-                _add(A, si, xm, r0 + a, c0 + c, coef * B[a, c])
+                add_entry(A, si, xm, r0 + a, c0 + c, coef * B[a, c])
 
 
 @hot_inline
@@ -596,11 +475,11 @@ def _set_block(A, r0, c0, coef, B, rows, n, si, sp, xm):
     if sp != 0:
         for a in range(rows):
             for c in range(si[sp + 2 * a], si[sp + 2 * a + 1]):
-                _put(A, si, xm, r0 + a, c0 + c, coef * B[a, c])
+                put_entry(A, si, xm, r0 + a, c0 + c, coef * B[a, c])
     else:
         for a in range(rows):
             for c in range(n):
-                _put(A, si, xm, r0 + a, c0 + c, coef * B[a, c])
+                put_entry(A, si, xm, r0 + a, c0 + c, coef * B[a, c])
 
 
 @hot_inline
@@ -668,17 +547,17 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
     si = ws.si
     bsp, gsp, fsp = plan_spans(ws_)
     xm = assembly_map(ws_)
-    _zero_band(A, xm)  # by a map (assembly_offset), then its own rows and columns' spans
+    clear_band(A, xm)  # by a map (assembly_offset), then its own rows and columns' spans
     if bsp != 0:
         for nu in range(s):
             for mu in range(s):
                 for a in range(n):
                     for c in range(si[bsp + 2 * a], si[bsp + 2 * a + 1]):
-                        _put(A, si, xm, nu * n + a, mu * n + c, 0.0)
+                        put_entry(A, si, xm, nu * n + a, mu * n + c, 0.0)
     else:
         for k in range(N):
             for l in range(N):
-                _put(A, si, xm, k, l, 0.0)
+                put_entry(A, si, xm, k, l, 0.0)
 
     if not has_mass:
         # the derivative of the residual's quadratic form, row 0 as its sum (as there)
@@ -695,7 +574,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                 r0 = nu * n
                 if diag:
                     for a in range(n):
-                        _put(A, si, xm, r0 + a, c0 + a, cM * Mc[a, a])
+                        put_entry(A, si, xm, r0 + a, c0 + a, cM * Mc[a, a])
                 else:
                     _set_block(A, r0, c0, cM, Mc, n, n, si, bsp, xm)
 
@@ -752,7 +631,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                     add_block(Aq, 0, 0, 1.0, Hc, n, n, si, bsp, None)
                 if patterned:
                     _clear(Fv, n, si, fv_spans if fv_spans != 0 else bsp)
-                _jacobian(md, flags[F_EX_FJV], FJV, FORCE, _FD_V, qi, vi, Fv, Ma[0], fa, F, n)
+                _jacobian(md, flags[F_EX_FJV], FJV, FORCE, _FD_V, qi, vi, Fv, Pm, fa, F, n)
             # a block of zeros adds nothing: skipping it leaves A as it was
             force_q = not q_free and _nonzero(Aq, n, si, bsp)
             w = h * b[i]
@@ -783,7 +662,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                     if force_q:
                         for a in range(n):
                             for c in range(n):
-                                _add(A, si, xm, r0 + a, c0 + c, cA * Aq[a, c])
+                                add_entry(A, si, xm, r0 + a, c0 + c, cA * Aq[a, c])
                     if has_mass:
                         # ∂/∂Q^μ of ℓ'_ν M v and of ℓ_ν ∂T/∂q: the mass and mixed terms
                         cM = b[i] * Ld[nu, i] * Ld[mu, i] * inv_h
@@ -792,12 +671,12 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                         if bsp != 0:
                             for a in range(n):
                                 for c in range(si[bsp + 2 * a], si[bsp + 2 * a + 1]):
-                                    _add(A, si, xm, r0 + a, c0 + c,
+                                    add_entry(A, si, xm, r0 + a, c0 + c,
                                          cM * Mi[a, c] + cB * Cq[c, a] + cC * Cq[a, c])
                         else:
                             for a in range(n):
                                 for c in range(n):
-                                    _add(A, si, xm, r0 + a, c0 + c,
+                                    add_entry(A, si, xm, r0 + a, c0 + c,
                                          cM * Mi[a, c] + cB * Cq[c, a] + cC * Cq[a, c])
                     if has_force and not sparse_fv:
                         add_block(A, r0, c0, b[i] * L[nu, i] * Ld[mu, i], Fv, n, n, si, bsp, xm)
@@ -847,7 +726,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                                 c0 = (mu - 1) * n
                                 for a in range(n):
                                     for c in range(n):
-                                        _add(A, si, xm, r0 + a, c0 + c, -(cc * Hc[a, c]))
+                                        add_entry(A, si, xm, r0 + a, c0 + c, -(cc * Hc[a, c]))
         for j in range(J):
             Gj = G[j]
             col = sn + j * m
@@ -858,11 +737,11 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                     if gsp != 0:  # G's rows by their spans: the transposed block by columns
                         for c in range(m):
                             for a in range(si[gsp + 2 * c], si[gsp + 2 * c + 1]):
-                                _put(A, si, xm, r0 + a, col + c, -cl * Gj[c, a])
+                                put_entry(A, si, xm, r0 + a, col + c, -cl * Gj[c, a])
                     else:
                         for a in range(n):
                             for c in range(m):
-                                _put(A, si, xm, r0 + a, col + c, -cl * Gj[c, a])
+                                put_entry(A, si, xm, r0 + a, col + c, -cl * Gj[c, a])
 
 
 # ----------------------------------------------------------------------------- predictor, full Newton
@@ -2042,7 +1921,7 @@ def step_kernel(md, tabs, opts, ws, full=False, sized=False):
     stepk, stages = _STEPS[key], _OPTIONAL[(plan, "base")]
     if full:
         stages = stages._replace(newton_full=_OPTIONAL[(plan, "newton_full")], full=1)
-        fit_newton_fields(ws)  # of a workspace made without them (layout.unused_fields)
+        fit_newton_fields(ws, md.flags)  # of a workspace made without them (layout.unused_fields)
     if timed:
         stages = stages._replace(step_work=_OPTIONAL[((key, False), "step_work")])
     if sized and ws.structured is None:

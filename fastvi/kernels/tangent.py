@@ -60,15 +60,15 @@ from .layout import (CHESS, CJAC, F_AUGMENT, F_CH_PATTERN, F_EX_CHESS, F_EX_MJAC
                      SOLVE_BANDED, SOLVE_DENSE,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, P_CJAC, P_CON,
                      P_FORCE, P_KGRAD, P_MASS, P_PGRAD, ModelData, Samples, is_timed,
-                     make_workspace, reciprocal_mass, sizes, with_plan, workspace_for, XM_KL,
-                     XM_KU, XM_N, XM_SIZE, XMAP_HEADER)
-from .banded import (band_factor, band_ld, band_solve, band_solve_transposed, gmg_factor,
-                     gmg_solve)
+                     assembly_into_band, make_workspace, reciprocal_mass, sizes,
+                     too_large_to_hold, with_plan, without_map, workspace_for)
+from .banded import (assembly_map, assembly_offset, band_factor, band_ld, band_solve,
+                     band_solve_transposed, gmg_factor, gmg_solve)
 # inlined: with the sizes as constants (sized_twin) the factorisations and solves unroll
 from .linalg import lu_factor_small, lu_solve_small
 from .step import (ASSEMBLE_SIGNATURE, add_block, assemble_function, cached_cfunc,
                    fd_constraint_hessian, fd_momentum_jacobian, end_momentum, jacobian_rate,
-                   linear_force, plan_spans, assembly_map, assembly_offset)
+                   linear_force, plan_spans)
 
 __all__ = ["PointWork", "TangentWork", "extended_tables", "make_point_work",
            "make_tangent_work", "point", "point_terms", "linearise", "push", "pull",
@@ -277,13 +277,14 @@ def make_tangent_work(n, m, s, r, J, d, pidx, pd, k, sp=None, step_ws=None, exac
     rows, cols = index_maps(n, m, s, J)
     sp = make_sparsity() if sp is None else sp
     structured = step_ws is not None and step_ws.structured
-    into_band = structured and _assembles_into_band(step_ws.si, sp, n, s * n + J * m)
+    step_si = without_map(step_ws.si) if structured else None  # the step's own A's map
+    into_band = structured and _assembles_into_band(step_si, sp, n, s * n + J * m)
     xws = make_workspace(n, m, s + 1, r, J, unused=frozenset({"A"}) if into_band else frozenset())
     if into_band:
-        si, A = _band_assembly(step_ws.si, sp, rows, n, m, s * n + J * m)
+        si, A = _band_assembly(step_si, sp, rows, n, m, s * n + J * m)
         xws = xws._replace(A=A, si=si, sb=step_ws.sb.copy(), structured=True)
     elif structured:
-        xws = xws._replace(si=step_ws.si, sb=step_ws.sb.copy(), structured=True)
+        xws = xws._replace(si=step_si, sb=step_ws.sb.copy(), structured=True)
     tw = tangent_work.py_func(xws, rows, cols, np.asarray(pidx, dtype=np.int64), int(d), sp, pd,
                               int(k), bool(exact))
     if into_band:  # the factors where the assembly left K
@@ -291,37 +292,26 @@ def make_tangent_work(n, m, s, r, J, d, pidx, pd, k, sp=None, step_ws=None, exac
     return tw
 
 
-#: the size of the dense extended matrix above which it is assembled into band storage
-BAND_ASSEMBLY_BYTES = 16 * 2 ** 20
-
-
 def _assembles_into_band(si, sp, n, N):
     """Whether the extended step of a structured model whose step's plan is ``si`` and whose
     :class:`Sparsity` is ``sp`` (``n`` coordinates, ``N`` unknowns) assembles its matrix
     straight into band storage: where ``K`` is banded, its own rows and columns are read
     over their patterns, the assembly writes over the rows' spans (a constant diagonal
-    mass), and the dense matrix would be large. Both give the same matrix bit for bit;
-    the map costs each entry a few loads, which a dense matrix too large for the caches
-    costs more (docs/decisions/0033-the-extended-matrix-in-band-storage.md)."""
-    large = 8 * (N + n) ** 2 > BAND_ASSEMBLY_BYTES
-    return large and sp.perm.shape[0] > 0 and sp.tptr.shape[0] > 0 and si[SI_BSPAN] != 0
+    mass), and the dense matrix would be large (:func:`.layout.too_large_to_hold`). Both
+    give the same matrix bit for bit."""
+    return (too_large_to_hold(N + n) and sp.perm.shape[0] > 0 and sp.tptr.shape[0] > 0
+            and si[SI_BSPAN] != 0)
 
 
 def _band_assembly(si, sp, rows, n, m, N):
-    """The extended step's plan and matrix storage for an assembly into band storage:
-    ``si`` with the map of :data:`.layout.XMAP_HEADER` appended (at ``si[SI_XMAP]``), and
-    ``A`` (1, L), the storage :func:`.step.assembly_offset` addresses: ``K``'s band (the
-    :func:`.banded.band_factor` storage), the rows of ``T_q`` and the columns of ``P_X``
-    each over its span of the coupling (of G for a constraint's), and one spare cell —
-    O(N (kl + ku + w)), ``w`` the widest span, in place of the dense (N + n)²."""
-    kl, ku = int(sp.kl), int(sp.ku)
+    """The extended step's plan and matrix storage for an assembly into band storage
+    (:func:`.layout.assembly_into_band`): ``K``'s band, the rows of ``T_q`` and the columns
+    of ``P_X`` each over its span of the coupling (of G for a constraint's)."""
     ext = np.arange(N + n)
     index = np.empty(N + n, dtype=np.int64)
     index[rows] = np.arange(N)
     own = np.setdiff1d(ext, rows)  # the translation's rows and columns, s n … s n + n − 1
     index[own] = N + np.arange(n)
-    position = np.empty(N, dtype=np.int64)
-    position[sp.perm] = np.arange(N)
     # each extended row's (and column's) span: its coordinate's, or its constraint's
     first = own[-1] + 1  # (s + 1) n: the first constraint row, and impulse column
     span = np.empty((N + n, 2), dtype=np.int64)
@@ -332,18 +322,8 @@ def _band_assembly(si, sp, rows, n, m, N):
     tspan = np.empty_like(span)
     tspan[index] = span  # row i of T_q: the extended row of index i
     xspan = tspan[:N]  # column j of P_X: the extended column of index j (rows, cols alike)
-    tlen, xlen = tspan[:, 1] - tspan[:, 0], xspan[:, 1] - xspan[:, 0]
-    band = band_ld(kl, ku) * N
-    tbase = band + np.cumsum(tlen) - tlen
-    xbase = band + tlen.sum() + np.cumsum(xlen) - xlen
-    spare = band + tlen.sum() + xlen.sum()
-    header = np.zeros(XMAP_HEADER, dtype=np.int64)
-    header[[XM_N, XM_SIZE, XM_KL, XM_KU]] = N, n, kl, ku
-    xsi = np.concatenate([si, header, index, position,
-                          np.column_stack([tbase, tspan]).ravel(),
-                          np.column_stack([xbase, xspan]).ravel(), [spare]]).astype(np.int64)
-    xsi[SI_XMAP] = si.shape[0]
-    return xsi, np.zeros((1, spare + 1))
+    xsi, L = assembly_into_band(si, N, int(sp.kl), int(sp.ku), sp.perm, index, tspan, xspan)
+    return xsi, np.zeros((1, L))
 
 
 def step_band(ws):
@@ -1125,7 +1105,7 @@ def _sparse_blocks(ws, A, rows, cols, sp, tv, xv, N, n, sn):
     from the storage that the map ``ws.si[SI_XMAP]`` gave them where there is one."""
     si = ws.si
     xm = assembly_map(ws)
-    if xm[0] != 0:  # where the assembly put them (step.assembly_offset)
+    if xm[0] != 0:  # where the assembly put them (banded.assembly_offset)
         for i in range(N + n):
             ri = rows[i] if i < N else sn + i - N
             for k in range(sp.tptr[i], sp.tptr[i + 1]):

@@ -649,10 +649,12 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
         stepk, stages = step_kernel(model.kernel_data(), meth.kernel_tables,
                                     opts["newton"], ws, full=True, sized=sized)
         compile_time += time.perf_counter() - t_step
+        # each member's workspace as this one: what its step reads, the full Newton's
+        # matrix in band storage for a long chain (layout.field_shapes)
         group = drive.EnsembleMembers(
-            fns, flags, Mc, KP, meth.kernel_tables, opts["newton"], h, t0, dims, plan.si,
-            plan.sb, X0, total, mode, every, H0, Qs, Vs, Ps, En, Gr, GVr, It, Wk,
-            ist, fst, ev.fns, ev.count, ev.direction, ev.terminal, Te, Qe, Ve, Ne, stepk, stages)
+            fns, flags, Mc, KP, meth.kernel_tables, opts["newton"], h, t0, dims, ws.si,
+            plan.sb, lay.field_shapes(ws), X0, total, mode, every, H0, Qs, Vs, Ps, En, Gr,
+            GVr, It, Wk, ist, fst, ev.fns, ev.count, ev.direction, ev.terminal, Te, Qe, Ve, Ne, stepk, stages)
         t_member = time.perf_counter()
         with quiet():
             member = drive.ensemble_member(group)

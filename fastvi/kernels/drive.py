@@ -24,7 +24,7 @@ from .layout import (E_FAILED, E_SAVED, E_STATUS, E_STEPS, EVENT_SLOTS, EVENT_TE
                      I_WORK_F, INFO_SIZE, NEEDS_FULL_NEWTON, POT, S_FULL, S_G, S_GV, S_ITERS,
                      S_RES, S_WORK, S_WORK_F, SAVE_DIAGNOSTICS, SAVE_STRIDE,
                      STEP_OUT_SIZE, Events, ModelData, Samples, dim, is_timed, sizes,
-                     with_plan, workspace_for)
+                     with_plan, workspace_shaped)
 from .adapt import advance, finished, next_step
 from .events import after_step, event_values, room_for_crossings
 from .._launch import _key
@@ -344,7 +344,7 @@ def run_member(md, tabs, opts, h, t0, state, ws, n_total, mode, every, H0, smp, 
 
 
 EnsembleMembers = namedtuple("EnsembleMembers", [
-    "fns", "flags", "Mc", "P", "tabs", "opts", "h", "t0", "dims", "si", "sb",
+    "fns", "flags", "Mc", "P", "tabs", "opts", "h", "t0", "dims", "si", "sb", "shapes",
     "X0", "n_total", "mode", "every", "H0", "Qs", "Vs", "Ps", "En", "Gr", "GVr", "It", "Wk",
     "ist", "fst", "efns", "ecount", "edir", "eterm", "Te", "Qe", "Ve", "Ne", "stepk",
     "stages"])
@@ -353,10 +353,12 @@ EnsembleMembers.__doc__ = """The ensemble of :func:`fastvi.integrate_ensemble`: 
     :func:`_ensemble_member`).
 
     ``dims`` = (n, m, s, r, J) sizes each member's workspace (the stages in ``stages`` may
-    be compiled for these sizes: :func:`.step.step_kernel`), and ``si``,
-    ``sb`` are the structured-solve plan of the model and method (:func:`fastvi.structure.plan`;
-    each member solves with its own copy of ``sb``, in a workspace typed as the step's loop
-    view, :func:`.layout.loop_view`). ``P``
+    be compiled for these sizes: :func:`.step.step_kernel`), ``shapes`` its arrays' shapes
+    (:func:`.layout.field_shapes` of a single run's workspace with the full Newton, which
+    the members take without returning to Python), and ``si``, ``sb`` the structured-solve
+    plan of that workspace (:func:`fastvi.structure.workspace`; each member solves with
+    its own copy of ``sb``, in a workspace typed as the step's loop view,
+    :func:`.layout.loop_view`). ``P``
     (N, k + 1) holds each member's kernel parameters (the kernels write the time into the
     last entry of a member's own row); the
     outputs are indexed by
@@ -377,7 +379,7 @@ def _ensemble_member(i, gp):
     g = own(gp)
     n = dim(g.dims[0])
     s = dim(g.dims[2])
-    ws = with_plan(workspace_for(g.dims), g.si, g.sb.copy(), None)
+    ws = with_plan(workspace_shaped(g.dims, g.shapes), g.si, g.sb.copy(), None)
     state = np.zeros((6, n))
     for a in range(n):
         state[0, a] = g.X0[i, 0, a]

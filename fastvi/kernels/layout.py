@@ -652,6 +652,39 @@ kept in the workspace's ``dims``: what a member of an ensemble allocates inside 
 loop."""
 
 
+def _workspace_shaped_source():
+    env = _sizes_env(2, 1, 2, 3, 2)  # any sizes: each field's number of axes
+    args = []
+    for k, name in enumerate(_WS_SHAPES):
+        axes = np.ndim(np.empty(_shape(name, env), dtype=np.int8))
+        shape = ", ".join(f"shapes[{k}, {a}]" for a in range(axes))
+        args.append(f"np.zeros(({shape},){', dtype=np.int64' if name in _WS_INT else ''})")
+    return ("def workspace_shaped(dims, shapes):\n"
+            f"    return Workspace({', '.join(args)}, None, dims)\n")
+
+
+def field_shapes(ws):
+    """The shape of each of ``ws``'s arrays, (fields, 3) int64 in :data:`_WS_SHAPES` order
+    (``si`` and ``sb`` empty: :func:`with_plan` gives them): what :func:`workspace_shaped`
+    allocates again."""
+    out = np.zeros((len(_WS_SHAPES), 3), dtype=np.int64)
+    for k, name in enumerate(_WS_SHAPES):
+        if name not in ("si", "sb"):
+            a = getattr(ws, name)
+            out[k, :a.ndim] = a.shape
+    return out
+
+
+exec(_workspace_shaped_source(), _scope)  # noqa: S102 - generated from the table above
+workspace_shaped = nb.njit(nogil=True, error_model="numpy", boundscheck=False)(
+    _scope["workspace_shaped"])
+workspace_shaped.__doc__ = """A workspace of the sizes ``dims`` whose arrays have the shapes
+``shapes`` (:func:`field_shapes` of a single run's workspace, its full Newton allocated):
+the fields that run leaves empty stay empty, and a full Newton assembled into band storage
+keeps its band-shaped ``A`` (its plan, with the map, goes with it). What a member of an
+ensemble allocates inside the parallel loop."""
+
+
 @hot_inline
 def sizes(ws):
     """``(n, m, s, r, J)`` of the workspace ``ws``: run-time integers in the generic kernels,

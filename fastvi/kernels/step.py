@@ -57,7 +57,7 @@ from .linalg import (augmented_mass, invert, invert_unpivoted, lu_factor, lu_fac
                      lu_solve, lu_solve_small)
 
 __all__ = ["make_workspace", "assemble", "assemble_at", "residual_dependence", "newton_matrix", "add_block", "plan_spans", "residual", "linear_force", "step", "step_kernel",
-           "take_step", "step_once", "cached_cfunc", "assemble_function", "ASSEMBLE_SIGNATURE",
+           "take_step", "step_once", "clear_rows", "cached_cfunc", "assemble_function", "ASSEMBLE_SIGNATURE",
            "end_momentum", "velocity_residual", "hidden_residual", "constraint_rate",
            "jacobian_rate"]
 
@@ -483,16 +483,24 @@ def _set_block(A, r0, c0, coef, B, rows, n, si, sp, xm):
 
 
 @hot_inline
-def _clear(B, n, si, sp):
-    """``B ← 0`` (n, n), over the rows' spans as :func:`add_block`."""
-    if sp != 0:
-        for a in range(n):
-            for c in range(si[sp + 2 * a], si[sp + 2 * a + 1]):
-                B[a, c] = 0.0
+def clear_rows(B, rows, n, spans):
+    """``B ← 0`` (rows, n) over each row's span ``spans`` (``(lo, hi)`` pairs; empty: all
+    of it). A callback with a declared pattern writes only its non-zeros, and entries
+    outside the spans are never written: they keep the zeros of the allocation."""
+    if spans.shape[0] > 0:
+        for c in range(rows):
+            for a in range(spans[2 * c], spans[2 * c + 1]):
+                B[c, a] = 0.0
     else:
-        for a in range(n):
-            for c in range(n):
-                B[a, c] = 0.0
+        for c in range(rows):
+            for a in range(n):
+                B[c, a] = 0.0
+
+
+@hot_inline
+def _spans(si, sp, rows):
+    """The rows' spans at ``si[sp …]`` (:func:`plan_spans`), empty where ``sp`` is 0."""
+    return si[sp: sp + 2 * rows] if sp != 0 else si[:0]
 
 
 @hot
@@ -605,7 +613,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
             # ∂F/∂q = T_qq − V_qq (+ ∂F_nc/∂q); F, Pm, fa are spent scratch of the residual
             if not q_free:
                 if flags[F_LINPOT] != 0:
-                    _clear(Aq, n, si, bsp)
+                    clear_rows(Aq, n, n, _spans(si, bsp, n))
                 else:
                     _jacobian(md, flags[F_EX_PHESS], PHESS, PGRAD, _FD_HESSIAN, qi, qi, Aq, fa,
                               F, Pm, n)
@@ -626,11 +634,11 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                 patterned = flags[F_FJ_PATTERN] != 0
                 if flags[F_FORCE_Q0] == 0:
                     if patterned:
-                        _clear(Hc, n, si, bsp)
+                        clear_rows(Hc, n, n, _spans(si, bsp, n))
                     _jacobian(md, flags[F_EX_FJQ], FJQ, FORCE, _FD_Q, qi, vi, Hc, fa, F, Pm, n)
                     add_block(Aq, 0, 0, 1.0, Hc, n, n, si, bsp, None)
                 if patterned:
-                    _clear(Fv, n, si, fv_spans if fv_spans != 0 else bsp)
+                    clear_rows(Fv, n, n, _spans(si, fv_spans if fv_spans != 0 else bsp, n))
                 _jacobian(md, flags[F_EX_FJV], FJV, FORCE, _FD_V, qi, vi, Fv, Pm, fa, F, n)
             # a block of zeros adds nothing: skipping it leaves A as it was
             force_q = not q_free and _nonzero(Aq, n, si, bsp)
@@ -701,7 +709,7 @@ def newton_matrix(md_, tabs_, h, qk, ws_):
                 eta = X[sn + j * m : sn + (j + 1) * m]
                 if flags[F_EX_CHESS] != 0:
                     if flags[F_CH_PATTERN] != 0:  # it writes the shared coordinates' entries
-                        _clear(Hc, n, si, bsp)
+                        clear_rows(Hc, n, n, _spans(si, bsp, n))
                     fns[CHESS](ptr(qd), ptr(eta), ptr(prm), ptr(Hc))
                 elif ws.si[SI_HC_NG] != 0:  # large models: columns in groups
                     fd_constraint_hessian_grouped(fns[CJAC], qd, eta, prm, Hc, fa, Pm, ws.Gp,

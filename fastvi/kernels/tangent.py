@@ -66,7 +66,7 @@ from .banded import (assembly_map, assembly_offset, band_factor, band_ld, band_s
                      band_solve_transposed, gmg_factor, gmg_solve)
 # inlined: with the sizes as constants (sized_twin) the factorisations and solves unroll
 from .linalg import lu_factor_small, lu_solve_small
-from .step import (ASSEMBLE_SIGNATURE, add_block, assemble_function, cached_cfunc,
+from .step import (ASSEMBLE_SIGNATURE, add_block, assemble_function, cached_cfunc, clear_rows,
                    fd_constraint_hessian, fd_momentum_jacobian, end_momentum, jacobian_rate,
                    linear_force, plan_spans)
 
@@ -339,27 +339,12 @@ def step_band(ws):
 
 
 # ----------------------------------------------------------------------------- second derivatives
-@hot_inline
-def _clear_rows(B, rows, n, spans):
-    """``B ← 0`` (rows, n) over each row's span ``spans`` (empty: all of it). A callback
-    with a declared pattern writes only its non-zeros, and entries outside the spans are
-    never written: they keep the zeros of the allocation."""
-    if spans.shape[0] > 0:
-        for c in range(rows):
-            for a in range(spans[2 * c], spans[2 * c + 1]):
-                B[c, a] = 0.0
-    else:
-        for c in range(rows):
-            for a in range(n):
-                B[c, a] = 0.0
-
-
 @hot
 def _hessian(md, q, eta, out, pw, n, m):
     """``out = Σ_c η_c ∇²g_c(q)``: the callback, or the full Newton's differences of G."""
     if md.flags[F_EX_CHESS] != 0:
         if md.flags[F_CH_PATTERN] != 0:  # it writes the shared coordinates' entries alone
-            _clear_rows(out, n, n, pw.sp.bspan)
+            clear_rows(out, n, n, pw.sp.bspan)
         md.fns[CHESS](ptr(q), ptr(eta), ptr(md.prm), ptr(out))
     else:
         fd_constraint_hessian(md.fns[CJAC], q, eta, md.prm, out, pw.qa, pw.Gp, pw.Gm, n, m)
@@ -395,7 +380,7 @@ def point(md_, q, v, eta, pw_):
                 Cq[a, b] = 0.0
     if m == 0:
         return
-    _clear_rows(G, m, n, pw.sp.gspan)
+    clear_rows(G, m, n, pw.sp.gspan)
     fns[CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
     _hessian(md, q, eta, pw.He, pw, n, m)
     if pw.sp.gsta.shape[0] > 0:
@@ -469,7 +454,7 @@ def _start_jacobian(md, qk, wx, sp, n, m):
     if md.flags[F_TIME] != 0:
         md.prm[md.flags[F_TSLOT]] = wx.time[0]
     G0 = wx.G[0]
-    _clear_rows(G0, m, n, sp.gspan)
+    clear_rows(G0, m, n, sp.gspan)
     md.fns[CJAC](ptr(qk), ptr(qk), ptr(md.prm), ptr(G0))
 
 
@@ -1169,7 +1154,7 @@ def _grouped_hv(ws, md, q, v, pw, n, m):
     group's sum is that of the one constraint whose pattern holds b, and the others add
     zeros there. The rows of :func:`point` for ``m`` Hessians in O(n²) each."""
     sp, Hv, Hs, e = pw.sp, pw.Hv, pw.Hs, pw.e
-    _clear_rows(Hv, m, n, sp.gspan)
+    clear_rows(Hv, m, n, sp.gspan)
     for k in range(sp.gsta.shape[0] - 1):
         for i in range(m):
             e[i] = 0.0

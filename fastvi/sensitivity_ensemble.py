@@ -22,7 +22,7 @@ from ._launch import Launcher
 from ._numba import quiet
 from .ensemble import PROGRESS_GROUPS, parallel_section
 from .integrate import IntegrationError
-from .kernels.layout import Samples, without_map
+from .kernels.layout import Samples, field_shapes
 from .kernels.drive import member_function, run_members
 from .kernels.tangent import Members, differentiator, index_maps, tangent_member
 from .model import Model
@@ -234,12 +234,14 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
     md, ws, ev = first.model_data, first.ws, first.ev
     rows, cols = index_maps(n, m, meth.s, meth.J)
     # the hook for a member's argument types, which are those of a single run's
-    each, lin = differentiator(md, first.state, first.loop_ws, first.info, first.tx,
-                               disc.tangent_work(first, d, pidx), dQ[0], first.sized)
+    tw = disc.tangent_work(first, d, pidx)
+    each, lin = differentiator(md, first.state, first.loop_ws, first.info, first.tx, tw, dQ[0],
+                               first.sized)
+    # each member allocates the single run's workspaces again: what its steps read, a long
+    # chain's matrices in band storage with their maps (layout.field_shapes)
     group = Members(md.fns, md.flags, md.Mc, KP, first.tabs, first.tx, first.opts, first.h,
-                    # the plan without the single run's map: each member assembles densely
-                    ws.dims, without_map(ws.si), ws.sb, ws.structured, X0, first.total,
-                    first.every, smp,
+                    ws.dims, ws.si, ws.sb, ws.structured, field_shapes(ws), tw.ws.si,
+                    field_shapes(tw.ws), X0, first.total, first.every, smp,
                     infos, ev, first.stepk, first.stages, rows, cols,
                     np.asarray(pidx, dtype=np.int64), first.sparsity,
                     model.param_derivative_data(), DQ, DP, TH, dQ, dP, each, lin)

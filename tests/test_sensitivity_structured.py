@@ -144,7 +144,8 @@ def test_the_band_assembly_changes_no_bit(monkeypatch):
     """A large mechanism's linearised step assembles the extended Newton matrix straight
     into the band storage that its LU factors, through a map of each entry's place, instead
     of a dense (N + n)² matrix packed into that storage afterwards: the same derivatives,
-    bit for bit, from storage that grows like N, not N²."""
+    bit for bit, from storage that grows like N, not N²; and so does each member of an
+    ensemble, whose workspaces are the single run's."""
     from fastvi import _discrete as disc
     from fastvi.kernels import layout
 
@@ -175,3 +176,7 @@ def test_the_band_assembly_changes_no_bit(monkeypatch):
     assert np.abs(dense[0]).max() > 0.0 and np.abs(dense[4]).max() > 0.0
     for a, b in zip(dense, band):
         assert np.array_equal(a, b)
+    # an ensemble's members allocate the single run's workspaces again, maps included
+    E = fastvi.sensitivity_ensemble(model, np.stack([q0, q0]), np.stack([v0, v0]), h=0.01,
+                                    n_steps=N, save_every=every, wrt=("q0", "v0", "params"))
+    assert np.array_equal(E.dq[1], dense[0]) and np.array_equal(E.dv[1], dense[1])

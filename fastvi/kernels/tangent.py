@@ -61,7 +61,7 @@ from .layout import (CHESS, CJAC, F_AUGMENT, F_CH_PATTERN, F_EX_CHESS, F_EX_MJAC
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, P_CJAC, P_CON,
                      P_FORCE, P_KGRAD, P_MASS, P_PGRAD, ModelData, Samples, is_timed,
                      assembly_into_band, make_workspace, reciprocal_mass, sizes,
-                     too_large_to_hold, with_plan, without_map, workspace_for)
+                     too_large_to_hold, with_plan, without_map, workspace_shaped)
 from .banded import (assembly_map, assembly_offset, band_factor, band_ld, band_solve,
                      band_solve_transposed, gmg_factor, gmg_solve)
 # inlined: with the sizes as constants (sized_twin) the factorisations and solves unroll
@@ -225,6 +225,8 @@ def tangent_work(xws, rows, cols, pidx, d, sp, pd, k, exact):
     banded = sp.perm.shape[0] > 0
     Nd = 1 if banded else N
     Nb = band_ld(sp.kl, sp.ku) * N if banded else 1
+    # an assembly into band storage (layout.assembly_into_band) leaves K where its factors go
+    ab = xws.A[0] if xws.si[SI_XMAP] != 0 else np.zeros(Nb)
     # R_q, P_q and P_X dense only where they are not kept over their patterns
     Nt, nt = N + n, n
     if sp.tptr.shape[0] > 0:
@@ -247,7 +249,7 @@ def tangent_work(xws, rows, cols, pidx, d, sp, pd, k, exact):
         per = max(per, n * n)
     return TangentWork(
         point_work(n, m, sp), rows, cols, np.zeros((Nd, Nd)), np.zeros(N, dtype=np.int64),
-        np.zeros(Nb), np.zeros(N),
+        ab, np.zeros(N),
         np.zeros((Nt, nt)), np.zeros((nt, N)), np.zeros(max(sp.tcol.shape[0], 1)),
         np.zeros(max(sp.xcol.shape[0], 1)), pidx, np.zeros((Rr, Rc)),
         np.zeros((min(Rr, n), Rc)), np.zeros((mm, n)), np.zeros((mm, mm)), np.zeros(mm, dtype=np.int64),
@@ -285,11 +287,8 @@ def make_tangent_work(n, m, s, r, J, d, pidx, pd, k, sp=None, step_ws=None, exac
         xws = xws._replace(A=A, si=si, sb=step_ws.sb.copy(), structured=True)
     elif structured:
         xws = xws._replace(si=step_si, sb=step_ws.sb.copy(), structured=True)
-    tw = tangent_work.py_func(xws, rows, cols, np.asarray(pidx, dtype=np.int64), int(d), sp, pd,
-                              int(k), bool(exact))
-    if into_band:  # the factors where the assembly left K
-        tw = tw._replace(ab=xws.A[0, :tw.ab.shape[0]])
-    return tw
+    return tangent_work.py_func(xws, rows, cols, np.asarray(pidx, dtype=np.int64), int(d), sp,
+                                pd, int(k), bool(exact))
 
 
 def _assembles_into_band(si, sp, n, N):
@@ -1719,7 +1718,10 @@ def _started(tw, dq, dp, th):
 #: :func:`tangent_member`), what every member reads: the model's callbacks, flags
 #: and constant mass, the members' parameter rows ``P`` (N, k + 1), the tables, extended
 #: tables and options, the step ``h``, the sizes ``dims`` = (n, m, s, r, J) and the
-#: structured plan (``si``, ``sb``, ``structured``), the starts ``X0`` (N, 3, n), the steps
+#: structured plan (``si``, ``sb``, ``structured``), the shapes of the single run's
+#: workspace and of its extended step's (``shapes``, ``xshapes``: :func:`.layout.field_shapes`)
+#: with the extended step's plan ``xsi``, which each member allocates again (a long chain's
+#: matrices in band storage, with their maps), the starts ``X0`` (N, 3, n), the steps
 #: and save stride, the members' samples ``smp`` (:class:`.layout.Samples` of arrays indexed
 #: by member first, slot 0 filled), counters ``infos`` (N, INFO_SIZE), the events of a run
 #: without events ``ev`` (read only), the step and its stages, ``rows``, ``cols`` of
@@ -1729,8 +1731,8 @@ def _started(tw, dq, dp, th):
 #: ``dQ``, ``dP`` (N, K, d, n), and the :func:`differentiator`'s ``each`` and ``lin``
 Members = namedtuple("Members", [
     "fns", "flags", "Mc", "P", "tabs", "tx", "opts", "h", "dims", "si", "sb", "structured",
-    "X0", "n_total", "save_every", "smp", "infos", "ev", "stepk", "stages", "rows", "cols",
-    "pidx", "sp", "pd", "DQ", "DP", "TH", "dQ", "dP", "each", "lin"])
+    "shapes", "xsi", "xshapes", "X0", "n_total", "save_every", "smp", "infos", "ev", "stepk",
+    "stages", "rows", "cols", "pidx", "sp", "pd", "DQ", "DP", "TH", "dQ", "dP", "each", "lin"])
 
 
 def tangent_member(i, membersp):
@@ -1740,9 +1742,10 @@ def tangent_member(i, membersp):
     g = own(membersp)
     n, m, s, r, J = g.dims[0], g.dims[1], g.dims[2], g.dims[3], g.dims[4]
     # the step's workspace as the time loop takes it (layout.loop_view); the extended step's
-    # with the step's plan, as make_tangent_work gives it
-    ws = with_plan(workspace_for(g.dims), g.si, g.sb.copy(), None)
-    xws = with_plan(workspace_for((n, m, s + 1, r, J)), g.si, g.sb.copy(), g.structured)
+    # with its plan, as make_tangent_work gives it
+    ws = with_plan(workspace_shaped(g.dims, g.shapes), g.si, g.sb.copy(), None)
+    xws = with_plan(workspace_shaped((n, m, s + 1, r, J), g.xshapes), g.xsi, g.sb.copy(),
+                    g.structured)
     tw = _started(tangent_work(xws, g.rows, g.cols, g.pidx, g.DQ.shape[1], g.sp, g.pd,
                                g.P.shape[1] - 1, True), g.DQ[i],
                   g.DP[i], g.TH[i])

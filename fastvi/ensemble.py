@@ -654,7 +654,8 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
         group = drive.EnsembleMembers(
             fns, flags, Mc, KP, meth.kernel_tables, opts["newton"], h, t0, dims, ws.si,
             plan.sb, lay.field_shapes(ws), X0, total, mode, every, H0, Qs, Vs, Ps, En, Gr,
-            GVr, It, Wk, ist, fst, ev.fns, ev.count, ev.direction, ev.terminal, Te, Qe, Ve, Ne, stepk, stages)
+            GVr, It, Wk, ist, fst, ev.fns, ev.count, ev.direction, ev.terminal, Te, Qe, Ve, Ne,
+            stepk, stages)
         t_member = time.perf_counter()
         with quiet():
             member = drive.ensemble_member(group)

@@ -516,8 +516,7 @@ def workspace(model, meth, prm=None, solver: str = "auto", newton: bool = True):
     unused = lay.unused_fields(model.kernel_arguments()[1], p.si, newton)
     si, N = p.si, meth.s * model.n + meth.J * model.m
     # a long chain's full Newton assembles into band storage: O(N), not the dense N²
-    into_band = (si[lay.SI_A] == lay.SOLVE_BANDED and si[lay.SI_BSPAN] != 0
-                 and lay.too_large_to_hold(N))
+    into_band = lay.assembles_into_band(si, N)
     ws = lay.make_workspace(model.n, model.m, meth.s, meth.r, meth.J,
                             (unused | {"A"}) if into_band else unused)
     if into_band:

@@ -30,9 +30,11 @@ from numba.extending import overload
 
 from .._numba import hot, hot_inline, only_if, own
 from .layout import (NONFINITE, OK, S_GV, SI_A_BAND, SI_A_KL, SI_A_KU, SI_A_PERM, SI_GCOL, SI_GPTR,
-                     SI_RHS, SI_XMAP, XM_KL, XM_KU, XM_N, XM_SIZE, XMAP_HEADER, SI_S, SI_S_BAND, SI_S_DST, SI_S_IPERM, SI_S_KL, SI_S_KU, SI_S_LEN, SI_S_LU, SI_S_PERM,
-                     SI_SC, SI_SC_BAND, SI_SC_DST, SI_SC_KL, SI_SC_KU, SI_SC_LEN, SI_SC_LU,
-                     SI_SC_PERM, SI_SCOL, SI_SPTR, SINGULAR_CONSTRAINTS, SOLVE_BANDED)
+                     SI_RHS, SI_S, SI_S_BAND, SI_S_DST, SI_S_IPERM, SI_S_KL, SI_S_KU, SI_S_LEN,
+                     SI_S_LU, SI_S_PERM, SI_SC, SI_SC_BAND, SI_SC_DST, SI_SC_KL, SI_SC_KU,
+                     SI_SC_LEN, SI_SC_LU, SI_SC_PERM, SI_SCOL, SI_SPTR, SI_XMAP,
+                     SINGULAR_CONSTRAINTS, SOLVE_BANDED, XM_KL, XM_KU, XM_N, XM_SIZE,
+                     XMAP_HEADER)
 from .sparse_lu import sparse_factor, sparse_solve
 
 __all__ = ["band_factor", "band_solve", "band_solve_transposed", "band_pack", "newton_banded", "schur_structured",
@@ -173,10 +175,9 @@ def assembly_offset(si, xm, r, c):
     ``K`` in its banded ordering (as :func:`band_pack` would leave it); for the
     derivatives' extended step, in the extended rows' own columns ``T_q`` (each row over
     its span), or in the extended step's own rows ``P_X`` (stored by columns of ``K``, each
-    over its span). An entry
-    outside these (zero: the band and the spans were chosen to hold the pattern) goes to
-    the last cell, which no one reads. Called, not inlined: typed once, not at every
-    write of the assembly."""
+    over its span). An entry outside these (zero: the band and the spans were chosen to
+    hold the pattern) goes to the last cell, which no one reads. Called, not inlined: typed
+    once, not at every write of the assembly."""
     at, N, kl, ku, tq, px, spare, pos = xm[1], xm[2], xm[3], xm[4], xm[5], xm[6], xm[7], xm[8]
     i = si[at + r]
     j = si[at + c]
@@ -270,9 +271,9 @@ def _assembly_map(ws_):
     storage (:func:`assembly_offset`), read once from ``si[SI_XMAP]``: ``(offset, at, N, kl,
     ku, tq, px, spare, pos)``, ``at`` the offset in si of the extended indices' indices in
     K (the identity for the step's own matrix), ``tq``, ``px`` of the spans of ``T_q`` and
-    ``P_X`` (the extended step's), ``spare`` the spare cell's
-    offset in ``A[0]``, ``pos`` the offset of the positions in the banded ordering; all 0
-    where there is none (the first: whether there is one)."""
+    ``P_X`` (the extended step's), ``spare`` the spare cell's offset in ``A[0]``, ``pos``
+    the offset of the positions in the banded ordering; all 0 where there is none (the
+    first: whether there is one)."""
     ws = own(ws_)
     si = ws.si
     xm = si[SI_XMAP]

@@ -517,9 +517,13 @@ def fit_newton_fields(ws, flags):
 BAND_ASSEMBLY_BYTES = 16 * 2 ** 20
 
 
-def too_large_to_hold(N):
-    """Whether a dense ``N × N`` Newton matrix exceeds :data:`BAND_ASSEMBLY_BYTES`."""
-    return 8 * N * N > BAND_ASSEMBLY_BYTES
+def assembles_into_band(si, N):
+    """Whether a Newton matrix of ``N`` rows under the plan ``si`` is assembled straight
+    into band storage (:func:`assembly_into_band`): the plan factors it banded, assembles
+    it over each row's span (``si[SI_BSPAN]``), and the dense matrix would exceed
+    :data:`BAND_ASSEMBLY_BYTES`."""
+    return (si[SI_A] == SOLVE_BANDED and si[SI_BSPAN] != 0
+            and 8 * N * N > BAND_ASSEMBLY_BYTES)
 
 
 def assembly_into_band(si, N, kl, ku, perm, index=None, tspan=None, xspan=None):

@@ -60,8 +60,8 @@ from .layout import (CHESS, CJAC, F_AUGMENT, F_CH_PATTERN, F_EX_CHESS, F_EX_MJAC
                      SOLVE_BANDED, SOLVE_DENSE,
                      SINGULAR_CONSTRAINTS, SINGULAR_MASS, STEP_OUT_SIZE, P_CJAC, P_CON,
                      P_FORCE, P_KGRAD, P_MASS, P_PGRAD, ModelData, Samples, is_timed,
-                     assembly_into_band, make_workspace, reciprocal_mass, sizes,
-                     too_large_to_hold, with_plan, without_map, workspace_shaped)
+                     assembles_into_band, assembly_into_band, make_workspace, reciprocal_mass,
+                     sizes, with_plan, without_map, workspace_shaped)
 from .banded import (assembly_map, assembly_offset, band_factor, band_ld, band_solve,
                      band_solve_transposed, gmg_factor, gmg_solve)
 # inlined: with the sizes as constants (sized_twin) the factorisations and solves unroll
@@ -296,10 +296,9 @@ def _assembles_into_band(si, sp, n, N):
     :class:`Sparsity` is ``sp`` (``n`` coordinates, ``N`` unknowns) assembles its matrix
     straight into band storage: where ``K`` is banded, its own rows and columns are read
     over their patterns, the assembly writes over the rows' spans (a constant diagonal
-    mass), and the dense matrix would be large (:func:`.layout.too_large_to_hold`). Both
+    mass), and the dense matrix would be large (:func:`.layout.assembles_into_band`). Both
     give the same matrix bit for bit."""
-    return (too_large_to_hold(N + n) and sp.perm.shape[0] > 0 and sp.tptr.shape[0] > 0
-            and si[SI_BSPAN] != 0)
+    return assembles_into_band(si, N + n) and sp.perm.shape[0] > 0 and sp.tptr.shape[0] > 0
 
 
 def _band_assembly(si, sp, rows, n, m, N):

@@ -539,6 +539,13 @@ class _Callbacks:
         out = f[:self.size[slot]].copy()
         return out.reshape(shape) if shape else out.reshape(())
 
+    def sized_all(self) -> None:
+        """Every slot has passed :meth:`check_size`: a large model calls its callbacks by
+        address from here on, and the guarded buffer (four ``n²`` guards, 160 MiB for a
+        chain of 1 024 links) is let go; a diagnosis allocates it again."""
+        if self.n > GUARD_ALL_CALLS_UP_TO_N:
+            self._buffer = np.empty(0)
+
     def check_size(self, slot: str, q: np.ndarray, v: np.ndarray | None = None) -> None:
         """Two evaluations with different fills: every declared entry written, nothing else,
         and the same values both times (a value read from ``out`` before it was set differs)."""
@@ -748,25 +755,32 @@ def _fd_contracted_by_groups(G, q: np.ndarray, E: np.ndarray, pattern: np.ndarra
     r""":func:`_fd` of the constraint Jacobian ``G(q)`` (m, n) by :func:`_fd_by_groups`,
     contracted with each row ``η_j`` of ``E``: ``(contracted, fscale, hmin)``, where
     ``contracted(j)`` gives ``(ref, est)`` with ``ref ≈ Σ_c η_jc ∂G_c/∂q`` (the constraint
-    Hessian, (n, n)) and ``est = Σ_c |η_jc| est_c``. The groups' differences are kept (a
-    few coordinates' worth per constraint) and each contraction is formed when asked: two
-    ``n × n`` arrays at a time, nothing of size ``m n²`` or ``len(E) n²``."""
+    Hessian, (n, n)) and ``est = Σ_c |η_jc| est_c``. Of each group's differences only the
+    entries of G's pattern are kept, ``∂G_ca/∂q_b`` for the coordinates ``a`` of row ``c``
+    (G is zero elsewhere at every q: the guarded calls hold it to its pattern), and each
+    contraction is formed when asked: two ``n × n`` arrays at a time, nothing of size
+    ``m n²``, ``len(E) n²`` or ``m n`` a group."""
     n = pattern.shape[1]
-    groups = list(_fd_by_groups(G, q, pattern))
-    fscale, hmin = groups.pop()
+    P = sp.csr_matrix(pattern)
+    kept = []  # per group: (rows c, their coordinate b, the column a, ∂G_ca/∂q_b, its error)
+    fscale, hmin = 0.0, np.inf
+    for item in _fd_by_groups(G, q, pattern):
+        if len(item) == 2:
+            fscale, hmin = item
+            continue
+        rr, b, r2, err = item
+        counts = np.diff(P.indptr)[rr]
+        at = np.repeat(np.arange(rr.size), counts)  # each kept entry's place in rr
+        a = np.concatenate([P.indices[P.indptr[c]:P.indptr[c + 1]] for c in rr])
+        kept.append((rr[at], b[at], a, r2[at, a], err[at, a]))
     absE = np.abs(E)
 
     def contracted(j):
-        # accumulated transposed, (b, a): each group adds whole rows b; refs[a, b_c] +=
-        # η_jc ∂G_ca/∂q_b over the rows c, a sparse sum into the group's coordinates alone
+        # accumulated transposed, (b, a): ref_t[b, a] += η_jc ∂G_ca/∂q_b over the rows c
         ref_t, est_t = np.zeros((n, n)), np.zeros((n, n))
-        for rr, b, r2, err in groups:
-            ub, at = np.unique(b, return_inverse=True)
-            cols_rr = np.arange(rr.size)
-            S = sp.csr_matrix((E[j, rr], (at, cols_rr)), shape=(ub.size, rr.size))
-            ref_t[ub] += S @ r2
-            S = sp.csr_matrix((absE[j, rr], (at, cols_rr)), shape=(ub.size, rr.size))
-            est_t[ub] += S @ err
+        for c, b, a, r2, err in kept:
+            np.add.at(ref_t, (b, a), E[j, c] * r2)
+            np.add.at(est_t, (b, a), absE[j, c] * err)
         return ref_t.T, est_t.T
 
     return contracted, fscale, hmin
@@ -981,6 +995,7 @@ def check_model(model: Model, q, v=None, *, params=None, t: float = 0.0,
     for slot in SLOTS + tuple(map(_theta, PARAM_SLOTS)):
         if has(slot):
             cb.check_size(slot, q, eta0 if slot == "constraint_hessian" else v)
+    cb.sized_all()
 
     # 2. First derivatives against the functions they differentiate, at every state, then
     # 3. second derivatives against the first ones, only where that first one passed

@@ -388,7 +388,8 @@ def reciprocal_mass(flags):
 #: ``mm = max(m, 1)``, ``Jm = max(J m, 1)``), and which are int64; ``dims`` is the sizes.
 #: One table for the two ways a workspace is made: in NumPy by :func:`make_workspace`
 #: (``integrate``: no compile) and inside an ensemble's parallel loop by
-#: :func:`workspace_for`, whose source is generated from it.
+#: :func:`workspace_shaped` (the shapes of a single run's workspace), whose source is
+#: generated from it.
 _WS_SHAPES = dict(
     X="N", R="N", A="(N, N)", piv="N", D="(s + 1, n)", G="(J + 1, mm, n)",
     qi="n", vi="n", F="n", Pm="n", fa="n", fb="n", Mi="(n, n)",
@@ -565,15 +566,6 @@ def without_map(si):
     return out
 
 
-def _workspace_for_source():
-    args = ", ".join(f"np.zeros({shape}{', dtype=np.int64' if name in _WS_INT else ''})"
-                     for name, shape in _WS_SHAPES.items())
-    return ("def workspace_for(dims):\n"
-            "    n, m, s, r, J = dim(dims[0]), dim(dims[1]), dim(dims[2]), dim(dims[3]), dim(dims[4])\n"
-            "    N = s * n + J * m\n    mm = max(m, 1)\n    Jm = max(J * m, 1)\n"
-            f"    return Workspace({args}, None, dims)\n")
-
-
 
 
 #: the structured-solve plan's fields come last in a Workspace: si, sb, then dims
@@ -646,16 +638,6 @@ def _dim(x):
     return None
 
 
-_scope = dict(np=np, dim=dim, Workspace=Workspace, H_SIZE=H_SIZE, SI_HEADER=SI_HEADER)
-exec(_workspace_for_source(), _scope)  # noqa: S102 - generated from the table above
-# not cached itself (generated source has no file): it is compiled into the ensembles' members,
-# whose cache holds it
-workspace_for = nb.njit(nogil=True, error_model="numpy", boundscheck=False)(_scope["workspace_for"])
-workspace_for.__doc__ = """:func:`make_workspace` compiled, for the sizes ``dims = (n, m, s, r, J)``
-kept in the workspace's ``dims``: what a member of an ensemble allocates inside the parallel
-loop."""
-
-
 def _workspace_shaped_source():
     env = _sizes_env(2, 1, 2, 3, 2)  # any sizes: each field's number of axes
     args = []
@@ -679,7 +661,10 @@ def field_shapes(ws):
     return out
 
 
+_scope = dict(np=np, Workspace=Workspace)
 exec(_workspace_shaped_source(), _scope)  # noqa: S102 - generated from the table above
+# not cached itself (generated source has no file): it is compiled into the ensembles' members,
+# whose cache holds it
 workspace_shaped = nb.njit(nogil=True, error_model="numpy", boundscheck=False)(
     _scope["workspace_shaped"])
 workspace_shaped.__doc__ = """A workspace of the sizes ``dims`` whose arrays have the shapes

@@ -436,8 +436,7 @@ def test_the_full_newton_assembled_into_band_storage_gives_the_same_run(name, mo
     its LU factors, through a map of each entry's place (``layout.assembly_into_band``),
     instead of a dense N² matrix packed into that storage afterwards: the same trajectory
     bit for bit, from storage that grows like N. The threshold is lowered so that a small
-    chain takes that path. An ensemble's members allocate their workspaces as the single
-    run's (``layout.field_shapes``): the map and the band-shaped matrix with it."""
+    chain takes that path."""
     model, args = _SCENE_CASES[name]()
     q0, v0 = (chain(10).initial_state(np.linspace(0.2, 1.0, 10)) if args is None
               else model.initial_state(*args))
@@ -451,8 +450,22 @@ def test_the_full_newton_assembled_into_band_storage_gives_the_same_run(name, mo
     assert ws.A.shape[0] == 1 and ws.A.size < N * N / 2
     band = fastvi.integrate(model, q0, v0, h=0.01, n_steps=40, newton="full", check=False)
     assert np.array_equal(band.q, dense.q) and np.array_equal(band.p, dense.p)
-    shapes = lay.field_shapes(structure.workspace(model, P2))
-    assert tuple(shapes[lay.Workspace._fields.index("A")]) == (1, ws.A.size, 0)
+
+
+@pytest.mark.slow
+def test_an_ensembles_members_assemble_into_band_storage_as_the_single_run(monkeypatch):
+    """An ensemble's members allocate their workspaces as the single run's
+    (``layout.field_shapes``), the map and the band-shaped matrix with it: the same final
+    states, bit for bit, as the run assembled densely (slow: it compiles the members of a
+    structured plan, about 20 s)."""
+    model, args = _SCENE_CASES["damped_chain12"]()
+    q0, v0 = model.initial_state(*args)
+    dense = fastvi.integrate(model, q0, v0, h=0.01, n_steps=40, newton="full", check=False)
+    monkeypatch.setattr(lay, "BAND_ASSEMBLY_BYTES", 0)
+    ws = structure.workspace(model, P2)
+    shapes = lay.field_shapes(ws)
+    assert ws.A.shape[0] == 1 and tuple(shapes[lay.Workspace._fields.index("A")]) == (
+        1, ws.A.size, 0)
     ens = fastvi.integrate_ensemble(model, np.stack([q0, q0]), np.stack([v0, v0]), h=0.01,
                                     n_steps=40, newton="full", threads=1)
     assert np.array_equal(ens.q[1], dense.q[-1])  # the final states

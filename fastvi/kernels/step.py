@@ -458,7 +458,7 @@ def _nonzero(B, n, si, sp):
 def add_block(A, r0, c0, coef, B, rows, n, si, sp, xm):
     """``A[r0 + a, c0 + c] += coef · B[a, c]`` for the ``rows`` rows of ``B`` (n columns),
     over their spans ``si[sp …]`` where ``sp`` is not 0, else over all columns; by the map
-    ``xm`` where there is one (:func:`assembly_offset`)."""
+    ``xm`` where there is one (:func:`.banded.assembly_offset`)."""
     if sp != 0:
         for a in range(rows):
             for c in range(si[sp + 2 * a], si[sp + 2 * a + 1]):

@@ -32,7 +32,7 @@ from .tables import Method
 
 __all__ = ["Run", "refuse", "prepare", "with_full_newton", "checked_model", "directions",
            "param_indices", "tangent_work", "initial_tangent", "initial_cotangent",
-           "theta_derivative",
+           "theta_derivative", "momentum_mass",
            "velocity_derivatives", "finish"]
 
 
@@ -118,13 +118,14 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
     :func:`fastvi.integrate` does."""
     started = time.perf_counter()
     n = checked_model(model).n
-    if model.mass_singular:
-        # the step solves with M + Gᵀ W G; its derivative (the projection's, and the initial
-        # tangent's metric) is written for an invertible M
+    if model.mass_singular and model.time_dependent:
+        # the step's multiplier is that of M + Gᵀ W G, which differs from M's by W g_t where
+        # the constraints move: its linearisation is written for scleronomic constraints
         raise ValueError(
             f"{what} of model {model.name!r} is not available: its constant mass matrix is "
-            "singular (a body with a zero principal inertia, such as a rod or a lamina). "
-            "fastvi.integrate runs it; the derivatives need an invertible mass matrix")
+            "singular (a body with a zero principal inertia, such as a rod or a lamina) and "
+            "its constraints depend on time. fastvi.integrate runs it; the derivatives of a "
+            "singular mass need constraints that do not depend on time")
     q0 = valid.vector(q0, "q0", n)
     v0 = valid.vector(v0, "v0", n)
     prm = valid.params(params, model).copy()
@@ -154,6 +155,13 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
     # the structured paths of the linearised step are compiled for structured workspaces
     # only (_numba.only_if): a model whose plan keeps every solve dense gets none of them
     patterns = structure.plan(model, meth, prm, solver).patterns if ws.structured else {}
+    if model.mass_singular and ws.structured:
+        # the projection's derivative factors M + Gᵀ W G densely: O(n³) a step
+        raise ValueError(
+            f"{what} of model {model.name!r} is not available with the structured solves of a "
+            "large mechanism: its constant mass matrix is singular (a body with a zero principal "
+            "inertia, such as a rod or a lamina). Pass `solver=\"dense\"` for a model small "
+            "enough, or give every body inertia about each axis")
     diagonal = bool(lay.reciprocal_mass.py_func(md.flags))
     sparsity = make_sparsity(step_band(ws), structure.linearisation_patterns(
         patterns["G"], patterns["newton"], meth.s, meth.J, diagonal) if patterns else None)
@@ -407,10 +415,13 @@ def _start_parts(run: Run, pidx, initial_state) -> StartParts:
         mv_th = by_differences(lambda p: model.mass_matrix(q0, p) @ v0, n)
     W = S = None
     if m:
-        # a large mechanism's constant diagonal mass: M⁻¹Gᵀ by its reciprocals, O(m n)
+        # a large mechanism's constant diagonal mass: M⁻¹Gᵀ by its reciprocals, O(m n); a
+        # singular one projects in the metric M̄ = M + Gᵀ W G, as valid.initial_state does
         diagonal = run.ws.structured and lay.reciprocal_mass.py_func(run.model_data.flags)
         W = G.T / np.diag(M)[:, None] if diagonal else np.linalg.solve(M, G.T)
         S = G @ W
+    if model.mass_singular:  # p0 = M v0 itself: its derivative M δv0 has no C_q term
+        M, Cq = model.mass_matrix_constant, np.zeros((n, n))
     return StartParts(M, G, Hv, Cq, W, S, g_th, gv_th, mv_th, dstate)
 
 
@@ -453,10 +464,22 @@ def _state_of(initial_state, p, n):
     return valid.vector(q, "initial_state(params)[0]", n), valid.vector(v, "initial_state(params)[1]", n)
 
 
+def momentum_mass(model, q, prm, t=0.0) -> np.ndarray:
+    """The matrix of ``p = M v`` on the constraints, as the linearised step reads it:
+    ``M(q, θ)``, or for a singular constant ``M`` the definite ``M + Gᵀ W G``
+    (:func:`.kernels.linalg.augmented_mass`), equal to it where ``G v = 0`` and so the
+    inverse that gives ``v`` from ``p`` there."""
+    M = model.mass_matrix(q, prm)
+    if not model.mass_singular:
+        return M
+    return valid.mass_metric(M, model.constraint_jacobian_value(q, prm, t))
+
+
 def velocity_derivatives(run, result, dq, dp, pidx, dth):
-    """``δv = M⁻¹ (δp − C_q δq − (M_θ v) δθ)`` at every sample."""
+    """``δv = M⁻¹ (δp − C_q δq − (M_θ v) δθ)`` at every sample (``M``: :func:`momentum_mass`,
+    which depends on ``q`` and ``θ`` through ``G`` for a singular constant mass)."""
     model = run.model
-    if model.mass_matrix_constant is not None:
+    if model.mass_matrix_constant is not None and not model.mass_singular:
         return np.linalg.solve(model.mass_matrix_constant, dp)
     dv = np.empty_like(dp)
     zero = np.zeros(model.m)
@@ -465,7 +488,7 @@ def velocity_derivatives(run, result, dq, dp, pidx, dth):
         M, _, _, _, Cq = point_terms(run.model_data, q, v, zero)
         rhs = dp[i] - Cq @ dq[i]
         for j, l in enumerate(pidx):
-            rhs -= np.outer(theta_derivative(lambda th: model.mass_matrix(q, th) @ v,
+            rhs -= np.outer(theta_derivative(lambda th: momentum_mass(model, q, th) @ v,
                                                   run.prm, l), dth[:, j])
         dv[i] = np.linalg.solve(M, rhs)
     return dv

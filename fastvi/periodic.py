@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _validate as valid
+from ._discrete import momentum_mass
 from .consistent import consistent_state
 from .integrate import IntegrationError, Result, integrate
 from .sensitivity import sensitivity, tangent_space
@@ -362,7 +363,7 @@ def _chart(model, x, Z, xi, prm):
     y = x + Z @ xi
     q = y[:n]
     try:
-        v = np.linalg.solve(model.mass_matrix(q, prm), y[n:])
+        v = np.linalg.solve(momentum_mass(model, q, prm), y[n:])
         return consistent_state(model, q, v, params=prm)
     except (ValueError, np.linalg.LinAlgError):
         return None
@@ -400,7 +401,7 @@ def _linearise(model, q, v, prm, run):
     the directions became (``I`` up to the difference quotients of ``C_q``)."""
     n, k = model.n, prm.shape[0]
     Z = tangent_space(model, q, v, params=prm)
-    M = model.mass_matrix(q, prm)
+    M = momentum_mass(model, q, prm)
     dv = np.linalg.solve(M, Z[n:] - _momentum_derivative(model, q, v, prm) @ Z[:n])
     D = np.vstack([Z[:n], dv, np.zeros((k, Z.shape[1]))])
     S = sensitivity(model, q, v, wrt=D, **run)
@@ -409,16 +410,19 @@ def _linearise(model, q, v, prm, run):
 
 
 def _momentum_derivative(model, q, v, prm) -> np.ndarray:
-    """``C_q = ∂(M(q) v)/∂q`` by central differences (zero for a constant mass matrix). Its
-    error only moves the directions within the tangent space: ``A`` accounts for it."""
+    """``C_q = ∂(M(q) v)/∂q`` by central differences (zero for a constant mass matrix;
+    ``M`` is :func:`fastvi._discrete.momentum_mass`, which depends on ``q`` for a singular
+    one). Its error only moves the directions within the tangent space: ``A`` accounts
+    for it."""
     n = model.n
-    if model.mass_matrix_constant is not None:
+    if model.mass_matrix_constant is not None and not model.mass_singular:
         return np.zeros((n, n))
     C = np.empty((n, n))
     for j in range(n):
         e = np.zeros(n)
         e[j] = _FD_STEP * max(1.0, abs(q[j]))
-        C[:, j] = (model.mass_matrix(q + e, prm) @ v - model.mass_matrix(q - e, prm) @ v) / (2 * e[j])
+        C[:, j] = (momentum_mass(model, q + e, prm) @ v
+                   - momentum_mass(model, q - e, prm) @ v) / (2 * e[j])
     return C
 
 

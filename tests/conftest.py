@@ -18,7 +18,8 @@ def pytest_addoption(parser):
 KERNEL_FAMILIES = {
     "derivatives": ("test_hard_cases", "test_lyapunov", "test_param_patterns", "test_periodic",
                     "test_sensitivity", "test_sensitivity_ensemble",
-                    "test_sensitivity_structured", "test_sized_tangent"),
+                    "test_sensitivity_structured", "test_singular_mass_derivatives",
+                    "test_sized_tangent"),
     "structured": ("test_bodies", "test_bodies_dynamics", "test_chain", "test_patterns",
                    "test_sparse", "test_tree"),
     "ensembles": ("test_distributed", "test_drawing", "test_ensemble"),

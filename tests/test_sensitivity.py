@@ -456,19 +456,6 @@ def test_a_trees_derivatives_by_its_quantities_match_differences_of_runs():
     assert np.allclose(A.grad_params, forward, rtol=1e-11, atol=0)
 
 
-def test_a_singular_mass_matrix_is_refused_by_name_before_the_run():
-    from fastvi.bodies import scenes
-
-    top = scenes.heavy_top()  # a symmetric top: one director of zero inertia
-    assert top.mass_singular
-    q0, v0 = top.initial_state()
-    for call in (lambda: fastvi.sensitivity(top, q0, v0, h=0.001, n_steps=2),
-                 lambda: fastvi.adjoint(top, q0, v0, lambda r: (r.q, None), h=0.001, n_steps=2,
-                                        param_index=[])):
-        with pytest.raises(ValueError, match="mass matrix is singular.*invertible"):
-            call()
-
-
 def nan_potential_grad_by_params(q, p, out):
     out[:, :] = np.nan
 

@@ -181,23 +181,46 @@ def augmented_mass(M, G, out, n, m):
     Newton's where ``G`` varies over the step: with ``γ`` the largest inertia the heavy
     top took 8.7 iterations a step, with this one 2.9 (``docs/method.md`` §12).
     """
-    gamma = np.inf
-    for a in range(n):
-        if M[a, a] > 0.0:
-            gamma = min(gamma, M[a, a])
-    gamma *= AUGMENT_SCALE
+    gamma = _augment_scale(M, n)
     for a in range(n):
         for b in range(n):
             out[a, b] = M[a, b]
     for c in range(m):
-        norm2 = 0.0
-        for a in range(n):
-            norm2 += G[c, a] * G[c, a]
-        if norm2 == 0.0:
+        w = _augment_weight(G, c, gamma, n)
+        if w == 0.0:
             continue
-        w = gamma / norm2
         for a in range(n):
             ga = w * G[c, a]
             if ga != 0.0:
                 for b in range(n):
                     out[a, b] += ga * G[c, b]
+
+
+@hot
+def augment_weights(M, G, w, n, m):
+    """``w`` (m,) = the diagonal of :func:`augmented_mass`'s ``W``, zero for a zero row of
+    ``G``: the linearised step's ``∂(M̄ v)/∂q = Gᵀ W H_v`` where ``G v = 0``."""
+    gamma = _augment_scale(M, n)
+    for c in range(m):
+        w[c] = _augment_weight(G, c, gamma, n)
+
+
+@hot_inline
+def _augment_scale(M, n):
+    """``γ``: ``AUGMENT_SCALE`` times the smallest positive diagonal entry of ``M``."""
+    gamma = np.inf
+    for a in range(n):
+        if M[a, a] > 0.0:
+            gamma = min(gamma, M[a, a])
+    return gamma * AUGMENT_SCALE
+
+
+@hot_inline
+def _augment_weight(G, c, gamma, n):
+    """``γ / |G_c|²`` (0 for a zero row)."""
+    norm2 = 0.0
+    for a in range(n):
+        norm2 += G[c, a] * G[c, a]
+    if norm2 == 0.0:
+        return 0.0
+    return gamma / norm2

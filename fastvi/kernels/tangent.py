@@ -65,7 +65,7 @@ from .layout import (CHESS, CJAC, F_AUGMENT, F_CH_PATTERN, F_EX_CHESS, F_EX_MJAC
 from .banded import (assembly_map, assembly_offset, band_factor, band_ld, band_solve,
                      band_solve_transposed, gmg_factor, gmg_solve)
 # inlined: with the sizes as constants (sized_twin) the factorisations and solves unroll
-from .linalg import lu_factor_small, lu_solve_small
+from .linalg import augment_weights, augmented_mass, lu_factor_small, lu_solve_small
 from .step import (ASSEMBLE_SIGNATURE, add_block, assemble_function, cached_cfunc, clear_rows,
                    fd_constraint_hessian, fd_momentum_jacobian, end_momentum, jacobian_rate,
                    linear_force, plan_spans)
@@ -353,8 +353,9 @@ def point(md_, q, v, eta, pw_):
     """Fill the :class:`PointWork` at ``(q, v)`` with impulse ``eta`` (m,): ``M(q)``,
     ``G(q)``, ``Σ η_c ∇²g_c``, ``∂(G v + g_t)/∂q`` (row c: ``(∇²g_c v)ᵀ``, plus
     ``∂G_c/∂t`` for time-dependent constraints, at the time the parameter vector carries)
-    and ``∂(M v)/∂q``. Where ``pw.sp`` has groups of constraints, ``H_v`` is left to
-    :func:`_grouped_hv` (the linearised step of a structured model)."""
+    and ``∂(M v)/∂q``; for a singular constant ``M``, ``M̄`` and ``∂(M̄ v)/∂q`` in their
+    place (scleronomic constraints). Where ``pw.sp`` has groups of constraints, ``H_v`` is
+    left to :func:`_grouped_hv` (the linearised step of a structured model)."""
     md, pw = own(md_), own(pw_)
     fns, flags, prm = md.fns, md.flags, md.prm
     n = q.shape[0]
@@ -399,6 +400,18 @@ def point(md_, q, v, eta, pw_):
         for c in range(m):
             for b in range(n):
                 Hv[c, b] += pw.Gp[c, b]
+    if flags[F_AUGMENT] != 0:
+        # a singular constant M: on the constraints p = M v = M̄(q) v with the definite
+        # M̄ = M + Gᵀ W G (:func:`.linalg.augmented_mass`), so the projection is that of the
+        # configuration-dependent mass M̄, whose ∂(M̄ v)/∂q is Gᵀ W H_v where G v = 0
+        augmented_mass(md.Mc, G, M, n, m)
+        augment_weights(md.Mc, G, e, n, m)
+        for a in range(n):
+            for b in range(n):
+                acc = 0.0
+                for c in range(m):
+                    acc += G[c, a] * e[c] * Hv[c, b]
+                Cq[a, b] = acc
 
 
 def point_terms(md, q, v, eta):

@@ -206,3 +206,28 @@ def test_an_ensembles_members_of_a_singular_mass_are_the_single_runs(follower):
         for name in ("dq", "dv", "dp"):
             assert np.array_equal(getattr(one, name), getattr(ens, name)[i]), (i, name)
     assert np.abs(ens.dq[0, -1] - ens.dq[1, -1]).max() > 0.1
+
+
+def _pendulum_period(amplitude):
+    """The simple pendulum's period from rest at ``amplitude``: SciPy, twice the time to the
+    far turning point."""
+    def turn(t, y):
+        return y[1]
+    turn.direction = 1
+    sol = solve_ivp(lambda t, y: [y[1], -(G_ / L_) * np.sin(y[0])], (0.0, 10.0),
+                    [amplitude, 0.0], events=turn, rtol=1e-13, atol=1e-14)
+    return 2.0 * sol.t_events[0][0]
+
+
+def test_a_periodic_orbit_of_a_singular_mass_is_the_pendulums(follower):
+    T = _pendulum_period(0.8)
+    orb = fastvi.periodic_orbit(follower, *_state(0.8, 0.02), period=T, n_steps=400)
+    assert orb.residual < 1e-12
+    # its amplitude, from its energy per unit mass: cos θ_max = cos θ0 − L ω0² / (2 g)
+    x, y = orb.q0[:2]
+    theta0, omega0 = np.arctan2(x, -y), (x * orb.v0[1] - y * orb.v0[0]) / L_ ** 2
+    amplitude = np.arccos(np.cos(theta0) - L_ * omega0 ** 2 / (2 * G_))
+    assert abs(amplitude - 0.8) < 1e-6  # the method's error at h = T / 400
+    # one degree of freedom, conservative: a pair of multipliers 1 (λ and 1/λ)
+    lam = np.sort(np.abs(orb.multipliers))
+    assert abs(lam[0] * lam[1] - 1.0) < 1e-10 and np.abs(lam - 1.0).max() < 1e-5

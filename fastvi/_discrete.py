@@ -22,6 +22,7 @@ from . import scipy_compat as compat
 from . import structure
 from .integrate import IntegrationError, _buffers, _filled
 from .kernels import layout as lay
+from .kernels.linalg import augment_weights
 from .kernels.step import linear_force, step_kernel
 from .kernels.tangent import (extended_tables, make_sparsity, make_tangent_work, point_terms,
                              step_band)
@@ -32,7 +33,7 @@ from .tables import Method
 
 __all__ = ["Run", "refuse", "prepare", "with_full_newton", "checked_model", "directions",
            "param_indices", "tangent_work", "initial_tangent", "initial_cotangent",
-           "theta_derivative", "momentum_mass",
+           "theta_derivative", "momentum_mass", "momentum", "velocity", "sample_data",
            "velocity_derivatives", "finish"]
 
 
@@ -118,14 +119,6 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
     :func:`fastvi.integrate` does."""
     started = time.perf_counter()
     n = checked_model(model).n
-    if model.mass_singular and model.time_dependent:
-        # the step's multiplier is that of M + Gᵀ W G, which differs from M's by W g_t where
-        # the constraints move: its linearisation is written for scleronomic constraints
-        raise ValueError(
-            f"{what} of model {model.name!r} is not available: its constant mass matrix is "
-            "singular (a body with a zero principal inertia, such as a rod or a lamina) and "
-            "its constraints depend on time. fastvi.integrate runs it; the derivatives of a "
-            "singular mass need constraints that do not depend on time")
     q0 = valid.vector(q0, "q0", n)
     v0 = valid.vector(v0, "v0", n)
     prm = valid.params(params, model).copy()
@@ -435,7 +428,10 @@ def _start_terms(run: Run):
     model, q0, v0 = run.model, run.q0, run.v0
     if not (run.sparsity.gsta.shape[0] > 0 and "constraint_hessian" in model.callbacks
             and not model.time_dependent and model.mass_matrix_constant is not None):
-        M, G, _, Hv, Cq = point_terms(run.model_data, q0, v0, np.zeros(model.m))
+        # at t0 itself: the run's kernel data carries the time its steps last set (the
+        # adjoint pulls its cotangent back to the start after the sweep)
+        data = model.kernel_data(run.prm, run.t0) if model.time_dependent else run.model_data
+        M, G, _, Hv, Cq = point_terms(data, q0, v0, np.zeros(model.m))
         return M, G, Hv, Cq
     M = model.mass_matrix(q0, run.prm)
     G = model.constraint_jacobian_value(q0, run.prm, run.t0)
@@ -466,29 +462,64 @@ def _state_of(initial_state, p, n):
 
 def momentum_mass(model, q, prm, t=0.0) -> np.ndarray:
     """The matrix of ``p = M v`` on the constraints, as the linearised step reads it:
-    ``M(q, θ)``, or for a singular constant ``M`` the definite ``M + Gᵀ W G``
-    (:func:`.kernels.linalg.augmented_mass`), equal to it where ``G v = 0`` and so the
-    inverse that gives ``v`` from ``p`` there."""
+    ``M(q, θ)``, or for a singular constant ``M`` the definite ``M̄ = M + Gᵀ W G``
+    (:func:`.kernels.linalg.augmented_mass`), equal to it where ``G v = 0``
+    (:func:`momentum` where the constraints move)."""
     M = model.mass_matrix(q, prm)
     if not model.mass_singular:
         return M
     return valid.mass_metric(M, model.constraint_jacobian_value(q, prm, t))
 
 
+def _rate_shift(model, q, prm, t):
+    """``Gᵀ W g_t`` of a singular constant mass (zero for fixed constraints): on the
+    constraints ``M v = M̄ v + Gᵀ W g_t``."""
+    if not (model.mass_singular and model.time_dependent):
+        return 0.0
+    M = model.mass_matrix_constant
+    G = model.constraint_jacobian_value(q, prm, t)
+    w = np.zeros(model.m)
+    augment_weights(M, np.ascontiguousarray(G), w, model.n, model.m)
+    return G.T @ (w * model.constraint_time_derivative_value(q, prm, t))
+
+
+def momentum(model, q, v, prm, t=0.0) -> np.ndarray:
+    """``p`` of ``(q, v)`` as the linearised step reads it on the constraints:
+    ``M(q, θ) v``, or for a singular constant ``M`` the smooth ``M̄ v + Gᵀ W g_t``, equal to
+    ``M v`` where ``G v + g_t = 0`` (its derivatives by ``q`` and ``θ`` are those of the
+    projection of :mod:`.kernels.tangent`)."""
+    return momentum_mass(model, q, prm, t) @ v + _rate_shift(model, q, prm, t)
+
+
+def sample_data(run, t):
+    """The model's kernel data for :func:`.kernels.tangent.point_terms` at a sample at time
+    ``t``: the run's own, but at ``t`` where the constraints move and the mass is singular
+    (``M̄`` then depends on time through ``G``)."""
+    model = run.model
+    if model.mass_singular and model.time_dependent:
+        return model.kernel_data(run.prm, t)
+    return run.model_data
+
+
+def velocity(model, q, p, prm, t=0.0) -> np.ndarray:
+    """The inverse of :func:`momentum` at ``q``."""
+    return np.linalg.solve(momentum_mass(model, q, prm, t), p - _rate_shift(model, q, prm, t))
+
+
 def velocity_derivatives(run, result, dq, dp, pidx, dth):
-    """``δv = M⁻¹ (δp − C_q δq − (M_θ v) δθ)`` at every sample (``M``: :func:`momentum_mass`,
-    which depends on ``q`` and ``θ`` through ``G`` for a singular constant mass)."""
+    """``δv = M⁻¹ (δp − C_q δq − (∂p/∂θ) δθ)`` at every sample, ``p`` the :func:`momentum` of
+    ``(q, v)`` (which depends on ``q`` and ``θ`` through ``G`` for a singular constant mass)."""
     model = run.model
     if model.mass_matrix_constant is not None and not model.mass_singular:
         return np.linalg.solve(model.mass_matrix_constant, dp)
     dv = np.empty_like(dp)
     zero = np.zeros(model.m)
     for i in range(dq.shape[0]):
-        q, v = result.q[i], result.v[i]
-        M, _, _, _, Cq = point_terms(run.model_data, q, v, zero)
+        q, v, t = result.q[i], result.v[i], float(result.t[i])
+        M, _, _, _, Cq = point_terms(sample_data(run, t), q, v, zero)
         rhs = dp[i] - Cq @ dq[i]
         for j, l in enumerate(pidx):
-            rhs -= np.outer(theta_derivative(lambda th: momentum_mass(model, q, th) @ v,
+            rhs -= np.outer(theta_derivative(lambda th: momentum(model, q, v, th, t),
                                                   run.prm, l), dth[:, j])
         dv[i] = np.linalg.solve(M, rhs)
     return dv

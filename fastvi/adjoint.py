@@ -316,8 +316,8 @@ def _cotangents(run, result, cotangent, pidx):
     ``(∂J/∂q_i, ∂J/∂v_i)``, with ``v = M(q, θ)⁻¹ p``: ``Lp = M⁻¹ J_v``,
     ``Lq = J_q − C_qᵀ M⁻¹ J_v``, and the direct part by the parameters
     ``−Σ_i (M_θ v_i)ᵀ M⁻¹ J_v`` (for a configuration-dependent mass: the model's ``∂M/∂θ``,
-    or five-point differences in θ; ``M`` is :func:`fastvi._discrete.momentum_mass`, which
-    depends on ``q`` and ``θ`` for a singular constant mass)."""
+    or five-point differences in θ of :func:`fastvi._discrete.momentum`, which depends on
+    ``q`` and ``θ`` for a singular constant mass)."""
     model = run.model
     n, K = model.n, result.t.shape[0]
     out = cotangent(result)
@@ -334,8 +334,8 @@ def _cotangents(run, result, cotangent, pidx):
     Lq, Lp = Jq.copy(), np.zeros((K, n))
     exact = "mass" in model.param_derivatives and not model.mass_singular
     for i in range(K):
-        q, v = result.q[i], result.v[i]
-        M, _, _, _, Cq = point_terms(run.model_data, q, v, np.zeros(model.m))
+        q, v, t = result.q[i], result.v[i], float(result.t[i])
+        M, _, _, _, Cq = point_terms(disc.sample_data(run, t), q, v, np.zeros(model.m))
         Lp[i] = np.linalg.solve(M, Jv[i])
         Lq[i] -= Cq.T @ Lp[i]
         if exact and pidx:  # the model's ∂M/∂θ, as the linearised step reads it
@@ -343,7 +343,7 @@ def _cotangents(run, result, cotangent, pidx):
             direct -= (dM[pidx] @ v) @ Lp[i]
             continue
         for j, l in enumerate(pidx):
-            direct[j] -= disc.theta_derivative(lambda th: disc.momentum_mass(model, q, th) @ v,
+            direct[j] -= disc.theta_derivative(lambda th: disc.momentum(model, q, v, th, t),
                                                run.prm, l) @ Lp[i]
     return Lq, Lp, direct
 

@@ -130,7 +130,7 @@ class SensitivityResult(SavedResult, ResultBase):
                                                         prm, l), self._dth[:, j])
                 hid = disc.theta_derivative(
                     lambda th: model.constraint_jacobian_value(q, th, t)
-                    @ np.linalg.solve(disc.momentum_mass(model, q, th, t), p)
+                    @ disc.velocity(model, q, p, th, t)
                     + model.constraint_time_derivative_value(q, th, t), prm, l)
                 lin_h += np.outer(hid, self._dth[:, j])
             g[i] = np.abs(lin_g).max()

@@ -353,8 +353,8 @@ def point(md_, q, v, eta, pw_):
     """Fill the :class:`PointWork` at ``(q, v)`` with impulse ``eta`` (m,): ``M(q)``,
     ``G(q)``, ``Σ η_c ∇²g_c``, ``∂(G v + g_t)/∂q`` (row c: ``(∇²g_c v)ᵀ``, plus
     ``∂G_c/∂t`` for time-dependent constraints, at the time the parameter vector carries)
-    and ``∂(M v)/∂q``; for a singular constant ``M``, ``M̄`` and ``∂(M̄ v)/∂q`` in their
-    place (scleronomic constraints). Where ``pw.sp`` has groups of constraints, ``H_v`` is
+    and ``∂(M v)/∂q``; for a singular constant ``M``, ``M̄``, ``∂(M̄ v + Gᵀ W g_t)/∂q``
+    and the impulse of ``M`` (``eta`` is that of ``M̄``) in their place. Where ``pw.sp`` has groups of constraints, ``H_v`` is
     left to :func:`_grouped_hv` (the linearised step of a structured model)."""
     md, pw = own(md_), own(pw_)
     fns, flags, prm = md.fns, md.flags, md.prm
@@ -382,6 +382,19 @@ def point(md_, q, v, eta, pw_):
     clear_rows(G, m, n, pw.sp.gspan)
     fns[CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
     _hessian(md, q, eta, pw.He, pw, n, m)
+    if flags[F_AUGMENT] != 0 and flags[F_TIME] != 0:
+        # the step's impulse is that of M̄ = M + Gᵀ W G; M's is larger by W G v = −W g_t
+        # (rheonomic constraints), and H_η is linear in the impulse
+        augment_weights(md.Mc, G, e, n, m)
+        for c in range(m):
+            acc = 0.0
+            for a in range(n):
+                acc += G[c, a] * v[a]
+            e[c] *= acc
+        _hessian(md, q, e, Hs, pw, n, m)
+        for a in range(n):
+            for b in range(n):
+                pw.He[a, b] += Hs[a, b]
     if pw.sp.gsta.shape[0] > 0:
         return  # H_v by groups: the caller's _grouped_hv
     for c in range(m):
@@ -401,9 +414,10 @@ def point(md_, q, v, eta, pw_):
             for b in range(n):
                 Hv[c, b] += pw.Gp[c, b]
     if flags[F_AUGMENT] != 0:
-        # a singular constant M: on the constraints p = M v = M̄(q) v with the definite
+        # a singular constant M: on the constraints p = M v = M̄ v + Gᵀ W g_t with the definite
         # M̄ = M + Gᵀ W G (:func:`.linalg.augmented_mass`), so the projection is that of the
-        # configuration-dependent mass M̄, whose ∂(M̄ v)/∂q is Gᵀ W H_v where G v = 0
+        # configuration-dependent mass M̄, whose ∂(M̄ v + Gᵀ W g_t)/∂q is Gᵀ W H_v where
+        # G v + g_t = 0
         augmented_mass(md.Mc, G, M, n, m)
         augment_weights(md.Mc, G, e, n, m)
         for a in range(n):

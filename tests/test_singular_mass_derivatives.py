@@ -211,6 +211,15 @@ def test_derivatives_of_a_singular_mass_with_moving_constraints_match_difference
     assert np.abs(got - forward).max() < 1e-11 * np.abs(forward).max()
 
 
+def test_the_structured_solves_of_a_singular_mass_are_refused_by_name(follower):
+    q0, v0 = _state(0.9, 1.2)
+    for call in (lambda: fastvi.sensitivity(follower, q0, v0, h=0.05, n_steps=2, solver="banded"),
+                 lambda: fastvi.adjoint(follower, q0, v0, lambda r: (r.q, None), h=0.05,
+                                        n_steps=2, solver="banded")):
+        with pytest.raises(ValueError, match='structured solves.*singular.*solver="dense"'):
+            call()
+
+
 def test_the_follower_is_the_simple_pendulum(follower):
     """The reference above is the right one: the run's angle is SciPy's pendulum's."""
     r = fastvi.integrate(follower, *_state(1.1, 0.4), h=0.01, t_end=1.0, method="P3L-Q4G")

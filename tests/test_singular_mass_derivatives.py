@@ -17,6 +17,7 @@ from scipy.integrate import solve_ivp
 
 import fastvi
 
+from .test_sensitivity import adjoint_gap
 from .test_singular_mass import A_, C_, G_, L_, W_, _driven_follower, _follower, _state
 
 N_FD = 20  # steps of h = 0.05 (t = 1)
@@ -29,6 +30,25 @@ def _end(model, q0, v0, prm, method, h=0.05, n=N_FD):
     return np.concatenate([r.q[-1], r.v[-1], r.p[-1]])
 
 
+def _against_differences(model, q0, v0, method, eps):
+    """The largest error, relative, of the forward derivatives of ``(q, v, p)`` at the end
+    of ``N_FD`` steps by ``(q0, v0, θ)`` against central differences of whole runs with
+    steps ``eps`` (times ``max(1, |θ_l|)``), and the sensitivity result."""
+    S = fastvi.sensitivity(model, q0, v0, h=0.05, n_steps=N_FD, method=method,
+                           wrt=("q0", "v0", "params"))
+    n, k = model.n, model.params.size
+    worst = 0.0
+    for j in range(2 * n + k):
+        e = np.zeros(2 * n + k)
+        e[j] = eps * (1.0 if j < 2 * n else max(1.0, abs(model.params[j - 2 * n])))
+        fp = _end(model, q0 + e[:n], v0 + e[n:2 * n], model.params + e[2 * n:], method)
+        fm = _end(model, q0 - e[:n], v0 - e[n:2 * n], model.params - e[2 * n:], method)
+        fd = (fp - fm) / (2 * e[j])
+        an = np.concatenate([S.dq[-1, :, j], S.dv[-1, :, j], S.dp[-1, :, j]])
+        worst = max(worst, np.abs(an - fd).max() / max(1.0, np.abs(fd).max()))
+    return worst, S
+
+
 @pytest.fixture(scope="module")
 def follower():
     return _follower()
@@ -38,18 +58,7 @@ def follower():
 def test_derivatives_of_a_singular_mass_match_differences_of_whole_runs(follower, method):
     model = follower
     q0, v0 = _state(0.9, 1.2)
-    S = fastvi.sensitivity(model, q0, v0, h=0.05, n_steps=N_FD, method=method,
-                           wrt=("q0", "v0", "params"))
-    n, k = model.n, model.params.size
-    worst = 0.0
-    for j in range(2 * n + k):
-        e = np.zeros(2 * n + k)
-        e[j] = 3e-7 * (1.0 if j < 2 * n else max(1.0, abs(model.params[j - 2 * n])))
-        fp = _end(model, q0 + e[:n], v0 + e[n:2 * n], model.params + e[2 * n:], method)
-        fm = _end(model, q0 - e[:n], v0 - e[n:2 * n], model.params - e[2 * n:], method)
-        fd = (fp - fm) / (2 * e[j])
-        an = np.concatenate([S.dq[-1, :, j], S.dv[-1, :, j], S.dp[-1, :, j]])
-        worst = max(worst, np.abs(an - fd).max() / max(1.0, np.abs(fd).max()))
+    worst, _ = _against_differences(model, q0, v0, method, 3e-7)
     # the differences' own error is ≈ 1e-9. δp too: an error of δp along Gᵀ leaves the
     # next steps' δq and δv alone (the multiplier at the step's start absorbs it)
     assert worst < 2e-7
@@ -108,18 +117,7 @@ def test_derivatives_of_a_singular_mass_converge_at_the_methods_order(follower):
 
 
 def test_the_adjoint_of_a_singular_mass_is_the_forward_derivative(follower):
-    model = follower
-    q0, v0 = _state(0.9, 1.2)
-    kw = dict(h=0.05, n_steps=60)
-    S = fastvi.sensitivity(model, q0, v0, wrt=("q0", "v0", "params"), **kw)
-    A = fastvi.adjoint(model, q0, v0, lambda r: (r.q, r.v), **kw)
-    n, k = model.n, model.params.size
-    # J = ½ Σ_k (|q_k|² + |v_k|²): ∂J/∂(q_k, v_k) = (q_k, v_k)
-    forward = (np.einsum("kn,knd->d", S.result.q, S.dq)
-               + np.einsum("kn,knd->d", S.result.v, S.dv))
-    got = np.concatenate([A.grad_q0, A.grad_v0, A.grad_params])
-    assert got.shape == (2 * n + k,)
-    assert np.abs(got - forward).max() < 1e-11 * np.abs(forward).max()
+    assert adjoint_gap(follower, *_state(0.9, 1.2), h=0.05, n_steps=60) < 1e-11
 
 
 def test_the_tangent_map_of_a_singular_mass_is_symplectic_on_the_constraints(follower):
@@ -185,30 +183,14 @@ def test_derivatives_of_a_singular_mass_with_moving_constraints_match_difference
     model = driven
     q0, v0 = _state(0.9, 1.2, 0.0, A_ * W_)
     method = "P2L-Q3G"
-    S = fastvi.sensitivity(model, q0, v0, h=0.05, n_steps=N_FD, method=method,
-                           wrt=("q0", "v0", "params"))
-    n, k = model.n, model.params.size
-    worst = 0.0
-    for j in range(2 * n + k):
-        e = np.zeros(2 * n + k)
-        # small: a move of the pivot's frequency leaves v0 off the hidden constraint by
-        # about A t ω δω, which the start projects only below its consistency tolerance
-        e[j] = 3e-8 * (1.0 if j < 2 * n else max(1.0, abs(model.params[j - 2 * n])))
-        fp = _end(model, q0 + e[:n], v0 + e[n:2 * n], model.params + e[2 * n:], method)
-        fm = _end(model, q0 - e[:n], v0 - e[n:2 * n], model.params - e[2 * n:], method)
-        fd = (fp - fm) / (2 * e[j])
-        an = np.concatenate([S.dq[-1, :, j], S.dv[-1, :, j], S.dp[-1, :, j]])
-        worst = max(worst, np.abs(an - fd).max() / max(1.0, np.abs(fd).max()))
+    # small steps: a move of the pivot's frequency leaves v0 off the hidden constraint by
+    # about A t ω δω, which the start projects only below its consistency tolerance
+    worst, S = _against_differences(model, q0, v0, method, 3e-8)
     assert worst < 2e-7
     g, gv = S.tangent_residual()
     size = max(1.0, np.abs(S.dq).max(), np.abs(S.dp).max())
     assert g.max() < 1e-12 * size and gv.max() < 1e-10 * size
-    kw = dict(h=0.05, n_steps=N_FD, method=method)
-    A = fastvi.adjoint(model, q0, v0, lambda r: (r.q, r.v), **kw)
-    forward = (np.einsum("kn,knd->d", S.result.q, S.dq)
-               + np.einsum("kn,knd->d", S.result.v, S.dv))
-    got = np.concatenate([A.grad_q0, A.grad_v0, A.grad_params])
-    assert np.abs(got - forward).max() < 1e-11 * np.abs(forward).max()
+    assert adjoint_gap(model, q0, v0, h=0.05, n_steps=N_FD, method=method) < 1e-11
 
 
 def test_the_structured_solves_of_a_singular_mass_are_refused_by_name(follower):

@@ -33,7 +33,7 @@ from .tables import Method
 
 __all__ = ["Run", "refuse", "prepare", "with_full_newton", "checked_model", "directions",
            "param_indices", "tangent_work", "initial_tangent", "initial_cotangent",
-           "theta_derivative", "momentum_mass", "momentum", "velocity", "sample_data",
+           "theta_derivative", "momentum_mass", "momentum", "velocity", "data_at",
            "velocity_derivatives", "finish"]
 
 
@@ -428,10 +428,8 @@ def _start_terms(run: Run):
     model, q0, v0 = run.model, run.q0, run.v0
     if not (run.sparsity.gsta.shape[0] > 0 and "constraint_hessian" in model.callbacks
             and not model.time_dependent and model.mass_matrix_constant is not None):
-        # at t0 itself: the run's kernel data carries the time its steps last set (the
-        # adjoint pulls its cotangent back to the start after the sweep)
-        data = model.kernel_data(run.prm, run.t0) if model.time_dependent else run.model_data
-        M, G, _, Hv, Cq = point_terms(data, q0, v0, np.zeros(model.m))
+        # at t0 itself: the adjoint pulls its cotangent back to the start after the sweep
+        M, G, _, Hv, Cq = point_terms(data_at(run, run.t0), q0, v0, np.zeros(model.m))
         return M, G, Hv, Cq
     M = model.mass_matrix(q0, run.prm)
     G = model.constraint_jacobian_value(q0, run.prm, run.t0)
@@ -491,14 +489,10 @@ def momentum(model, q, v, prm, t=0.0) -> np.ndarray:
     return momentum_mass(model, q, prm, t) @ v + _rate_shift(model, q, prm, t)
 
 
-def sample_data(run, t):
-    """The model's kernel data for :func:`.kernels.tangent.point_terms` at a sample at time
-    ``t``: the run's own, but at ``t`` where the constraints move and the mass is singular
-    (``M̄`` then depends on time through ``G``)."""
-    model = run.model
-    if model.mass_singular and model.time_dependent:
-        return model.kernel_data(run.prm, t)
-    return run.model_data
+def data_at(run, t):
+    """The model's kernel data at time ``t``, for :func:`.kernels.tangent.point_terms`: the
+    run's own for a model without time (the run's carries the time its steps last set)."""
+    return run.model.kernel_data(run.prm, t) if run.model.time_dependent else run.model_data
 
 
 def velocity(model, q, p, prm, t=0.0) -> np.ndarray:
@@ -516,7 +510,7 @@ def velocity_derivatives(run, result, dq, dp, pidx, dth):
     zero = np.zeros(model.m)
     for i in range(dq.shape[0]):
         q, v, t = result.q[i], result.v[i], float(result.t[i])
-        M, _, _, _, Cq = point_terms(sample_data(run, t), q, v, zero)
+        M, _, _, _, Cq = point_terms(data_at(run, t), q, v, zero)
         rhs = dp[i] - Cq @ dq[i]
         for j, l in enumerate(pidx):
             rhs -= np.outer(theta_derivative(lambda th: momentum(model, q, v, th, t),

@@ -335,7 +335,7 @@ def _cotangents(run, result, cotangent, pidx):
     exact = "mass" in model.param_derivatives and not model.mass_singular
     for i in range(K):
         q, v, t = result.q[i], result.v[i], float(result.t[i])
-        M, _, _, _, Cq = point_terms(disc.sample_data(run, t), q, v, np.zeros(model.m))
+        M, _, _, _, Cq = point_terms(disc.data_at(run, t), q, v, np.zeros(model.m))
         Lp[i] = np.linalg.solve(M, Jv[i])
         Lq[i] -= Cq.T @ Lp[i]
         if exact and pidx:  # the model's ∂M/∂θ, as the linearised step reads it

@@ -3,10 +3,11 @@
 The model of ``test_singular_mass``: a pendulum carrying a massless point rigidly, so
 ``M = diag(m, m, 0, 0)`` is singular but definite on the tangent space of the constraints.
 On the constraints ``p = M v = M̄(q) v`` with the definite ``M̄ = M + Gᵀ W G``, and the
-linearised step differentiates the projection of that configuration-dependent mass. The
+linearised step differentiates the projection of that configuration-dependent mass; where
+the pivot moves, ``p = M̄ v + Gᵀ W g_t``. Also Brüls' lamina (the heavy top). The
 references are independent of that code: differences of whole runs (the step alone), the
-simple pendulum's angle integrated by SciPy, and the adjoint's identity with the forward
-derivative.
+simple pendulum's angle and period from SciPy, the adjoint's identity with the forward
+derivative, and the symplectic form.
 """
 
 import warnings

@@ -3,7 +3,9 @@ r"""Periodic orbits of the discrete flow by shooting, and their Floquet multipli
 
 Newton's method on the closing condition ``Φ^N(x) = x`` of the integrator's own map, with the
 exact derivatives of :func:`fastvi.sensitivity`, in coordinates of the tangent space of the
-constrained phase space (:func:`fastvi.tangent_space`); ``docs/sensitivities.md``.
+constrained phase space (:func:`fastvi.tangent_space`); ``docs/sensitivities.md``. An
+autonomous model's orbits need a phase condition; a periodically forced model's (a driven
+constraint, a time-dependent potential or force) have their time origin fixed by the drive.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _validate as valid
-from ._discrete import momentum_mass
+from ._discrete import momentum, momentum_mass, velocity
 from .consistent import consistent_state
 from .integrate import IntegrationError, Result, integrate
 from .sensitivity import sensitivity, tangent_space
@@ -25,6 +27,13 @@ __all__ = ["periodic_orbit", "PeriodicOrbit", "PeriodicOrbitError"]
 _MAX_HALVINGS = 8
 #: relative step of the central differences of ``M(q) v`` in ``q`` (a q-dependent mass only)
 _FD_STEP = 1e-6
+#: fractions of the period at which a force is compared with its value at ``t0`` to tell
+#: whether it changes in time: not simple fractions, so that a force of period ``T / k``
+#: shows it too
+_PROBES = (0.1372, 0.3718, 0.5, 0.7291)
+#: how far (relative) the model's time-dependent callbacks may differ between ``t0`` and
+#: ``t0 + period`` at the guess: round-off in the drive's phase, far below a wrong period's
+_PERIODIC_RTOL = 1e-8
 
 
 @dataclass
@@ -47,14 +56,20 @@ class PeriodicOrbit:
     monodromy : ndarray (2(n − m), 2(n − m))
         ``Zᵀ DΦ^N(x0) Z``: the tangent map of one period in the coordinates of ``Z``.
     multipliers : ndarray (2(n − m),), complex
-        The eigenvalues of :attr:`monodromy`, farthest from 1 first: for an orbit of a
-        conservative model the last two are the trivial pair ≈ 1 (the directions along the
-        flow and across the energies).
+        The eigenvalues of :attr:`monodromy`, farthest from 1 first: for an orbit of an
+        autonomous conservative model the last two are the trivial pair ≈ 1 (the directions
+        along the flow and across the energies); a forced model's have no trivial pair.
     residual : float
         ``max |(q, v)(period) − (q0, v0)|`` of :attr:`result`.
     iterations : int
         Newton iterations taken.
     method : str
+    t0 : float
+        The time of ``(q0, v0)``: for a forced model, the phase of the drive the orbit
+        starts at.
+    forced : bool
+        Whether the model is forced (time-dependent, or with a force that changes in time),
+        so that the orbit was sought without a phase condition.
     """
 
     q0: np.ndarray
@@ -69,6 +84,8 @@ class PeriodicOrbit:
     residual: float
     iterations: int
     method: str
+    t0: float = 0.0
+    forced: bool = False
 
 
 class PeriodicOrbitError(RuntimeError):
@@ -93,9 +110,9 @@ class PeriodicOrbitError(RuntimeError):
 
 
 def periodic_orbit(model, q0, v0, *, period: float, n_steps: int | None = None,
-                   h: float | None = None, method="P2L-Q3G", phase="section",
+                   h: float | None = None, method="P2L-Q3G", phase="auto",
                    tol: float = 1e-12, max_iter: int = 20, params=None,
-                   save_every: int = 1) -> PeriodicOrbit:
+                   save_every: int = 1, t0: float = 0.0) -> PeriodicOrbit:
     r"""A periodic orbit of the discrete flow through a guess, and its Floquet multipliers.
 
     Finds a consistent state ``x0 = (q0, p0)`` that the integrator's map ``Φ`` (one step
@@ -145,27 +162,43 @@ def periodic_orbit(model, q0, v0, *, period: float, n_steps: int | None = None,
     (unstable). They are those of the discrete map and differ from the exact flow's by the
     method's error, ``O(h^{2s})``.
 
+    **Forced models.** A model whose constraints or potential depend on time
+    (``time_dependent``), or whose force changes in time at the guess, is *forced*: its map
+    over a period of the drive depends on where in the drive the orbit starts, ``t0``, and
+    its periodic orbits (of the drive's period or a multiple of it) are isolated. There is
+    no phase condition then: Newton solves the ``2d`` equations ``Z_kᵀ F(x_k) = 0`` in the
+    ``2d`` unknowns ``ξ``. An equilibrium of the drive's period map — the inverted position
+    of a pendulum on a vibrating pivot, say — is such an orbit and is returned. Where the
+    model is conservative the multipliers still come in reciprocal pairs (the map is
+    symplectic), none of them trivial; with damping their product is the contraction of
+    phase-space volume over a period.
+
     Parameters
     ----------
     model : Model
-        A model without time-dependent constraints or potential (an autonomous
-        conservative one has periodic orbits in families; a damped one has none, and Newton
-        fails with :class:`PeriodicOrbitError`).
+        An autonomous conservative model (its periodic orbits come in families; a damped
+        autonomous model has none, and Newton fails with :class:`PeriodicOrbitError`), or
+        a forced one: time-dependent constraints or potential, or a force that changes in
+        time, periodic with a period that divides ``period``.
     q0, v0 : array_like (n,)
         The guess, e.g. a linear normal mode; projected onto the constraints first.
     period : float
-        The period sought, ``n_steps · h``.
+        The period sought, ``n_steps · h``. For a forced model, a period of its time
+        dependence (that of the drive or a multiple of it): its callbacks are compared at
+        ``t0`` and ``t0 + period`` at the guess, and a difference is an error.
     n_steps, h :
         Give one: the steps per period (then ``h = period / n_steps``), or the step size
         (then ``period`` must be a whole number of steps).
     method : str or Method, default "P2L-Q3G"
         As :func:`fastvi.integrate`.
-    phase : "section", ("q", i) or ("v", i); default "section"
+    phase : "auto", "section", ("q", i), ("v", i) or None; default "auto"
         The phase condition. ``"section"``: ``x0`` lies on the hyperplane through the guess
         orthogonal to the direction of the flow there (in ``(q, p)``). ``("q", i)``,
         ``("v", i)``: ``q0[i]`` (``v0[i]``) keeps its value in the guess — e.g.
         ``("v", i)`` with ``v0[i] = 0`` starts at a turning point of coordinate ``i``.
-        The coordinate must move along the orbit there.
+        The coordinate must move along the orbit there. ``None``: no phase condition, for a
+        forced model only (the drive fixes the time origin). ``"auto"``: ``"section"`` for
+        an autonomous model, ``None`` for a forced one.
     tol : float, default 1e-12
         Converged when ``max |(q, v)(period) − (q0, v0)| ≤ tol · max(1, |q0|, |v0|)`` and
         the phase condition holds as closely; one more Newton step is then taken if it
@@ -176,6 +209,9 @@ def periodic_orbit(model, q0, v0, *, period: float, n_steps: int | None = None,
         Parameters (default: the model's).
     save_every : int, default 1
         Sampling of :attr:`PeriodicOrbit.result`; must divide ``n_steps``.
+    t0 : float, default 0.0
+        The time of the guess and of the orbit's start (the drive's phase for a forced
+        model).
 
     Returns
     -------
@@ -187,12 +223,13 @@ def periodic_orbit(model, q0, v0, *, period: float, n_steps: int | None = None,
     ------
     PeriodicOrbitError
         Newton did not converge in ``max_iter`` iterations, or a step could not reduce the
-        residual (no periodic orbit of that period near the guess), or it converged to an
-        equilibrium (which closes for any period); carries the last iterate.
+        residual (no periodic orbit of that period near the guess), or, for an autonomous
+        model, it converged to an equilibrium (which closes for any period); carries the
+        last iterate.
     ValueError, TypeError
-        Bad arguments, naming them.
-    NotImplementedError
-        A model with time-dependent constraints or potential.
+        Bad arguments, naming them: among them a ``period`` that is not a period of a forced
+        model's time dependence, a phase condition for a forced model and none for an
+        autonomous one.
     fastvi.IntegrationError
         The run from the guess itself fails.
 
@@ -213,12 +250,18 @@ def periodic_orbit(model, q0, v0, *, period: float, n_steps: int | None = None,
     ...                               phase=("v", 0))
     >>> bool(orbit.residual < 1e-12), orbit.multipliers.shape
     (True, (4,))
+
+    The inverted position of Kapitza's pendulum, over one period of its pivot:
+
+    >>> kp = fastvi.scenes.kapitza_pendulum()             # a ω = 7.5 m/s: stable
+    >>> q0, v0 = kp.initial_state(np.pi + 0.05)
+    >>> up = fastvi.periodic_orbit(kp, q0, v0, period=2 * np.pi / 150.0, n_steps=40)
+    >>> bool(abs(kp.angle(up.q0, 0.0)) > 3.14159), bool(np.abs(np.abs(up.multipliers) - 1).max() < 1e-12)
+    (True, True)
     """
-    if model.time_dependent:
-        raise NotImplementedError("periodic_orbit does not support time-dependent constraints or "
-                                  f"potentials (model {model.name!r})")
     n = model.n
     period, h, N = _steps(period, n_steps, h)
+    t0 = valid.start_time(t0)
     every = valid.count(save_every, "save_every", 1)
     if N % every:
         raise ValueError(f"`save_every` = {every} must divide the {N} steps of a period, so that "
@@ -226,16 +269,17 @@ def periodic_orbit(model, q0, v0, *, period: float, n_steps: int | None = None,
     tol = valid.tolerance(tol)
     iters = valid.max_iter(max_iter)
     prm = valid.params(params, model)
-    run = dict(h=h, n_steps=N, method=method, params=prm, save_every=every)
+    run = dict(h=h, n_steps=N, method=method, params=prm, save_every=every, t0=t0)
     q, v = consistent_state(model, valid.vector(q0, "q0", n), valid.vector(v0, "v0", n),
-                            params=prm)
-    phi = _phase(model, phase, q, v, prm, h, method)
+                            params=prm, t=t0)
+    forced = _forced(model, q, v, prm, t0, period)
+    phi = _phase(model, phase, q, v, prm, run, forced)
 
     Z, A, S = _linearise(model, q, v, prm, run)
     polished = False
     for it in range(iters + 1):
         close, scale = _closing(S), max(1.0, np.abs(q).max(), np.abs(v).max())
-        converged = close <= tol * scale and abs(phi.value(S)) <= tol * scale
+        converged = close <= tol * scale and (phi is None or abs(phi.value(S)) <= tol * scale)
         if converged and (polished or it == iters):
             break
         if not converged and it == iters:
@@ -256,12 +300,12 @@ def periodic_orbit(model, q0, v0, *, period: float, n_steps: int | None = None,
                 "another `phase` condition", residual=close, iterations=it, q=q, v=v)
         (q, v), Z, A, S = new
         polished = converged
-    if _flow(model, q, v, prm, h, method)[1] is None:
+    if not forced and _flow(model, q, v, prm, run)[1] is None:
         raise PeriodicOrbitError(
             "periodic_orbit converged to an equilibrium (the state does not move), not to an "
             f"orbit of period {period:g}: start from a guess with more motion, or with a period "
             "nearer the linear one", residual=close, iterations=it, q=q, v=v)
-    return _orbit(model, S, Z, A, q, v, period, h, N, _closing(S), it, method)
+    return _orbit(S, Z, A, q, v, period, h, N, _closing(S), it, method, t0, forced)
 
 
 # ----------------------------------------------------------------------------- arguments
@@ -308,10 +352,55 @@ class _Phase:
         return (S.dq if self.kind == "q" else S.dv)[0][self.index]
 
 
-def _phase(model, phase, q, v, prm, h, method) -> _Phase:
+def _at(model, slot, q, v, prm, t):
+    """The callback ``slot`` at ``(t, q, v)``, or ``None`` where the model has none."""
+    try:
+        return np.asarray(model.callback_value(slot, q, v, params=prm, t=t), dtype=np.float64)
+    except ValueError:
+        return None
+
+
+def _forced(model, q, v, prm, t0, period) -> bool:
+    """Whether the model is forced (time-dependent, or a force that changes in time at the
+    guess); if so, checks at the guess that ``period`` is a period of its time dependence."""
+    slots = [s for s in ("potential", "potential_grad", "constraint", "constraint_jacobian")
+             if model.time_dependent]
+    if model.has_force:
+        f0 = _at(model, "force", q, v, prm, t0)
+        if any(not np.array_equal(_at(model, "force", q, v, prm, t0 + c * period), f0)
+               for c in _PROBES):
+            slots.append("force")
+    if not slots:
+        return False
+    for slot in slots:
+        a, b = _at(model, slot, q, v, prm, t0), _at(model, slot, q, v, prm, t0 + period)
+        if a is None:
+            continue
+        gap = float(np.abs(b - a).max(initial=0.0))
+        if gap > _PERIODIC_RTOL * max(1.0, float(np.abs(a).max(initial=0.0))):
+            raise ValueError(
+                f"`period` = {period:g} is not a period of the model's time dependence: its "
+                f"`{slot}` at the guess differs by {gap:.2e} between t0 = {t0:g} and "
+                f"t0 + period. Pass the drive's period or a multiple of it")
+    return True
+
+
+def _phase(model, phase, q, v, prm, run, forced) -> _Phase | None:
     n = model.n
+    if isinstance(phase, str) and phase == "auto":
+        phase = None if forced else "section"
+    if forced and phase is not None:
+        raise ValueError(
+            f"`phase` = {phase!r}: the model is forced (time-dependent, or a force that changes "
+            "in time), and the drive fixes where its orbit starts; pass `phase=None` (or "
+            "'auto') and choose the start with `t0`")
+    if phase is None:
+        if not forced:
+            raise ValueError("`phase` = None is for a forced model: an autonomous model's "
+                             "orbits need a phase condition ('section', ('q', i) or ('v', i))")
+        return None
     if isinstance(phase, str) and phase == "section":
-        x, f = _flow(model, q, v, prm, h, method)
+        x, f = _flow(model, q, v, prm, run)
         if f is None:
             raise ValueError("`phase` = 'section' needs motion: the guess is an equilibrium "
                              "(no flow direction); start from a moving state, e.g. a linear "
@@ -321,27 +410,28 @@ def _phase(model, phase, q, v, prm, h, method) -> _Phase:
     ok = (isinstance(phase, tuple) and len(phase) == 2 and phase[0] in ("q", "v")
           and isinstance(phase[1], (int, np.integer)) and not isinstance(phase[1], bool))
     if not ok:
-        raise ValueError(f"`phase` must be 'section', ('q', i) or ('v', i) with an integer i, "
-                         f"got {phase!r}")
+        raise ValueError(f"`phase` must be 'auto', 'section', ('q', i), ('v', i) with an "
+                         f"integer i, or None, got {phase!r}")
     i = int(phase[1])
     if not 0 <= i < n:
         raise ValueError(f"`phase` index {i} is out of range for n = {n} coordinates (0 … {n - 1})")
     return _Phase(phase[0], i, float((q if phase[0] == "q" else v)[i]))
 
 
-def _flow(model, q, v, prm, h, method):
+def _flow(model, q, v, prm, run):
     """``x = (q, p)`` and the direction of the flow there, ``Φ(x) − x`` (one step), or
     ``None`` at an equilibrium (a step that moves by round-off only)."""
-    one = integrate(model, q, v, h=h, n_steps=1, method=method, params=prm)
+    one = integrate(model, q, v, h=run["h"], n_steps=1, method=run["method"], params=prm,
+                    t0=run["t0"])
     x = np.concatenate([one.q[0], one.p[0]])
     f = np.concatenate([one.q[1], one.p[1]]) - x
     return x, (f if np.abs(f).max() > 1e-12 * max(1.0, np.abs(x).max()) else None)
 
 
 # ----------------------------------------------------------------------------- Newton
-def _state(model, q, v, prm) -> np.ndarray:
-    """``(q, p)`` of a state."""
-    return np.concatenate([q, model.mass_matrix(q, prm) @ v])
+def _state(model, q, v, prm, t) -> np.ndarray:
+    """``(q, p)`` of a state at time ``t``."""
+    return np.concatenate([q, momentum(model, q, v, prm, t)])
 
 
 def _closing(S) -> float:
@@ -350,21 +440,28 @@ def _closing(S) -> float:
     return float(max(np.abs(r.q[-1] - r.q[0]).max(), np.abs(r.v[-1] - r.v[0]).max()))
 
 
-def _merit(model, S, phi, prm) -> float:
+def _ends(model, S, prm):
+    """``(q, p)`` at the start and at the end of the run ``S``."""
     r = S.result
-    d = _state(model, r.q[-1], r.v[-1], prm) - _state(model, r.q[0], r.v[0], prm)
-    return float(d @ d + phi.value(S) ** 2)
+    return (_state(model, r.q[0], r.v[0], prm, r.t[0]),
+            _state(model, r.q[-1], r.v[-1], prm, r.t[-1]))
 
 
-def _chart(model, x, Z, xi, prm):
-    """The consistent state nearest to ``x + Z ξ`` (``None`` where the projection fails:
-    a step too long)."""
+def _merit(model, S, phi, prm) -> float:
+    x, xN = _ends(model, S, prm)
+    d = xN - x
+    return float(d @ d + (0.0 if phi is None else phi.value(S) ** 2))
+
+
+def _chart(model, x, Z, xi, prm, t):
+    """The consistent state nearest to ``x + Z ξ`` at time ``t`` (``None`` where the
+    projection fails: a step too long)."""
     n = model.n
     y = x + Z @ xi
     q = y[:n]
     try:
-        v = np.linalg.solve(momentum_mass(model, q, prm), y[n:])
-        return consistent_state(model, q, v, params=prm)
+        v = velocity(model, q, y[n:], prm, t)
+        return consistent_state(model, q, v, params=prm, t=t)
     except (ValueError, np.linalg.LinAlgError):
         return None
 
@@ -373,17 +470,17 @@ def _newton_step(model, S, Z, A, phi, prm, run, halvings):
     """The next iterate ``(state, Z, A, run)`` from the run ``S`` at the current one: the
     least-squares Newton step, halved up to ``halvings`` times until ``|F|² + φ²`` drops;
     ``None`` if it never does."""
-    r = S.result
-    x = _state(model, r.q[0], r.v[0], prm)
-    xN = _state(model, r.q[-1], r.v[-1], prm)
+    x, xN = _ends(model, S, prm)
     Ainv = np.linalg.inv(A)
     Y = np.vstack([S.dq[-1], S.dp[-1]])
-    lhs = np.vstack([Z.T @ Y @ Ainv - np.eye(Z.shape[1]), phi.row(S) @ Ainv])
-    rhs = -np.concatenate([Z.T @ (xN - x), [phi.value(S)]])
+    lhs, rhs = Z.T @ Y @ Ainv - np.eye(Z.shape[1]), -(Z.T @ (xN - x))
+    if phi is not None:
+        lhs = np.vstack([lhs, phi.row(S) @ Ainv])
+        rhs = np.concatenate([rhs, [-phi.value(S)]])
     xi = np.linalg.lstsq(lhs, rhs, rcond=None)[0]
     merit = _merit(model, S, phi, prm)
     for j in range(halvings + 1):
-        trial = _chart(model, x, Z, 0.5 ** j * xi, prm)
+        trial = _chart(model, x, Z, 0.5 ** j * xi, prm, run["t0"])
         if trial is None:
             continue
         try:
@@ -399,21 +496,21 @@ def _linearise(model, q, v, prm, run):
     """The basis ``Z`` at ``(q, v)``, the run over one period with the columns of ``Z`` as
     directions, and ``A = Zᵀ (δq, δp)(0)``: the coordinates in ``Z`` of the tangent vectors
     the directions became (``I`` up to the difference quotients of ``C_q``)."""
-    n, k = model.n, prm.shape[0]
-    Z = tangent_space(model, q, v, params=prm)
-    M = momentum_mass(model, q, prm)
-    dv = np.linalg.solve(M, Z[n:] - _momentum_derivative(model, q, v, prm) @ Z[:n])
+    n, k, t = model.n, prm.shape[0], run["t0"]
+    Z = tangent_space(model, q, v, params=prm, t=t)
+    M = momentum_mass(model, q, prm, t)
+    dv = np.linalg.solve(M, Z[n:] - _momentum_derivative(model, q, v, prm, t) @ Z[:n])
     D = np.vstack([Z[:n], dv, np.zeros((k, Z.shape[1]))])
     S = sensitivity(model, q, v, wrt=D, **run)
     A = Z.T @ np.vstack([S.dq[0], S.dp[0]])
     return Z, A, S
 
 
-def _momentum_derivative(model, q, v, prm) -> np.ndarray:
-    """``C_q = ∂(M(q) v)/∂q`` by central differences (zero for a constant mass matrix;
-    ``M`` is :func:`fastvi._discrete.momentum_mass`, which depends on ``q`` for a singular
-    one). Its error only moves the directions within the tangent space: ``A`` accounts
-    for it."""
+def _momentum_derivative(model, q, v, prm, t) -> np.ndarray:
+    """``C_q = ∂p/∂q`` at fixed ``v`` by central differences, ``p`` the
+    :func:`fastvi._discrete.momentum` (zero for a constant invertible mass matrix; it depends
+    on ``q`` through ``G`` for a singular one). Its error only moves the directions within
+    the tangent space: ``A`` accounts for it."""
     n = model.n
     if model.mass_matrix_constant is not None and not model.mass_singular:
         return np.zeros((n, n))
@@ -421,16 +518,15 @@ def _momentum_derivative(model, q, v, prm) -> np.ndarray:
     for j in range(n):
         e = np.zeros(n)
         e[j] = _FD_STEP * max(1.0, abs(q[j]))
-        C[:, j] = (momentum_mass(model, q + e, prm) @ v
-                   - momentum_mass(model, q - e, prm) @ v) / (2 * e[j])
+        C[:, j] = (momentum(model, q + e, v, prm, t) - momentum(model, q - e, v, prm, t)) / (2 * e[j])
     return C
 
 
-def _orbit(model, S, Z, A, q, v, period, h, N, close, iterations, method) -> PeriodicOrbit:
+def _orbit(S, Z, A, q, v, period, h, N, close, iterations, method, t0, forced) -> PeriodicOrbit:
     Y = np.vstack([S.dq[-1], S.dp[-1]])
     mono = Z.T @ Y @ np.linalg.inv(A)
     lam = np.linalg.eigvals(mono)
     lam = lam[np.argsort(-np.abs(lam - 1.0), kind="stable")]
     name = method if isinstance(method, str) else getattr(method, "name", str(method))
     return PeriodicOrbit(q.copy(), v.copy(), period, h, N, S.result, Z, mono, lam, close,
-                         iterations, name)
+                         iterations, name, t0, forced)

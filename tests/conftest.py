@@ -17,6 +17,7 @@ def pytest_addoption(parser):
 #: ``--dist loadfile`` every file of a family goes to one worker, in one work unit.
 KERNEL_FAMILIES = {
     "derivatives": ("test_hard_cases", "test_lyapunov", "test_param_patterns", "test_periodic",
+                    "test_periodic_forced",
                     "test_sensitivity", "test_sensitivity_ensemble",
                     "test_sensitivity_structured", "test_singular_mass_derivatives",
                     "test_sized_tangent"),

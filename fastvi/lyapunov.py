@@ -24,12 +24,12 @@ class LyapunovSpectrum:
     Attributes
     ----------
     t : ndarray (J,)
-        The ends of the segments, ``t_j = j · segment``, ``j = 1 … J``.
+        The ends of the segments, ``t_j = t0 + j · segment``, ``j = 1 … J``.
     exponents : ndarray (d,)
         The estimates at ``t_J``: ``running[-1]``, largest first (up to the finite-time
         scatter of exponents that are nearly equal).
     running : ndarray (J, d)
-        ``running[j - 1, i] = λ_i(t_j) = (1/t_j) Σ_{l ≤ j} growth[l - 1, i]``.
+        ``running[j - 1, i] = λ_i(t_j) = (1/(j · segment)) Σ_{l ≤ j} growth[l - 1, i]``.
     growth : ndarray (J, d)
         ``log |R_ii|`` of segment ``j``: the logarithm of the growth of the ``i``-dimensional
         volume spanned by the first ``i`` vectors, divided by that of the first ``i − 1``
@@ -50,7 +50,7 @@ class LyapunovSpectrum:
 
 def lyapunov_spectrum(model, q0, v0, *, h: float, t_end: float, segment: float = 1.0,
                       count: int | None = None, method="P2L-Q3G", seed: int = 0,
-                      start=None) -> LyapunovSpectrum:
+                      start=None, t0: float = 0.0) -> LyapunovSpectrum:
     r"""The ``count`` largest Lyapunov exponents from the discrete tangent flow (QR method).
 
     Benettin's standard method (Shimada–Nagashima, Benettin et al.): ``d = count`` tangent
@@ -61,7 +61,7 @@ def lyapunov_spectrum(model, q0, v0, *, h: float, t_end: float, segment: float =
 
     .. math::
 
-        λ_i(t_J) = \frac{1}{t_J} \sum_{j=1}^{J} \log |(R_j)_{ii}|, \qquad t_J = J\,\text{segment},
+        λ_i(t_J) = \frac{1}{t_J - t_0} \sum_{j=1}^{J} \log |(R_j)_{ii}|, \qquad t_J = t_0 + J\,\text{segment},
 
     ``λ_1 ≥ λ_2 ≥ …`` as ``t_J → ∞`` (Oseledets' theorem): ``λ_1 + … + λ_i`` is the growth
     rate of ``i``-dimensional volumes.
@@ -85,13 +85,20 @@ def lyapunov_spectrum(model, q0, v0, *, h: float, t_end: float, segment: float =
     (:func:`fastvi.tangent_space`): the Euclidean volume of that space is not the
     symplectic one.
 
+    A forced model — time-dependent constraints or potential, or a force that changes in
+    time — is followed in time: each segment starts where the last one ended, at
+    ``t0 + j · segment``, so the estimates do not depend on ``segment`` (up to round-off).
+    A conservative forced model's step is still symplectic: its exponents come in pairs
+    summing to zero and obey the sum above, but none is zero.
+
     Parameters
     ----------
     model, q0, v0, h, method :
-        As :func:`sensitivity` (a model without time-dependent potential or constraints;
-        forces are allowed and make the sum of the exponents negative).
+        As :func:`sensitivity`: an autonomous model or a forced one (time-dependent
+        constraints or potential, forces that change in time); dissipative forces make
+        the sum of the exponents negative.
     t_end : float
-        The span, a whole number of segments.
+        The span, a whole number of segments: the run ends at ``t0 + t_end``.
     segment : float, default 1.0
         Renormalisation interval, a whole number of steps ``h``: short enough that the
         vectors neither overflow nor align numerically (``(λ_1 − λ_d) · segment ≪ 30``).
@@ -103,6 +110,8 @@ def lyapunov_spectrum(model, q0, v0, *, h: float, t_end: float, segment: float =
     start : array_like (2n, count), optional
         Start vectors ``(δq0, δv0)`` instead of random ones; projected likewise, and must
         stay independent after the projection.
+    t0 : float, default 0.0
+        The time of ``(q0, v0)``: where a forced model's drive starts.
 
     Returns
     -------
@@ -138,6 +147,7 @@ def lyapunov_spectrum(model, q0, v0, *, h: float, t_end: float, segment: float =
     True
     """
     h = valid.step_size(h)
+    t0 = valid.start_time(t0)
     segment, t_end = float(segment), float(t_end)
     steps = int(round(segment / h))
     segments = int(round(t_end / segment))
@@ -160,12 +170,13 @@ def lyapunov_spectrum(model, q0, v0, *, h: float, t_end: float, segment: float =
         if w.shape != (2 * n, d) or not np.all(np.isfinite(w)):
             raise ValueError(f"`start` must hold {d} finite start vectors (δq0, δv0) as columns, "
                              f"shape ({2 * n}, {d}); got shape {w.shape}")
-    q, v = np.array(q0, dtype=float), np.array(v0, dtype=float)
+    q, v, t = np.array(q0, dtype=float), np.array(v0, dtype=float), t0
     growth = np.empty((segments, d))
     for j in range(segments):
         raw = np.vstack([w, np.zeros((k, d))])  # the parameters stay fixed
+        # each segment starts at the time the last one ended: a forced model's drive runs on
         s = sensitivity(model, q, v, h=h, n_steps=steps, wrt=raw, save_every=steps,
-                        method=method)
+                        method=method, t0=t)
         # the start's own triangle too: the first segment's vectors are merely projected,
         # and the next ones are re-projected at the re-projected state (round-off)
         r0 = _triangle(np.vstack([s.dq[0], s.dp[0]]), "start")
@@ -173,10 +184,10 @@ def lyapunov_spectrum(model, q0, v0, *, h: float, t_end: float, segment: float =
         growth[j] = np.log(np.abs(np.diag(r1))) - np.log(np.abs(np.diag(r0)))
         # Y_j = Y_j' R_j⁻¹, taken in (δq, δv) — the same linear combinations — to feed back
         w = np.linalg.solve(r1.T, np.vstack([s.dq[-1], s.dv[-1]]).T).T
-        q, v = s.result.q[-1].copy(), s.result.v[-1].copy()
-    t = segment * np.arange(1, segments + 1)
-    running = np.cumsum(growth, axis=0) / t[:, None]
-    return LyapunovSpectrum(t, running[-1].copy(), running, growth, segment, dim)
+        q, v, t = s.result.q[-1].copy(), s.result.v[-1].copy(), float(s.result.t[-1])
+    elapsed = segment * np.arange(1, segments + 1)
+    running = np.cumsum(growth, axis=0) / elapsed[:, None]
+    return LyapunovSpectrum(t0 + elapsed, running[-1].copy(), running, growth, segment, dim)
 
 
 def _triangle(Y, where):
@@ -190,7 +201,7 @@ def _triangle(Y, where):
 
 
 def largest_lyapunov(model, q0, v0, *, h: float, t_end: float, segment: float = 1.0,
-                     method="P2L-Q3G", seed: int = 0) -> np.ndarray:
+                     method="P2L-Q3G", seed: int = 0, t0: float = 0.0) -> np.ndarray:
     r"""Running estimate of the largest Lyapunov exponent from the discrete tangent flow.
 
     :func:`lyapunov_spectrum` with one vector (Benettin's method): one tangent vector,
@@ -205,13 +216,13 @@ def largest_lyapunov(model, q0, v0, *, h: float, t_end: float, segment: float = 
 
     Parameters
     ----------
-    model, q0, v0, h, t_end, segment, method, seed :
+    model, q0, v0, h, t_end, segment, method, seed, t0 :
         As :func:`lyapunov_spectrum`.
 
     Returns
     -------
     ndarray (J,)
-        ``λ(t_j)`` at ``t_j = j · segment``, ``j = 1 … J``.
+        ``λ(t_j)`` at ``t_j = t0 + j · segment``, ``j = 1 … J``.
 
     Examples
     --------
@@ -223,4 +234,4 @@ def largest_lyapunov(model, q0, v0, *, h: float, t_end: float, segment: float = 
     True
     """
     return lyapunov_spectrum(model, q0, v0, h=h, t_end=t_end, segment=segment, count=1,
-                             method=method, seed=seed).running[:, 0]
+                             method=method, seed=seed, t0=t0).running[:, 0]

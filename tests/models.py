@@ -275,6 +275,55 @@ def damped_double_pendulum_by_differences(damping=0.3):
         **damping_.options(damping, 4))
 
 
+# a pendulum (Cartesian) with dashpot c, driven by a horizontal force F cos(ω t) on its bob:
+# forced through its force alone. params = (m, l, g, c, F, ω)
+DRIVEN_PARAMS = (1.0, 1.0, 9.81, 0.5, 2.0, 2.5)
+
+
+def driven_V(q, p):
+    return p[0] * p[2] * q[1]
+
+
+def driven_dV(q, p, out):
+    out[0] = 0.0
+    out[1] = p[0] * p[2]
+
+
+def driven_g(q, p, out):
+    out[0] = 0.5 * (q[0] * q[0] + q[1] * q[1] - p[1] * p[1])
+
+
+def driven_G(q, p, out):
+    out[0, 0] = q[0]
+    out[0, 1] = q[1]
+
+
+def driven_ddg(q, eta, p, out):
+    out[:, :] = 0.0
+    out[0, 0] = eta[0]
+    out[1, 1] = eta[0]
+
+
+def driven_force(t, q, v, p, out):
+    out[0] = -p[3] * v[0] + p[4] * np.cos(p[5] * t)
+    out[1] = -p[3] * v[1]
+
+
+def driven_force_v(t, q, v, p, out):
+    out[:, :] = 0.0
+    out[0, 0] = -p[3]
+    out[1, 1] = -p[3]
+
+
+def driven_pendulum():
+    """The pendulum of :data:`DRIVEN_PARAMS`: time enters through its force alone."""
+    return fastvi.Model(2, 1, params=DRIVEN_PARAMS, mass=DRIVEN_PARAMS[0] * np.eye(2),
+                        potential=driven_V, potential_grad=driven_dV, potential_hessian=0,
+                        constraint=driven_g, constraint_jacobian=driven_G,
+                        constraint_hessian=driven_ddg, force=driven_force,
+                        force_jacobian_q=0, force_jacobian_v=driven_force_v, name="driven_pendulum")
+
+
 # time-dependent spring: V = ½ k1 x² + ½ k2 (y − a sin t)², params = (k1, k2, a, …)
 def td_potential(t, q, p):
     return 0.5 * p[0] * q[0] ** 2 + 0.5 * p[1] * (q[1] - p[2] * np.sin(t)) ** 2

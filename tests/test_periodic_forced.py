@@ -15,6 +15,8 @@ from scipy.optimize import fsolve
 
 import fastvi
 
+from . import models
+
 L, GRAV, AMP = 1.0, 9.81, 0.05  # Kapitza's pendulum (the scene's defaults but ω)
 
 
@@ -75,52 +77,9 @@ def test_a_later_start_and_a_double_period_give_the_same_multipliers():
     assert np.abs(np.sort_complex(twice.multipliers) - np.sort_complex(lam**2)).max() < 1e-13
 
 
-# the damped pendulum driven by a horizontal force on its bob: a force that changes in time
-# makes the model forced although its constraint and potential do not depend on time
-M, C, FORCE, OMEGA = 1.0, 0.5, 2.0, 2.5
+# the damped pendulum driven by a horizontal force on its bob (tests/models.py)
+M, LD, GD, C, FORCE, OMEGA = models.DRIVEN_PARAMS
 PERIOD = 2 * np.pi / OMEGA
-
-
-def _V(q, p):
-    return p[0] * p[2] * q[1]
-
-
-def _dV(q, p, out):
-    out[0] = 0.0
-    out[1] = p[0] * p[2]
-
-
-def _g(q, p, out):
-    out[0] = 0.5 * (q[0] * q[0] + q[1] * q[1] - p[1] * p[1])
-
-
-def _G(q, p, out):
-    out[0, 0] = q[0]
-    out[0, 1] = q[1]
-
-
-def _ddg(q, eta, p, out):
-    out[:, :] = 0.0
-    out[0, 0] = eta[0]
-    out[1, 1] = eta[0]
-
-
-def _force(t, q, v, p, out):
-    out[0] = -p[3] * v[0] + p[4] * np.cos(p[5] * t)
-    out[1] = -p[3] * v[1]
-
-
-def _force_v(t, q, v, p, out):
-    out[:, :] = 0.0
-    out[0, 0] = -p[3]
-    out[1, 1] = -p[3]
-
-
-def _driven():
-    return fastvi.Model(2, 1, params=(M, L, GRAV, C, FORCE, OMEGA), mass=M * np.eye(2),
-                        potential=_V, potential_grad=_dV, potential_hessian=0, constraint=_g,
-                        constraint_jacobian=_G, constraint_hessian=_ddg, force=_force,
-                        force_jacobian_q=0, force_jacobian_v=_force_v, name="driven_pendulum")
 
 
 def _driven_reference():
@@ -128,10 +87,10 @@ def _driven_reference():
     of ``m l² θ̈ = −m g l sin θ − c l² θ̇ + F l cos(ω t) cos θ``."""
     def rhs(t, y):
         th, om = y[0], y[1]
-        acc = (-M * GRAV * L * np.sin(th) - C * L * L * om
-               + FORCE * L * np.cos(OMEGA * t) * np.cos(th)) / (M * L * L)
-        J = np.array([[0.0, 1.0], [(-M * GRAV * L * np.cos(th)
-                                    - FORCE * L * np.cos(OMEGA * t) * np.sin(th)) / (M * L * L),
+        acc = (-M * GD * LD * np.sin(th) - C * LD * LD * om
+               + FORCE * LD * np.cos(OMEGA * t) * np.cos(th)) / (M * LD * LD)
+        J = np.array([[0.0, 1.0], [(-M * GD * LD * np.cos(th)
+                                    - FORCE * LD * np.cos(OMEGA * t) * np.sin(th)) / (M * LD * LD),
                                    -C / M]])
         return np.concatenate([[om, acc], (J @ y[2:].reshape(2, 2)).ravel()])
 
@@ -147,19 +106,19 @@ def _driven_reference():
 
 
 def test_the_response_of_a_driven_damped_pendulum_converges_to_scipys_at_order_four():
-    model = _driven()
+    model = models.driven_pendulum()
     assert not model.time_dependent  # forced through its force alone
     y0, mono = _driven_reference()
     ref = np.sort_complex(np.linalg.eigvals(mono))
     volume = np.exp(-C * PERIOD / M)  # Liouville: the trace of the angle equation's matrix is −c/m
     assert abs(np.linalg.det(mono) - volume) < 1e-12  # (the reference agrees with theory)
-    q0 = np.array([np.sin(0.2), -np.cos(0.2)]) * L
+    q0 = np.array([np.sin(0.2), -np.cos(0.2)]) * LD
     state, lam, det = [], [], []
     for n_steps in (25, 50):
         o = fastvi.periodic_orbit(model, q0, np.zeros(2), period=PERIOD, n_steps=n_steps)
         assert o.forced and o.residual < 1e-12
         th = np.arctan2(o.q0[0], -o.q0[1])
-        rate = (o.v0[0] * np.cos(th) + o.v0[1] * np.sin(th)) / L
+        rate = (o.v0[0] * np.cos(th) + o.v0[1] * np.sin(th)) / LD
         state.append(max(abs(th - y0[0]), abs(rate - y0[1])))
         lam.append(np.abs(np.sort_complex(o.multipliers) - ref).max())
         det.append(abs(np.prod(o.multipliers).real - volume))
@@ -175,7 +134,7 @@ def test_forced_models_name_a_wrong_period_and_a_phase_condition(double_pendulum
     with pytest.raises(ValueError, match=r"not a period of the model's time dependence.*`constraint`"):
         fastvi.periodic_orbit(kp, q0, v0, period=1.1 * T, n_steps=40)
     with pytest.raises(ValueError, match=r"not a period.*`force`"):
-        fastvi.periodic_orbit(_driven(), q0, v0, period=0.7 * PERIOD, n_steps=40)
+        fastvi.periodic_orbit(models.driven_pendulum(), q0, v0, period=0.7 * PERIOD, n_steps=40)
     with pytest.raises(ValueError, match=r"`phase` = 'section'.*forced.*`phase=None`"):
         fastvi.periodic_orbit(kp, q0, v0, period=T, n_steps=40, phase="section")
     with pytest.raises(ValueError, match=r"`phase` = None is for a forced model"):

@@ -25,7 +25,7 @@ from .kernels import layout as lay
 from .kernels.linalg import augment_weights
 from .kernels.step import linear_force, step_kernel
 from .kernels.tangent import (extended_tables, make_sparsity, make_tangent_work, point_terms,
-                             step_band)
+                             sample_masses, sample_terms, step_band)
 from .model import Model
 from .results import Result
 from .status import Status
@@ -34,7 +34,7 @@ from .tables import Method
 __all__ = ["Run", "refuse", "prepare", "with_full_newton", "checked_model", "directions",
            "param_indices", "tangent_work", "initial_tangent", "initial_cotangent",
            "theta_derivative", "momentum_mass", "momentum", "velocity", "data_at",
-           "velocity_derivatives", "finish"]
+           "sample_terms_by_chunk", "momentum_by_theta", "velocity_derivatives", "finish"]
 
 
 @dataclass
@@ -500,6 +500,44 @@ def velocity(model, q, p, prm, t=0.0) -> np.ndarray:
     return np.linalg.solve(momentum_mass(model, q, prm, t), p - _rate_shift(model, q, prm, t))
 
 
+#: the bytes of the terms of the samples one call of :func:`.kernels.tangent.sample_terms`
+#: computes: on a long run they are taken a chunk at a time
+_SAMPLE_BYTES = 32 * 2**20
+
+
+def sample_terms_by_chunk(model, prm, result, by_theta=0):
+    """``(start, Ms, Gs, Hvs, Cqs)`` over consecutive chunks of the samples of ``result``:
+    ``M``, ``G``, ``H_v`` and ``C_q`` of the linearised step's projection
+    (:func:`.kernels.tangent.point`) at each sample, from ``start`` on; chunks small enough
+    for ``by_theta`` more (n,) vectors a sample too (:func:`momentum_by_theta`)."""
+    K, n = result.q.shape
+    m = model.m
+    chunk = max(1, _SAMPLE_BYTES // (8 * n * (3 * n + 2 * m + by_theta)))
+    md = model.kernel_data(prm, float(result.t[0]))  # its own: the loop sets its time
+    for i0 in range(0, K, chunk):
+        i1 = min(K, i0 + chunk)
+        yield (i0, *sample_terms(md, result.q[i0:i1], result.v[i0:i1], result.t[i0:i1], m))
+
+
+def momentum_by_theta(model, prm, result, start, stop, pidx) -> np.ndarray:
+    """``∂p/∂θ_l`` (``p`` the :func:`momentum`) at the samples ``start … stop − 1`` of
+    ``result``, (stop − start, len(pidx), n): :func:`theta_derivative`'s rule, sample by
+    sample the same arithmetic, with the masses of each point in θ in one compiled loop
+    (:func:`.kernels.tangent.sample_masses`)."""
+    q, v, t = result.q[start:stop], result.v[start:stop], result.t[start:stop]
+    out = np.zeros((stop - start, len(pidx), model.n))
+    for c, l in enumerate(pidx):
+        dt = lay.FD_T * max(1.0, abs(float(prm[l])))
+        for sgn, wgt in lay.FD_T_POINTS:
+            p = prm.copy()
+            p[l] += sgn * dt
+            Ms = sample_masses(model.kernel_data(p, float(t[0])), q, t, model.m)
+            for j, M in enumerate(Ms):
+                out[j, c] = out[j, c] + wgt * (M @ v[j] + _rate_shift(model, q[j], p, float(t[j])))
+        out[:, c] /= 12.0 * dt
+    return out
+
+
 def velocity_derivatives(run, result, dq, dp, pidx, dth):
     """``δv = M⁻¹ (δp − C_q δq − (∂p/∂θ) δθ)`` at every sample, ``p`` the :func:`momentum` of
     ``(q, v)`` (which depends on ``q`` and ``θ`` through ``G`` for a singular constant mass)."""
@@ -507,15 +545,14 @@ def velocity_derivatives(run, result, dq, dp, pidx, dth):
     if model.mass_matrix_constant is not None and not model.mass_singular:
         return np.linalg.solve(model.mass_matrix_constant, dp)
     dv = np.empty_like(dp)
-    zero = np.zeros(model.m)
-    for i in range(dq.shape[0]):
-        q, v, t = result.q[i], result.v[i], float(result.t[i])
-        M, _, _, _, Cq = point_terms(data_at(run, t), q, v, zero)
-        rhs = dp[i] - Cq @ dq[i]
-        for j, l in enumerate(pidx):
-            rhs -= np.outer(theta_derivative(lambda th: momentum(model, q, v, th, t),
-                                                  run.prm, l), dth[:, j])
-        dv[i] = np.linalg.solve(M, rhs)
+    for start, Ms, _, _, Cqs in sample_terms_by_chunk(model, run.prm, result, len(pidx)):
+        Pth = momentum_by_theta(model, run.prm, result, start, start + len(Ms), pidx)
+        for j, (M, Cq) in enumerate(zip(Ms, Cqs)):
+            i = start + j
+            rhs = dp[i] - Cq @ dq[i]
+            for c in range(len(pidx)):
+                rhs -= np.outer(Pth[j, c], dth[:, c])
+            dv[i] = np.linalg.solve(M, rhs)
     return dv
 
 

@@ -21,7 +21,6 @@ from ._numba import quiet
 from .kernels.adjoint import (g_entries, make_checkpoints, make_records, recorder, run_adjoint,
                               run_checkpointed, sweeper)
 from .kernels import layout as lay
-from .kernels.tangent import point_terms
 from .progress import UPDATES, ProgressBar
 from .results import (Result, ResultBase, SavedResult, matching_model, result_arrays,
                       result_from, run_items, run_text, stats_arrays, stats_from, timing)
@@ -333,18 +332,20 @@ def _cotangents(run, result, cotangent, pidx):
         return Jq, np.linalg.solve(model.mass_matrix_constant, Jv.T).T.copy(), direct
     Lq, Lp = Jq.copy(), np.zeros((K, n))
     exact = "mass" in model.param_derivatives and not model.mass_singular
-    for i in range(K):
-        q, v, t = result.q[i], result.v[i], float(result.t[i])
-        M, _, _, _, Cq = point_terms(disc.data_at(run, t), q, v, np.zeros(model.m))
-        Lp[i] = np.linalg.solve(M, Jv[i])
-        Lq[i] -= Cq.T @ Lp[i]
-        if exact and pidx:  # the model's ∂M/∂θ, as the linearised step reads it
-            dM = model.param_derivative_value("mass", q, params=run.prm)
-            direct -= (dM[pidx] @ v) @ Lp[i]
-            continue
-        for j, l in enumerate(pidx):
-            direct[j] -= disc.theta_derivative(lambda th: disc.momentum(model, q, v, th, t),
-                                               run.prm, l) @ Lp[i]
+    by_theta = 0 if exact else len(pidx)
+    for start, Ms, _, _, Cqs in disc.sample_terms_by_chunk(model, run.prm, result, by_theta):
+        Pth = disc.momentum_by_theta(model, run.prm, result, start, start + len(Ms),
+                                     pidx[:by_theta])
+        for j, (M, Cq) in enumerate(zip(Ms, Cqs)):
+            i = start + j
+            Lp[i] = np.linalg.solve(M, Jv[i])
+            Lq[i] -= Cq.T @ Lp[i]
+            if exact and pidx:  # the model's ∂M/∂θ, as the linearised step reads it
+                dM = model.param_derivative_value("mass", result.q[i], params=run.prm)
+                direct -= (dM[pidx] @ result.v[i]) @ Lp[i]
+                continue
+            for c in range(by_theta):
+                direct[c] -= Pth[j, c] @ Lp[i]
     return Lq, Lp, direct
 
 

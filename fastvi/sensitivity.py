@@ -119,22 +119,23 @@ class SensitivityResult(SavedResult, ResultBase):
         if model.m == 0:
             return g, gv
         res = self.result
-        for i in range(K):
-            q, v, p, t = res.q[i], res.v[i], res.p[i], float(self.t[i])
-            M, G, _, Hv, Cq = point_terms(model.kernel_data(prm, t), q, v, np.zeros(model.m))
-            dq, dp = self.dq[i], self.dp[i]
-            lin_g = G @ dq
-            lin_h = Hv @ dq + G @ np.linalg.solve(M, dp - Cq @ dq)
-            for j, l in enumerate(self._pidx):
-                lin_g += np.outer(disc.theta_derivative(lambda th: model.constraint_value(q, th, t),
-                                                        prm, l), self._dth[:, j])
-                hid = disc.theta_derivative(
-                    lambda th: model.constraint_jacobian_value(q, th, t)
-                    @ disc.velocity(model, q, p, th, t)
-                    + model.constraint_time_derivative_value(q, th, t), prm, l)
-                lin_h += np.outer(hid, self._dth[:, j])
-            g[i] = np.abs(lin_g).max()
-            gv[i] = np.abs(lin_h).max()
+        for start, Ms, Gs, Hvs, Cqs in disc.sample_terms_by_chunk(model, prm, res):
+            for j, (M, G, Hv, Cq) in enumerate(zip(Ms, Gs, Hvs, Cqs)):
+                i = start + j
+                q, p, t = res.q[i], res.p[i], float(self.t[i])
+                dq, dp = self.dq[i], self.dp[i]
+                lin_g = G @ dq
+                lin_h = Hv @ dq + G @ np.linalg.solve(M, dp - Cq @ dq)
+                for c, l in enumerate(self._pidx):
+                    lin_g += np.outer(disc.theta_derivative(
+                        lambda th: model.constraint_value(q, th, t), prm, l), self._dth[:, c])
+                    hid = disc.theta_derivative(
+                        lambda th: model.constraint_jacobian_value(q, th, t)
+                        @ disc.velocity(model, q, p, th, t)
+                        + model.constraint_time_derivative_value(q, th, t), prm, l)
+                    lin_h += np.outer(hid, self._dth[:, c])
+                g[i] = np.abs(lin_g).max()
+                gv[i] = np.abs(lin_h).max()
         return g, gv
 
     def plot(self, path=None, *, directions=None):

@@ -438,6 +438,71 @@ def point_terms(md, q, v, eta):
     return pw.M.copy(), pw.G[:m].copy(), pw.He.copy(), pw.Hv[:m].copy(), pw.Cq.copy()
 
 
+@njit
+def _sample_terms(md, Q, V, T, eta, pw, Ms, Gs, Hvs, Cqs):
+    flags = md.flags
+    n, m = Q.shape[1], eta.shape[0]
+    for i in range(Q.shape[0]):
+        if flags[F_TIME] != 0:
+            md.prm[flags[F_TSLOT]] = T[i]
+        point(md, Q[i], V[i], eta, pw)
+        for a in range(n):
+            for b in range(n):
+                Ms[i, a, b] = pw.M[a, b]
+                Cqs[i, a, b] = pw.Cq[a, b]
+        for c in range(m):
+            for b in range(n):
+                Gs[i, c, b] = pw.G[c, b]
+                Hvs[i, c, b] = pw.Hv[c, b]
+
+
+@njit
+def _sample_masses(md, Q, T, pw, Ms):
+    fns, flags, prm = md.fns, md.flags, md.prm
+    n, m = Q.shape[1], pw.G.shape[0]
+    G = pw.G
+    for i in range(Q.shape[0]):
+        if flags[F_TIME] != 0:
+            prm[flags[F_TSLOT]] = T[i]
+        q, M = Q[i], Ms[i]
+        if flags[F_MASSFN] != 0:
+            fns[MASS](ptr(q), ptr(q), ptr(prm), ptr(M))
+        elif flags[F_AUGMENT] != 0:
+            clear_rows(G, m, n, pw.sp.gspan)
+            fns[CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
+            augmented_mass(md.Mc, G, M, n, m)
+        else:
+            for a in range(n):
+                for b in range(n):
+                    M[a, b] = md.Mc[a, b]
+
+
+def sample_masses(md, Q, T, m):
+    """``M(q)`` at each sample ``Q[i]`` at time ``T[i]`` (K, n, n), as :func:`point` reads
+    it — the model's mass function, or for a singular constant mass ``M̄`` — in one
+    compiled loop: what the differences by θ of the momentum take at every sample."""
+    K, n = Q.shape
+    Ms = np.empty((K, n, n))
+    _sample_masses(md, np.ascontiguousarray(Q, dtype=float), np.ascontiguousarray(T, dtype=float),
+                   make_point_work(n, m), Ms)
+    return Ms
+
+
+def sample_terms(md, Q, V, T, m):
+    """``(Ms, Gs, Hvs, Cqs)``: ``M``, ``G``, ``H_v`` and ``C_q`` of :func:`point` (impulse
+    zero) at each sample ``(Q[i], V[i])`` at time ``T[i]``, (K, n, n) and (K, m, n), in one
+    compiled loop: a call of :func:`point_terms` a sample cost the dispatch's typing of the
+    model's callbacks, about 1 ms, far more than the terms. ``md`` is the model's kernel
+    data, whose time slot a time-dependent model's loop overwrites."""
+    K, n = Q.shape
+    Ms, Cqs = np.empty((K, n, n)), np.empty((K, n, n))
+    Gs, Hvs = np.empty((K, m, n)), np.empty((K, m, n))
+    _sample_terms(md, np.ascontiguousarray(Q, dtype=float), np.ascontiguousarray(V, dtype=float),
+                  np.ascontiguousarray(T, dtype=float), np.zeros(m), make_point_work(n, m),
+                  Ms, Gs, Hvs, Cqs)
+    return Ms, Gs, Hvs, Cqs
+
+
 @hot
 def lu_solve_transposed(A, piv, b, N):
     """Solve ``Aᵀ x = b`` with the factors of :func:`.linalg.lu_factor` (``P A = L U``,

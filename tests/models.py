@@ -4,7 +4,12 @@
 vertical, so the mass matrix diag(m, m r²) depends on q; with ``spring`` the radius is a
 spring (unconstrained, m = 0), otherwise the constraint r − l = 0 makes it a pendulum.
 params = (m, g, l_or_r0, k).
+
+``driven_pendulum``: the scenes' pendulum with a dashpot, driven by a horizontal force on its
+bob: a forced model whose constraint and potential do not depend on time.
 """
+
+import importlib
 
 import numba
 import numpy as np
@@ -276,32 +281,9 @@ def damped_double_pendulum_by_differences(damping=0.3):
 
 
 # a pendulum (Cartesian) with dashpot c, driven by a horizontal force F cos(ω t) on its bob:
-# forced through its force alone. params = (m, l, g, c, F, ω)
+# forced through its force alone; the scene's pendulum otherwise. params = (m, l, g, c, F, ω)
+pendulum_scene = importlib.import_module("fastvi.scenes.pendulum")  # the module: the name is the scene
 DRIVEN_PARAMS = (1.0, 1.0, 9.81, 0.5, 2.0, 2.5)
-
-
-def driven_V(q, p):
-    return p[0] * p[2] * q[1]
-
-
-def driven_dV(q, p, out):
-    out[0] = 0.0
-    out[1] = p[0] * p[2]
-
-
-def driven_g(q, p, out):
-    out[0] = 0.5 * (q[0] * q[0] + q[1] * q[1] - p[1] * p[1])
-
-
-def driven_G(q, p, out):
-    out[0, 0] = q[0]
-    out[0, 1] = q[1]
-
-
-def driven_ddg(q, eta, p, out):
-    out[:, :] = 0.0
-    out[0, 0] = eta[0]
-    out[1, 1] = eta[0]
 
 
 def driven_force(t, q, v, p, out):
@@ -318,9 +300,10 @@ def driven_force_v(t, q, v, p, out):
 def driven_pendulum():
     """The pendulum of :data:`DRIVEN_PARAMS`: time enters through its force alone."""
     return fastvi.Model(2, 1, params=DRIVEN_PARAMS, mass=DRIVEN_PARAMS[0] * np.eye(2),
-                        potential=driven_V, potential_grad=driven_dV, potential_hessian=0,
-                        constraint=driven_g, constraint_jacobian=driven_G,
-                        constraint_hessian=driven_ddg, force=driven_force,
+                        potential=pendulum_scene._V, potential_grad=pendulum_scene._dV,
+                        potential_hessian=0, constraint=pendulum_scene._g,
+                        constraint_jacobian=pendulum_scene._G,
+                        constraint_hessian=pendulum_scene._ddg, force=driven_force,
                         force_jacobian_q=0, force_jacobian_v=driven_force_v, name="driven_pendulum")
 
 

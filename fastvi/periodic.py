@@ -31,6 +31,8 @@ _FD_STEP = 1e-6
 #: whether it changes in time: not simple fractions, so that a force of period ``T / k``
 #: shows it too
 _PROBES = (0.1372, 0.3718, 0.5, 0.7291)
+#: the callbacks that take the time in a ``time_dependent`` model
+_TIMED_SLOTS = ("potential", "potential_grad", "constraint", "constraint_jacobian")
 #: how far (relative) the model's time-dependent callbacks may differ between ``t0`` and
 #: ``t0 + period`` at the guess: round-off in the drive's phase, far below a wrong period's
 _PERIODIC_RTOL = 1e-8
@@ -363,8 +365,7 @@ def _at(model, slot, q, v, prm, t):
 def _forced(model, q, v, prm, t0, period) -> bool:
     """Whether the model is forced (time-dependent, or a force that changes in time at the
     guess); if so, checks at the guess that ``period`` is a period of its time dependence."""
-    slots = [s for s in ("potential", "potential_grad", "constraint", "constraint_jacobian")
-             if model.time_dependent]
+    slots = list(_TIMED_SLOTS) if model.time_dependent else []
     if model.has_force:
         f0 = _at(model, "force", q, v, prm, t0)
         if any(not np.array_equal(_at(model, "force", q, v, prm, t0 + c * period), f0)

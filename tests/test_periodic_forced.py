@@ -32,11 +32,12 @@ def _kapitza_monodromy(omega):
     return s.y[2:, -1].reshape(2, 2)
 
 
-def _inverted(omega, n_steps, **kw):
+def _inverted(omega, n_steps, periods=1, t0=0.0):
+    """Kapitza's pendulum from 0.05 rad off the top at ``t0``, over ``periods`` of the drive."""
     kp = fastvi.scenes.kapitza_pendulum(omega=omega)
-    q0, v0 = kp.initial_state(np.pi + 0.05, t0=kw.get("t0", 0.0))
-    return kp, fastvi.periodic_orbit(kp, q0, v0, period=kw.pop("periods", 1) * 2 * np.pi / omega,
-                                     n_steps=n_steps, **kw)
+    q0, v0 = kp.initial_state(np.pi + 0.05, t0=t0)
+    return kp, fastvi.periodic_orbit(kp, q0, v0, period=periods * 2 * np.pi / omega,
+                                     n_steps=n_steps, t0=t0)
 
 
 @pytest.mark.parametrize("omega,stable", [(150.0, True), (30.0, False)])

@@ -49,7 +49,7 @@ def consistent_state(model: Model, q, v, *, fixed=(), t: float = 0.0, params=Non
         \left(G v + g_t\right),
 
     solved twice (the second pass removes the round-off of the first). ``g_t = ∂g/∂t`` is
-    zero for the time-independent constraints models have today.
+    zero unless the model is ``time_dependent`` (a driven constraint).
 
     Parameters
     ----------
@@ -60,9 +60,8 @@ def consistent_state(model: Model, q, v, *, fixed=(), t: float = 0.0, params=Non
         Coordinate indices (0 … n−1) whose position and velocity are prescribed, e.g. the
         two coordinates of a crank pin to set its angle and speed.
     t : float, default 0.0
-        The time of the state. Unused with time-independent constraints (all models
-        today); accepted so that calls stay valid when models gain time-dependent
-        constraints, where the velocity equation becomes ``G v + g_t = 0``.
+        The time of the state. It matters only to a ``time_dependent`` model: the
+        constraints are solved at ``t``, and the velocities so that ``G v + g_t = 0``.
     params : array_like (k,), optional
         Parameters (default: the model's).
     max_iter : int, default 50

@@ -326,7 +326,10 @@ class EnsembleResult(ResultBase):
 
         Equal, array for array, to ``integrate(..., save_every=k, on_failure="return")`` of
         that member (the times in ``stats`` are NaN: members share the clock; the
-        summary says "time not measured").
+        summary says "time not measured"), except for a member a terminal event ended:
+        its last sample is the end of the step that contains the event, where
+        ``integrate`` moves it to the event (the state there is the member's
+        ``q_events``/``v_events`` entry of that event).
         """
         if self.t is None:
             raise ValueError(f"member trajectories need `save` = an integer stride; this ensemble "

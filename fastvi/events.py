@@ -5,8 +5,8 @@ zero crossing is located on the step polynomial inside the compiled time loop
 (:mod:`fastvi.kernels.events`). Optional attributes, as in SciPy:
 
 ``terminal`` : bool or int, default False
-    True (or 1): the run ends at the step containing the first crossing; an integer
-    ``k > 1``: at the k-th crossing.
+    True (or 1): the run ends at the first crossing (its last sample is the state at the
+    crossing, as in SciPy); an integer ``k > 1``: at the k-th crossing.
 ``direction`` : float, default 0
     Count only crossings from negative to positive (``> 0``), positive to negative
     (``< 0``), or both (``0``).

@@ -215,7 +215,7 @@ def integrate(
         ``P1L-Q2G`` on the double pendulum). Methods whose quadrature has fewer than ``s``
         points (the mass block is singular) use the full Newton under ``"auto"``.
         ``"full"``: the exact Newton matrix, assembled and factored at every iteration
-        (v0.1's iteration, bit for bit). Both solve the same equations to the same
+        (Newton's method proper). Both solve the same equations to the same
         tolerance; the trajectories differ at round-off.
     params : array_like (k,), optional
         Parameters for this run (default: the model's).

@@ -643,7 +643,7 @@ def render(study: dict) -> str:
         w("With J > s constraint intervals the step has as many equations as unknowns, but "
           "as h → 0 every G(q(d_j)) tends to G(q_k) and the J·m constraint rows only see the "
           "s·m normal components of the increments: the Newton matrix tends to a singular one "
-          "(for s = 1 it is singular at once). An earlier run of this study measured it: "
+          "(for s = 1 it is singular at once). Measured with the refusal below lifted: "
           "`P1L-Q2G-CL3` and `-CG1` were singular at once, `P2L-Q3G-CL4` and `P3L-Q4G-CL5` "
           "failed Newton on the triple pendulum for h ≤ 1/32 and h ≤ 1/16, and where Newton "
           "converged the error fell far more slowly than order 2. `fastvi.method` therefore "

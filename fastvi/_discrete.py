@@ -10,6 +10,7 @@ bit; :mod:`fastvi.kernels.tangent` differentiates each step after it.
 from __future__ import annotations
 
 import time
+import warnings
 from collections import namedtuple
 from dataclasses import dataclass
 
@@ -25,7 +26,7 @@ from .kernels import layout as lay
 from .kernels.linalg import augment_weights
 from .kernels.step import linear_force, step_kernel
 from .kernels.tangent import (extended_tables, make_sparsity, make_tangent_work, point_terms,
-                             sample_masses, sample_terms, step_band)
+                             sample_callback, sample_masses, sample_terms, step_band)
 from .model import Model
 from .results import Result
 from .status import Status
@@ -33,8 +34,9 @@ from .tables import Method
 
 __all__ = ["Run", "refuse", "prepare", "with_full_newton", "checked_model", "directions",
            "param_indices", "tangent_work", "initial_tangent", "initial_cotangent",
-           "theta_derivative", "momentum_mass", "momentum", "velocity", "data_at",
-           "sample_terms_by_chunk", "momentum_by_theta", "velocity_derivatives", "finish"]
+           "checked_initial_state", "theta_derivative", "momentum_mass", "momentum", "velocity", "data_at",
+           "sample_terms_by_chunk", "momentum_by_theta", "constraints_by_theta",
+           "velocity_derivatives", "finish"]
 
 
 @dataclass
@@ -211,13 +213,23 @@ def _linear_part(run: Run, tw) -> None:
 # ----------------------------------------------------------------------------- directions
 def theta_derivative(f, prm: np.ndarray, l: int) -> np.ndarray:
     """``∂f/∂θ_l`` at ``prm`` by the kernels' five-point difference (``layout.FD_T``)."""
-    dt = lay.FD_T * max(1.0, abs(float(prm[l])))
+    points, scale = _theta_stencil(prm, l)
     acc = 0.0
+    for p, wgt in points:
+        acc = acc + wgt * np.asarray(f(p), dtype=float)
+    return acc / scale
+
+
+def _theta_stencil(prm, l: int):
+    """``([(θ_j, w_j)], 12 δ)``: the points and weights of :func:`theta_derivative`'s rule
+    in ``θ_l`` and its divisor, ``∂f/∂θ_l ≈ Σ_j w_j f(θ_j) / (12 δ)``."""
+    dt = lay.FD_T * max(1.0, abs(float(prm[l])))
+    points = []
     for sgn, wgt in lay.FD_T_POINTS:
         p = prm.copy()
         p[l] += sgn * dt
-        acc = acc + wgt * np.asarray(f(p), dtype=float)
-    return acc / (12.0 * dt)
+        points.append((p, wgt))
+    return points, 12.0 * dt
 
 
 def checked_model(model) -> Model:
@@ -227,23 +239,28 @@ def checked_model(model) -> Model:
     return model
 
 
-def directions(wrt, n: int, k: int, param_index, fixed=()) -> tuple[np.ndarray, list[str]]:
+def directions(wrt, n: int, k: int, param_index, fixed=(),
+               mass=()) -> tuple[np.ndarray, list[str]]:
     """``(D, labels)``: the raw directions (d, 2n + k) in ``(δq0, δv0, δθ)`` of ``wrt`` — a
     sequence of the names ``"q0"``, ``"v0"``, ``"params"`` (``param_index`` the parameters
     of ``"params"``, default all but the model's ``fixed`` ones) or an array (2n + k, d) of
     directions — and a label for each."""
     if isinstance(wrt, str):
         wrt = (wrt,)
-    idx = param_indices(param_index, k, fixed)
+    idx = param_indices(param_index, k, fixed, mass)
     if isinstance(wrt, np.ndarray) or (isinstance(wrt, (list, tuple)) and wrt
                                        and not isinstance(wrt[0], str)):
         D = np.asarray(wrt, dtype=float)
         if D.ndim == 1:
             D = D[:, None]
-        if D.ndim != 2 or D.shape[0] != 2 * n + k or not np.all(np.isfinite(D)):
-            raise ValueError(f"`wrt` as an array must hold finite directions (δq0, δv0, δθ) as "
+        if D.ndim != 2 or D.shape[0] != 2 * n + k:
+            raise ValueError(f"`wrt` as an array must hold directions (δq0, δv0, δθ) as "
                              f"columns, shape ({2 * n + k}, d) for n = {n}, k = {k}; got shape "
                              f"{D.shape}")
+        if not np.all(np.isfinite(D)):
+            raise ValueError(f"`wrt` as an array must be finite; column(s) "
+                             f"{sorted(set(np.nonzero(~np.isfinite(D))[1].tolist()))} hold NaN "
+                             f"or inf")
         for l in fixed:
             if np.any(D[2 * n + l] != 0.0):
                 raise ValueError(f"`wrt` moves params[{l}], which the model marks fixed "
@@ -256,6 +273,11 @@ def directions(wrt, n: int, k: int, param_index, fixed=()) -> tuple[np.ndarray, 
             raise ValueError(f"`wrt` entries must be 'q0', 'v0' or 'params', got {name!r}")
         if names.count(name) > 1:
             raise ValueError(f"`wrt` names {name!r} twice")
+    if param_index is not None and "params" not in names:
+        raise ValueError(f"`param_index` chooses among the directions of 'params', which `wrt` = "
+                         f"{tuple(names)} does not name: add 'params' to `wrt`, or drop "
+                         f"`param_index`")
+    for name in names:
         if name == "params":
             for l in idx:
                 r = np.zeros(2 * n + k)
@@ -280,7 +302,7 @@ _FIXED = ("`Model.fixed_params`: data its callbacks read, such as an index, not 
           "it has no derivative")
 
 
-def param_indices(param_index, k: int, fixed=()) -> list[int]:
+def param_indices(param_index, k: int, fixed=(), mass=()) -> list[int]:
     """The parameters to differentiate by: ``param_index`` checked against the ``k``
     parameters and the model's ``fixed`` ones, or (None) every parameter but those."""
     if param_index is None:
@@ -300,6 +322,10 @@ def param_indices(param_index, k: int, fixed=()) -> list[int]:
             raise ValueError(f"`param_index` names params[{int(i)}], which the model marks "
                              f"fixed ({_FIXED}); leave it out")
         out.append(int(i))
+    named = [l for l in out if l in mass]
+    if named:
+        warnings.warn(valid.mass_params_warning(named, "`param_index` differentiates by"),
+                      UserWarning, stacklevel=3)
     return out
 
 
@@ -453,8 +479,22 @@ def _rate_jacobian(model: Model, sp, prm, q, v):
     return Hv
 
 
+def checked_initial_state(initial_state):
+    """``initial_state`` (None or a callable ``params -> (q0, v0)``), or a TypeError that
+    names it, before any run."""
+    if initial_state is not None and not callable(initial_state):
+        raise TypeError(f"`initial_state` must be a function `initial_state(params) -> (q0, v0)` "
+                        f"(or None), got {type(initial_state).__name__}")
+    return initial_state
+
+
 def _state_of(initial_state, p, n):
-    q, v = initial_state(p)
+    out = initial_state(p)
+    if not (isinstance(out, (tuple, list)) and len(out) == 2):
+        raise TypeError(f"`initial_state(params)` must return a pair (q0, v0), got "
+                        f"{type(out).__name__}" + (f" of length {len(out)}"
+                                                   if isinstance(out, (tuple, list)) else ""))
+    q, v = out
     return valid.vector(q, "initial_state(params)[0]", n), valid.vector(v, "initial_state(params)[1]", n)
 
 
@@ -527,15 +567,64 @@ def momentum_by_theta(model, prm, result, start, stop, pidx) -> np.ndarray:
     q, v, t = result.q[start:stop], result.v[start:stop], result.t[start:stop]
     out = np.zeros((stop - start, len(pidx), model.n))
     for c, l in enumerate(pidx):
-        dt = lay.FD_T * max(1.0, abs(float(prm[l])))
-        for sgn, wgt in lay.FD_T_POINTS:
-            p = prm.copy()
-            p[l] += sgn * dt
-            Ms = sample_masses(model.kernel_data(p, float(t[0])), q, t, model.m)
-            for j, M in enumerate(Ms):
-                out[j, c] = out[j, c] + wgt * (M @ v[j] + _rate_shift(model, q[j], p, float(t[j])))
-        out[:, c] /= 12.0 * dt
+        points, scale = _theta_stencil(prm, l)
+        for p, wgt in points:
+            Mv = _stacked(sample_masses(model.kernel_data(p, float(t[0])), q, t, model.m), v)
+            out[:, c] += wgt * (Mv + _rate_shifts(model, q, p, t))
+        out[:, c] /= scale
     return out
+
+
+def _rate_shifts(model, q, prm, t):
+    """:func:`_rate_shift` at every sample ``(q[i], t[i])`` ((K, n), or 0.0 where it
+    vanishes): a Python call a sample, for a singular mass whose constraints move alone."""
+    if not (model.mass_singular and model.time_dependent):
+        return 0.0
+    return np.array([_rate_shift(model, qj, prm, float(tj)) for qj, tj in zip(q, t)])
+
+
+def constraints_by_theta(model, prm, result, start, stop, pidx):
+    """``(∂g/∂θ_l, ∂(G v + g_t)/∂θ_l)`` at the samples ``start … stop − 1`` of ``result``,
+    two (stop − start, len(pidx), m) arrays, ``v`` the :func:`velocity` of the sample's
+    ``(q, p)`` at each θ: :func:`theta_derivative`'s rule, with the callbacks at every
+    sample in one compiled loop a point in θ (:func:`.kernels.tangent.sample_callback`)."""
+    q, p, t = result.q[start:stop], result.p[start:stop], result.t[start:stop]
+    n, m = model.n, model.m
+    gth = np.zeros((stop - start, len(pidx), m))
+    hth = np.zeros_like(gth)
+    for c, l in enumerate(pidx):
+        points, scale = _theta_stencil(prm, l)
+        for th, wgt in points:
+            md = model.kernel_data(th, float(t[0]))
+            rhs = p - _rate_shifts(model, q, th, t)
+            v = np.linalg.solve(sample_masses(md, q, t, m), rhs[..., None])[..., 0]
+            G = sample_callback(md, lay.CJAC, q, t, (m, n))
+            gth[:, c] += wgt * sample_callback(md, lay.CON, q, t, (m,))
+            hth[:, c] += wgt * (_stacked(G, v) + _constraint_rates(model, md, q, t))
+        gth[:, c] /= scale
+        hth[:, c] /= scale
+    return gth, hth
+
+
+def _constraint_rates(model, md, q, t):
+    """``g_t = ∂g/∂t`` at the samples ``(q[i], t[i])`` (K, m):
+    :meth:`fastvi.Model.constraint_time_derivative_value`'s rule at every sample."""
+    K, m = q.shape[0], model.m
+    if not model.time_dependent:
+        return np.zeros((K, m))
+    if "constraint_time_derivative" in model.callbacks:
+        return sample_callback(md, lay.GT, q, t, (m,))
+    dt = lay.FD_T * np.maximum(1.0, np.abs(t))
+    out = np.zeros((K, m))
+    for at, weight in lay.FD_T_POINTS:
+        out += weight * sample_callback(md, lay.CON, q, t + at * dt, (m,))
+    return out * (1.0 / (12.0 * dt))[:, None]
+
+
+def _stacked(A, x):
+    """``A[i] @ x[i]`` for a stack of matrices ``A`` (K, r, c) and vectors or matrices ``x``
+    (K, c) or (K, c, d)."""
+    return np.matmul(A, x[..., None])[..., 0] if x.ndim == 2 else np.matmul(A, x)
 
 
 def velocity_derivatives(run, result, dq, dp, pidx, dth):
@@ -546,13 +635,12 @@ def velocity_derivatives(run, result, dq, dp, pidx, dth):
         return np.linalg.solve(model.mass_matrix_constant, dp)
     dv = np.empty_like(dp)
     for start, Ms, _, _, Cqs in sample_terms_by_chunk(model, run.prm, result, len(pidx)):
-        Pth = momentum_by_theta(model, run.prm, result, start, start + len(Ms), pidx)
-        for j, (M, Cq) in enumerate(zip(Ms, Cqs)):
-            i = start + j
-            rhs = dp[i] - Cq @ dq[i]
-            for c in range(len(pidx)):
-                rhs -= np.outer(Pth[j, c], dth[:, c])
-            dv[i] = np.linalg.solve(M, rhs)
+        s = slice(start, start + len(Ms))
+        Pth = momentum_by_theta(model, run.prm, result, s.start, s.stop, pidx)
+        rhs = dp[s] - _stacked(Cqs, dq[s])
+        for c in range(len(pidx)):
+            rhs -= Pth[:, c, :, None] * dth[:, c]
+        dv[s] = np.linalg.solve(Ms, rhs)
     return dv
 
 

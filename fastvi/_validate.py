@@ -46,7 +46,20 @@ def params(p, model) -> np.ndarray:
     if p is None:
         return model.params
     arr = vector(p, "params", model.params.shape[0])
+    moved = [l for l in getattr(model, "mass_params", ()) if arr[l] != model.params[l]]
+    if moved:
+        warnings.warn(mass_params_warning(moved, "`params` changes"), UserWarning, stacklevel=3)
     return arr
+
+
+def mass_params_warning(moved, what: str) -> str:
+    """Why a change of (or a derivative by) the parameters ``moved`` that built a constant
+    mass matrix reaches only the model's callbacks."""
+    names = ", ".join(f"params[{l}]" for l in moved)
+    return (f"{what} {names}, from which the model's constant mass matrix was built "
+            f"(`Model.mass_params`): that matrix is data of the model and does not follow "
+            f"`params`, so only the potential and the other callbacks see the new value. To "
+            f"change a mass, build the model again (a scene: e.g. fastvi.scenes.pendulum(m=2.0))")
 
 
 def step_size(h) -> float:
@@ -56,6 +69,16 @@ def step_size(h) -> float:
     if not (h > 0.0 and math.isfinite(h)):
         raise ValueError(f"`h` must be positive and finite, got {h}")
     return h
+
+
+def duration(x, name: str) -> float:
+    """A positive, finite span of time named ``name`` in the error."""
+    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
+        raise TypeError(f"`{name}` must be a float (seconds), got {x!r}")
+    x = float(x)
+    if not (x > 0.0 and math.isfinite(x)):
+        raise ValueError(f"`{name}` must be positive and finite, got {x}")
+    return x
 
 
 def flag(x, name: str) -> bool:
@@ -378,7 +401,12 @@ def member_params(p, model, N: int) -> np.ndarray:
     if arr.ndim != 2 or arr.shape != (N, k):
         raise ValueError(f"`params` must be None, shape ({k},) (shared) or ({N}, {k}) (one row per "
                          f"member), got shape {arr.shape}")
-    return member_vectors(arr, "params", k)
+    arr = member_vectors(arr, "params", k)
+    moved = [l for l in getattr(model, "mass_params", ())
+             if np.any(arr[:, l] != model.params[l])]
+    if moved:
+        warnings.warn(mass_params_warning(moved, "`params` changes"), UserWarning, stacklevel=3)
+    return arr
 
 
 def ensemble_save(save):

@@ -95,7 +95,7 @@ class TrajectoryFit:
         if param_index is None:
             raise TypeError("`param_index` is required: name the parameters to fit")
         self.param_index = disc.param_indices(param_index, self.params.shape[0],
-                                              model.fixed_params)
+                                              model.fixed_params, model.mass_params)
         if not self.param_index:
             raise ValueError("`param_index` is empty: name the parameters to fit")
         self.data = np.asarray(data, dtype=float)

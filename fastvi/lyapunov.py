@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _validate as valid
+from ._discrete import checked_model
 from .sensitivity import sensitivity
 
 __all__ = ["lyapunov_spectrum", "LyapunovSpectrum", "largest_lyapunov"]
@@ -146,9 +147,12 @@ def lyapunov_spectrum(model, q0, v0, *, h: float, t_end: float, segment: float =
     >>> bool(spec.exponents[0] > 0.3)                  # chaotic
     True
     """
+    checked_model(model)
     h = valid.step_size(h)
     t0 = valid.start_time(t0)
-    segment, t_end = float(segment), float(t_end)
+    segment, t_end = valid.duration(segment, "segment"), valid.duration(t_end, "t_end")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(f"`seed` must be an integer, got {seed!r}")
     steps = int(round(segment / h))
     segments = int(round(t_end / segment))
     if steps < 1 or abs(steps * h - segment) > 1e-9 * segment:
@@ -157,7 +161,7 @@ def lyapunov_spectrum(model, q0, v0, *, h: float, t_end: float, segment: float =
         raise ValueError(f"`t_end` = {t_end:g} must be a whole number of segments ({segment:g} s)")
     n, k = model.n, model.params.shape[0]
     dim = 2 * (n - model.m)
-    d = dim if count is None else int(count)
+    d = dim if count is None else valid.count(count, "count", 1)
     if not 1 <= d <= dim:
         raise ValueError(f"`count` = {count} must be between 1 and 2(n − m) = {dim}, the "
                          "dimension of the tangent space")

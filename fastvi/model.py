@@ -557,6 +557,13 @@ class Model:
         parameter of a large mechanism usually moves a few coordinates' forces, and the
         dense ``(k, n)`` output per call is what made the adjoint by every parameter of a
         chain cost O(N²) a step. :meth:`check` reports a non-zero written outside it.
+    mass_params : sequence of int, optional
+        Entries of ``params`` a constant ``mass`` was built from (a scene's masses). The
+        constant mass matrix is data of the model: a run's ``params`` do not rebuild it,
+        so a run whose ``params`` change one of these entries warns (the new value reaches
+        the potential and the other callbacks, not the inertia), and so does a derivative
+        that names one in ``param_index`` (it is the derivative of those callbacks alone).
+        To change a mass, build the model again (a scene: ``fastvi.scenes.pendulum(m=2.0)``).
     fixed_params : sequence of int, optional
         Entries of ``params`` that are data the callbacks read rather than quantities:
         indices, counts, kinds (a tree's parent of each body, a mechanism's joint table).
@@ -621,6 +628,7 @@ class Model:
         param_derivatives=None,
         param_patterns=None,
         fixed_params=(),
+        mass_params=(),
         name: str | None = None,
     ):
         self.n = _as_int(n, "n", 1)
@@ -628,6 +636,8 @@ class Model:
         self.params = _as_params(params)
         #: entries of ``params`` the derivatives leave out (sorted indices)
         self.fixed_params = _as_fixed(fixed_params, self.params.shape[0])
+        #: entries of ``params`` the constant mass matrix was built from (sorted indices)
+        self.mass_params = _as_fixed(mass_params, self.params.shape[0], "mass_params")
         self.name = name or "model"
         self.recipe = None  # set by the scenes: pickled as this recipe
         self.drawing = None  # a fastvi.drawing.Drawing (the scenes set one)
@@ -669,6 +679,10 @@ class Model:
                              "constraints that depend on time need `time_dependent=True` (and then "
                              "every potential and constraint callback takes `t` first)")
         if callable(mass):
+            if self.mass_params:
+                raise ValueError("`mass_params` names the parameters a constant mass matrix was "
+                                 "built from; a mass function reads `params` itself: drop "
+                                 "`mass_params`")
             funcs["mass"] = mass
             self.mass_matrix_constant = None
             self.mass_singular = False
@@ -822,7 +836,7 @@ class Model:
                       constraint_jacobian_pattern=self.constraint_jacobian_pattern,
                       force_jacobian_pattern=self.force_jacobian_pattern,
                       param_derivatives=self._param_arg(), param_patterns=self.param_patterns,
-                      fixed_params=self.fixed_params,
+                      fixed_params=self.fixed_params, mass_params=self.mass_params,
                       **funcs)
         return (_model_from_kwargs, (self.n, self.m, kwargs))
 
@@ -1173,15 +1187,15 @@ def _model_from_kwargs(n, m, kwargs):
     return Model(n, m, **kwargs)
 
 
-def _as_fixed(fixed, k: int) -> tuple:
-    """``fixed_params`` as sorted unique indices into the ``k`` parameters."""
+def _as_fixed(fixed, k: int, name: str = "fixed_params") -> tuple:
+    """``fixed_params`` (or ``name``) as sorted unique indices into the ``k`` parameters."""
     idx = np.atleast_1d(np.asarray(fixed if fixed is not None else (), dtype=object))
     out = set()
     for i in idx:
         if isinstance(i, (bool, np.bool_)) or not isinstance(i, (int, np.integer)):
-            raise TypeError(f"`fixed_params` must be parameter indices (ints), got {fixed!r}")
+            raise TypeError(f"`{name}` must be parameter indices (ints), got {fixed!r}")
         if not 0 <= int(i) < k:
-            raise ValueError(f"`fixed_params` entry {int(i)} is out of range for k = {k} "
+            raise ValueError(f"`{name}` entry {int(i)} is out of range for k = {k} "
                              "parameters")
         out.add(int(i))
     return tuple(sorted(out))

@@ -118,24 +118,19 @@ class SensitivityResult(SavedResult, ResultBase):
         g, gv = np.zeros(K), np.zeros(K)
         if model.m == 0:
             return g, gv
-        res = self.result
+        res, pidx = self.result, self._pidx
         for start, Ms, Gs, Hvs, Cqs in disc.sample_terms_by_chunk(model, prm, res):
-            for j, (M, G, Hv, Cq) in enumerate(zip(Ms, Gs, Hvs, Cqs)):
-                i = start + j
-                q, p, t = res.q[i], res.p[i], float(self.t[i])
-                dq, dp = self.dq[i], self.dp[i]
-                lin_g = G @ dq
-                lin_h = Hv @ dq + G @ np.linalg.solve(M, dp - Cq @ dq)
-                for c, l in enumerate(self._pidx):
-                    lin_g += np.outer(disc.theta_derivative(
-                        lambda th: model.constraint_value(q, th, t), prm, l), self._dth[:, c])
-                    hid = disc.theta_derivative(
-                        lambda th: model.constraint_jacobian_value(q, th, t)
-                        @ disc.velocity(model, q, p, th, t)
-                        + model.constraint_time_derivative_value(q, th, t), prm, l)
-                    lin_h += np.outer(hid, self._dth[:, c])
-                g[i] = np.abs(lin_g).max()
-                gv[i] = np.abs(lin_h).max()
+            s = slice(start, start + len(Ms))
+            dq, dp = self.dq[s], self.dp[s]
+            lin_g = Gs @ dq
+            lin_h = Hvs @ dq + Gs @ np.linalg.solve(Ms, dp - Cqs @ dq)
+            if pidx:
+                gth, hth = disc.constraints_by_theta(model, prm, res, s.start, s.stop, pidx)
+                for c in range(len(pidx)):
+                    lin_g += gth[:, c, :, None] * self._dth[:, c]
+                    lin_h += hth[:, c, :, None] * self._dth[:, c]
+            g[s] = np.abs(lin_g).max(axis=(1, 2))
+            gv[s] = np.abs(lin_h).max(axis=(1, 2))
         return g, gv
 
     def plot(self, path=None, *, directions=None):
@@ -326,9 +321,14 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
     """
     disc.refuse(unsupported, "fastvi.sensitivity")
     progress = valid.flag(progress, "progress")
+    initial_state = disc.checked_initial_state(initial_state)
     # checked before the run: a bad `wrt` is reported without compiling or integrating
     D, labels = disc.directions(wrt, disc.checked_model(model).n, model.params.shape[0],
-                                param_index, model.fixed_params)
+                                param_index, model.fixed_params, model.mass_params)
+    if initial_state is not None and not np.any(D[:, 2 * model.n:]):
+        raise ValueError("`initial_state` gives the start's dependence on the parameters, but no "
+                         "direction of `wrt` moves a parameter: add 'params' to `wrt`, or drop "
+                         "`initial_state`")
     run = disc.prepare(model, q0, v0, h=h, t_end=t_end, n_steps=n_steps, t0=t0, t_span=t_span,
                        method=method, save_every=save_every, tol=tol, max_iter=max_iter,
                        newton=newton, params=params, solver=solver, check=check,

@@ -206,15 +206,20 @@ def sensitivity_ensemble(model, Q0, V0, *, h: float, t_end: float | None = None,
     threads = valid.threads(threads)
     N, n = Q0.shape
     P = valid.member_params(params, model, N)
-    runs = [disc.prepare(model, Q0[i], V0[i], h=h, t_end=t_end, n_steps=n_steps, t0=t0,
-                         t_span=t_span, method=method, save_every=save_every, tol=tol,
-                         max_iter=max_iter, newton=newton, params=P[i], solver=solver,
-                         check=check, monitor=monitor, what="the sensitivity",
-                         specialize=specialize, full=True)  # members run in one compiled loop
-            for i in range(N)]
+    runs = []
+    for i in range(N):
+        try:
+            runs.append(disc.prepare(
+                model, Q0[i], V0[i], h=h, t_end=t_end, n_steps=n_steps, t0=t0, t_span=t_span,
+                method=method, save_every=save_every, tol=tol, max_iter=max_iter, newton=newton,
+                params=P[i], solver=solver, check=check, monitor=monitor,
+                what="the sensitivity", specialize=specialize,
+                full=True))  # members run in one compiled loop
+        except ValueError as exc:
+            raise ValueError(f"member {i} (`Q0[{i}]`, `V0[{i}]`, `params[{i}]`): {exc}") from None
     first = runs[0]
     meth, m, k = first.meth, model.m, P.shape[1]
-    D, labels = disc.directions(wrt, n, k, param_index, model.fixed_params)
+    D, labels = disc.directions(wrt, n, k, param_index, model.fixed_params, model.mass_params)
     d = D.shape[0]
     tangents = [disc.initial_tangent(r, D) for r in runs]
     pidx = tangents[0][2]

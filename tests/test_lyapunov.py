@@ -89,6 +89,18 @@ def test_errors_name_the_bad_argument(double_pendulum, dp_start):
     with pytest.raises(ValueError, match="dependent"):
         fastvi.lyapunov_spectrum(double_pendulum, q0, v0, h=0.01, t_end=1.0, count=2,
                                  start=np.ones((8, 2)))
+    # before any run: each names its argument rather than failing in a conversion
+    kw = dict(h=0.01, t_end=1.0, segment=0.5)
+    for bad, match in ((dict(segment=np.nan), "`segment` must be positive and finite"),
+                       (dict(t_end=np.inf), "`t_end` must be positive and finite"),
+                       (dict(segment="1"), "`segment` must be a float"),
+                       (dict(count=2.7), "`count` must be an integer"),
+                       (dict(count=True), "`count` must be an integer"),
+                       (dict(seed="a"), "`seed` must be an integer")):
+        with pytest.raises((TypeError, ValueError), match=match):
+            fastvi.lyapunov_spectrum(double_pendulum, q0, v0, **{**kw, **bad})
+    with pytest.raises(TypeError, match="`model` must be a fastvi.Model"):
+        fastvi.lyapunov_spectrum("dp", q0, v0, **kw)
 
 
 @pytest.mark.slow

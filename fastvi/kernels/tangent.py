@@ -54,7 +54,7 @@ from .._launch import _key
 from .._numba import CalledAs, byref, erased, hot, hot_inline, njit, only_if, own, ptr, quiet
 from .drive import run, step_hook
 from .layout import specialize as layout_specialize
-from .layout import (CHESS, CJAC, F_AUGMENT, F_CH_PATTERN, F_EX_CHESS, F_EX_MJAC, F_MASSFN,
+from .layout import (CHESS, CJAC, CON, F_AUGMENT, F_CH_PATTERN, F_EX_CHESS, F_EX_MJAC, F_MASSFN,
                      F_TIME, F_TSLOT, FD_T, FD_T_POINTS, I_SLOT, MASS, MJAC, NONFINITE, OK, SI_A,
                      SI_A_KL, SI_A_KU, SI_A_PERM, SI_BSPAN, SI_GSPAN, SI_S, SI_XMAP, SINGULAR,
                      SOLVE_BANDED, SOLVE_DENSE,
@@ -349,6 +349,27 @@ def _hessian(md, q, eta, out, pw, n, m):
 
 
 @hot
+def _mass(md, q, M, G, sp, n, m):
+    """``M`` as the linearised step reads it at ``q``: the model's mass function; for a
+    singular constant mass the definite ``M̄ = M + Gᵀ W G`` (:func:`.linalg.augmented_mass`),
+    ``G`` evaluated into ``G`` on the way; else the constant (only its diagonal where it is
+    inverted by its reciprocals: the caller's zeros stay off it)."""
+    if md.flags[F_MASSFN] != 0:
+        md.fns[MASS](ptr(q), ptr(q), ptr(md.prm), ptr(M))
+    elif md.flags[F_AUGMENT] != 0:
+        clear_rows(G, m, n, sp.gspan)
+        md.fns[CJAC](ptr(q), ptr(q), ptr(md.prm), ptr(G))
+        augmented_mass(md.Mc, G, M, n, m)
+    elif reciprocal_mass(md.flags):
+        for a in range(n):
+            M[a, a] = md.Mc[a, a]
+    else:
+        for a in range(n):  # M is factored in place (_factor_projection): copied anew
+            for b in range(n):
+                M[a, b] = md.Mc[a, b]
+
+
+@hot
 def point(md_, q, v, eta, pw_):
     """Fill the :class:`PointWork` at ``(q, v)`` with impulse ``eta`` (m,): ``M(q)``,
     ``G(q)``, ``Σ η_c ∇²g_c``, ``∂(G v + g_t)/∂q`` (row c: ``(∇²g_c v)ᵀ``, plus
@@ -361,26 +382,21 @@ def point(md_, q, v, eta, pw_):
     n = q.shape[0]
     m = eta.shape[0]
     M, G, Hv, Cq, Hs, e = pw.M, pw.G, pw.Hv, pw.Cq, pw.Hs, pw.e
+    _mass(md, q, M, G, pw.sp, n, m)
     if flags[F_MASSFN] != 0:
-        fns[MASS](ptr(q), ptr(q), ptr(prm), ptr(M))
         if flags[F_EX_MJAC] != 0:
             fns[MJAC](ptr(q), ptr(v), ptr(prm), ptr(Cq))
         else:
             fd_momentum_jacobian(fns[MASS], q, v, prm, Cq, pw.qa, pw.Ma, n)
-    elif reciprocal_mass(flags):
-        # nothing writes M off its diagonal nor C_q (a constant mass, inverted by its
-        # reciprocals): the zeros of the allocation stay, and the diagonal is copied in O(n)
+    elif not reciprocal_mass(flags):  # else nothing writes C_q: the allocation's zeros stay
         for a in range(n):
-            M[a, a] = md.Mc[a, a]
-    else:
-        for a in range(n):  # M is factored in place (_factor_projection): copied anew
             for b in range(n):
-                M[a, b] = md.Mc[a, b]
                 Cq[a, b] = 0.0
     if m == 0:
         return
-    clear_rows(G, m, n, pw.sp.gspan)
-    fns[CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
+    if flags[F_AUGMENT] == 0:  # (_mass evaluated G for M̄)
+        clear_rows(G, m, n, pw.sp.gspan)
+        fns[CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
     _hessian(md, q, eta, pw.He, pw, n, m)
     if flags[F_AUGMENT] != 0 and flags[F_TIME] != 0:
         # the step's impulse is that of M̄ = M + Gᵀ W G; M's is larger by W G v = −W g_t
@@ -416,9 +432,8 @@ def point(md_, q, v, eta, pw_):
     if flags[F_AUGMENT] != 0:
         # a singular constant M: on the constraints p = M v = M̄ v + Gᵀ W g_t with the definite
         # M̄ = M + Gᵀ W G (:func:`.linalg.augmented_mass`), so the projection is that of the
-        # configuration-dependent mass M̄, whose ∂(M̄ v + Gᵀ W g_t)/∂q is Gᵀ W H_v where
-        # G v + g_t = 0
-        augmented_mass(md.Mc, G, M, n, m)
+        # configuration-dependent mass M̄ (:func:`_mass`), whose ∂(M̄ v + Gᵀ W g_t)/∂q is
+        # Gᵀ W H_v where G v + g_t = 0
         augment_weights(md.Mc, G, e, n, m)
         for a in range(n):
             for b in range(n):
@@ -458,31 +473,20 @@ def _sample_terms(md, Q, V, T, eta, pw, Ms, Gs, Hvs, Cqs):
 
 @njit
 def _sample_masses(md, Q, T, pw, Ms):
-    fns, flags, prm = md.fns, md.flags, md.prm
+    flags = md.flags
     n, m = Q.shape[1], pw.G.shape[0]
-    G = pw.G
     for i in range(Q.shape[0]):
         if flags[F_TIME] != 0:
-            prm[flags[F_TSLOT]] = T[i]
-        q, M = Q[i], Ms[i]
-        if flags[F_MASSFN] != 0:
-            fns[MASS](ptr(q), ptr(q), ptr(prm), ptr(M))
-        elif flags[F_AUGMENT] != 0:
-            clear_rows(G, m, n, pw.sp.gspan)
-            fns[CJAC](ptr(q), ptr(q), ptr(prm), ptr(G))
-            augmented_mass(md.Mc, G, M, n, m)
-        else:
-            for a in range(n):
-                for b in range(n):
-                    M[a, b] = md.Mc[a, b]
+            md.prm[flags[F_TSLOT]] = T[i]
+        _mass(md, Q[i], Ms[i], pw.G, pw.sp, n, m)
 
 
 def sample_masses(md, Q, T, m):
     """``M(q)`` at each sample ``Q[i]`` at time ``T[i]`` (K, n, n), as :func:`point` reads
-    it — the model's mass function, or for a singular constant mass ``M̄`` — in one
-    compiled loop: what the differences by θ of the momentum take at every sample."""
+    it (:func:`_mass`: the model's mass function, or for a singular constant mass ``M̄``) in
+    one compiled loop: what the differences by θ of the momentum take at every sample."""
     K, n = Q.shape
-    Ms = np.empty((K, n, n))
+    Ms = np.zeros((K, n, n))
     _sample_masses(md, np.ascontiguousarray(Q, dtype=float), np.ascontiguousarray(T, dtype=float),
                    make_point_work(n, m), Ms)
     return Ms
@@ -501,6 +505,28 @@ def sample_terms(md, Q, V, T, m):
                   np.ascontiguousarray(T, dtype=float), np.zeros(m), make_point_work(n, m),
                   Ms, Gs, Hvs, Cqs)
     return Ms, Gs, Hvs, Cqs
+
+
+@njit
+def _sample_callback(md, slot, Q, V, T, out):
+    flags = md.flags
+    for i in range(Q.shape[0]):
+        if flags[F_TIME] != 0:
+            md.prm[flags[F_TSLOT]] = T[i]
+        md.fns[slot](ptr(Q[i]), ptr(V[i]), ptr(md.prm), ptr(out[i]))
+
+
+def sample_callback(md, slot, Q, T, shape, V=None):
+    """The model's callback ``slot`` (:data:`.layout.SLOTS`: ``CON``, ``CJAC``, …) at each
+    sample ``(Q[i], V[i])`` at time ``T[i]``, ``(K, *shape)`` (zeros where a callback
+    declared to write its pattern alone writes nothing), in one compiled loop: the
+    constraint terms the differences by θ of :meth:`fastvi.SensitivityResult.tangent_residual`
+    take at every sample. ``V`` defaults to ``Q`` (the callbacks of ``q`` alone)."""
+    Q = np.ascontiguousarray(Q, dtype=float)
+    V = Q if V is None else np.ascontiguousarray(V, dtype=float)
+    out = np.zeros((Q.shape[0], *shape))
+    _sample_callback(md, slot, Q, V, np.ascontiguousarray(T, dtype=float), out)
+    return out
 
 
 @hot

@@ -263,7 +263,7 @@ def chain(N: int, m=1.0, l=1.0, g: float = 9.81, damping: float = 0.0) -> Model:
         constraint=constraint, constraint_jacobian=constraint_jacobian,
         constraint_hessian=constraint_hessian, constraint_jacobian_pattern=pattern(N),
         name=f"chain{N}" + ("-damped" if c else ""), param_derivatives=param_derivatives(c),
-        param_patterns=param_patterns(N, c),
+        param_patterns=param_patterns(N, c), mass_params=range(N),
         **damping_.options(c, 2 * N),
     )
     lengths = np.array(ls)

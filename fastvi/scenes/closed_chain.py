@@ -139,7 +139,8 @@ def closed_chain(N: int = 8, m: float = 1.0, l: float = 1.0, d: float | None = N
     model = Model(n, N, params=(m, l, d, g), mass=np.full(n, float(m)) * np.eye(n), potential=_V,
                   potential_grad=_dV, potential_hessian=0, constraint=_g,
                   constraint_jacobian=_G, constraint_hessian=_ddg,
-                  constraint_jacobian_pattern=pattern(N), name=f"closed_chain{N}")
+                  constraint_jacobian_pattern=pattern(N), mass_params=(0,),
+                  name=f"closed_chain{N}")
 
     def initial_state():
         return _arc(N, l, d).ravel(), np.zeros(n)

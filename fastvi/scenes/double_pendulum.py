@@ -124,7 +124,7 @@ def double_pendulum(m1: float = 1.0, m2: float = 1.0, l1: float = 1.0, l2: float
         potential=potential, potential_grad=potential_grad, potential_hessian=0, constraint=_g,
         constraint_jacobian=_G, constraint_hessian=_ddg, param_derivatives=_chain_param_derivatives(c),
         param_patterns=_chain_param_patterns(2, c),
-        name="double_pendulum" + ("-damped" if c else ""), **damping_.options(c, 4),
+        mass_params=(0, 1), name="double_pendulum" + ("-damped" if c else ""), **damping_.options(c, 4),
     )
 
     def initial_state(theta1, theta2, omega1=0.0, omega2=0.0):

@@ -74,7 +74,7 @@ def four_bar(mB: float = 1.0, mC: float = 1.0, a: float = 1.0, L: float = 2.0, g
     model = Model(
         4, 3, params=(mB, mC, a, L, g), mass=np.diag([mB, mB, mC, mC]), potential=_V,
         potential_grad=_dV, potential_hessian=0, constraint=_g, constraint_jacobian=_G,
-        constraint_hessian=_ddg, name="four_bar",
+        constraint_hessian=_ddg, mass_params=(0, 1), name="four_bar",
     )
 
     def initial_state(theta: float, omega: float = 0.0):

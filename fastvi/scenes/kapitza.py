@@ -76,7 +76,8 @@ def kapitza_pendulum(m: float = 1.0, l: float = 1.0, g: float = 9.81, a: float =
     model = Model(
         2, 1, params=(m, l, g, a, omega), mass=m * np.eye(2), potential=_V, potential_grad=_dV,
         potential_hessian=0, constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
-        time_dependent=True, constraint_time_derivative=_gt, name="kapitza_pendulum",
+        time_dependent=True, constraint_time_derivative=_gt, mass_params=(0,),
+        name="kapitza_pendulum",
     )
 
     def pivot(t):

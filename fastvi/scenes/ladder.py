@@ -189,7 +189,8 @@ def ladder(N: int = 8, m: float = 1.0, a: float = 1.0, L: float = 1.0, g: float 
     n = 4 * N
     model = Model(n, 3 * N, params=(m, a, L, g), mass=float(m) * np.eye(n), potential=_V,
                   potential_grad=_dV, potential_hessian=0, constraint=_g, constraint_jacobian=_G,
-                  constraint_hessian=_ddg, constraint_jacobian_pattern=pattern(N), name=f"ladder{N}")
+                  constraint_hessian=_ddg, constraint_jacobian_pattern=pattern(N), mass_params=(0,),
+                  name=f"ladder{N}")
 
     def initial_state(thetas, omegas=None):
         th = np.atleast_1d(np.asarray(thetas, dtype=float))

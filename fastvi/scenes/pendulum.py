@@ -65,7 +65,7 @@ def pendulum(m: float = 1.0, l: float = 1.0, g: float = 9.81) -> Model:
         potential_hessian=0, constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
         param_derivatives=dict(potential_grad=_dV_by_params, constraint=_g_by_params,
                                constraint_jacobian=0),
-        name="pendulum",
+        mass_params=(0,), name="pendulum",
     )
 
     def initial_state(theta: float, omega: float = 0.0):

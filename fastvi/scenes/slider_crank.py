@@ -137,7 +137,7 @@ def slider_crank(r: float = 0.3, L: float = 1.0, m_a: float = 0.5, m_c: float = 
         mass=np.diag([m_a, m_a, m_c, m_c, m_b, m_b]), potential=_V, potential_grad=_dV,
         potential_hessian=0, constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
         time_dependent=True, constraint_time_derivative=_gt,
-        name="slider_crank" + ("-driven" if driven else ""),
+        mass_params=(2, 3, 4), name="slider_crank" + ("-driven" if driven else ""),
     )
 
     def initial_state(phi: float, omega: float | None = None):

@@ -123,7 +123,7 @@ def spherical_pendulum(m: float = 1.0, l: float = 1.0, g: float = 9.81) -> Model
     model = Model(
         3, 1, params=(m, l, g), mass=m * np.eye(3), potential=_V, potential_grad=_dV,
         potential_hessian=0, constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
-        name="spherical_pendulum",
+        mass_params=(0,), name="spherical_pendulum",
     )
 
     def initial_state(theta: float, phi: float, theta_dot: float = 0.0, phi_dot: float = 0.0):

@@ -154,6 +154,7 @@ def tree(branches: int = 3, links: int = 3, m=1.0, l=1.0, g: float = 9.81, dampi
         param_derivatives=damping_.param_derivatives(c),
         param_patterns=damping_.param_patterns(c, 3 * N + 1 + (1 if c else 0), 2 * N),
         fixed_params=range(2 * N + 1, 3 * N + 1),  # the parents: the tree's shape, not a quantity
+        mass_params=range(N),
     )
     lengths = np.array(ls)
 

@@ -82,7 +82,7 @@ def triple_pendulum(m=(1.0, 1.0, 1.0), l=(1.0, 1.0, 1.0), g: float = 9.81) -> Mo
         potential=_V, potential_grad=_dV, potential_hessian=0, constraint=_g,
         constraint_jacobian=_G, constraint_hessian=_ddg, constraint_jacobian_pattern=_chain_pattern(3),
         param_derivatives=_chain_param_derivatives(), param_patterns=_chain_param_patterns(3),
-        name="triple_pendulum",
+        mass_params=(0, 1, 2), name="triple_pendulum",
     )
 
     def initial_state(theta1, theta2, theta3, omega1=0.0, omega2=0.0, omega3=0.0):

@@ -23,7 +23,7 @@ from . import scipy_compat as compat
 from . import structure
 from .integrate import IntegrationError, _buffers, _filled
 from .kernels import layout as lay
-from .kernels.linalg import augment_weights
+from .kernels.linalg import AUGMENT_SCALE, augment_weights
 from .kernels.step import linear_force, step_kernel
 from .kernels.tangent import (extended_tables, make_sparsity, make_tangent_work, point_terms,
                              sample_callback, sample_masses, sample_terms, step_band)
@@ -577,10 +577,20 @@ def momentum_by_theta(model, prm, result, start, stop, pidx) -> np.ndarray:
 
 def _rate_shifts(model, q, prm, t):
     """:func:`_rate_shift` at every sample ``(q[i], t[i])`` ((K, n), or 0.0 where it
-    vanishes): a Python call a sample, for a singular mass whose constraints move alone."""
+    vanishes): ``G`` and ``g_t`` at every sample in compiled loops, and the weights of
+    :func:`.kernels.linalg.augment_weights` in its own order of sums over a whole chunk."""
     if not (model.mass_singular and model.time_dependent):
         return 0.0
-    return np.array([_rate_shift(model, qj, prm, float(tj)) for qj, tj in zip(q, t)])
+    n, m = model.n, model.m
+    md = model.kernel_data(prm, float(t[0]))
+    G = sample_callback(md, lay.CJAC, q, t, (m, n))
+    M = model.mass_matrix_constant
+    gamma = min(M[a, a] for a in range(n) if M[a, a] > 0.0) * AUGMENT_SCALE
+    norm2 = np.zeros(G.shape[:2])
+    for a in range(n):
+        norm2 += G[:, :, a] * G[:, :, a]
+    w = np.divide(gamma, norm2, out=np.zeros_like(norm2), where=norm2 != 0.0)
+    return _stacked(G.transpose(0, 2, 1), w * _constraint_rates(model, md, q, t))
 
 
 def constraints_by_theta(model, prm, result, start, stop, pidx):

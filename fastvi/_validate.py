@@ -46,10 +46,16 @@ def params(p, model) -> np.ndarray:
     if p is None:
         return model.params
     arr = vector(p, "params", model.params.shape[0])
-    moved = [l for l in getattr(model, "mass_params", ()) if arr[l] != model.params[l]]
-    if moved:
-        warnings.warn(mass_params_warning(moved, "`params` changes"), UserWarning, stacklevel=3)
+    _warn_moved_masses(arr, model)
     return arr
+
+
+def _warn_moved_masses(P, model) -> None:
+    """Warn where the parameters ``P`` ((k,), or (N, k) by member) move an entry the model's
+    constant mass matrix was built from (:attr:`fastvi.Model.mass_params`)."""
+    moved = [l for l in getattr(model, "mass_params", ()) if np.any(P[..., l] != model.params[l])]
+    if moved:
+        warnings.warn(mass_params_warning(moved, "`params` changes"), UserWarning, stacklevel=4)
 
 
 def mass_params_warning(moved, what: str) -> str:
@@ -402,10 +408,7 @@ def member_params(p, model, N: int) -> np.ndarray:
         raise ValueError(f"`params` must be None, shape ({k},) (shared) or ({N}, {k}) (one row per "
                          f"member), got shape {arr.shape}")
     arr = member_vectors(arr, "params", k)
-    moved = [l for l in getattr(model, "mass_params", ())
-             if np.any(arr[:, l] != model.params[l])]
-    if moved:
-        warnings.warn(mass_params_warning(moved, "`params` changes"), UserWarning, stacklevel=3)
+    _warn_moved_masses(arr, model)
     return arr
 
 

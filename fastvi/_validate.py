@@ -69,12 +69,8 @@ def mass_params_warning(moved, what: str) -> str:
 
 
 def step_size(h) -> float:
-    if isinstance(h, bool) or not isinstance(h, (int, float, np.integer, np.floating)):
-        raise TypeError(f"`h` must be a float, got {h!r}")
-    h = float(h)
-    if not (h > 0.0 and math.isfinite(h)):
-        raise ValueError(f"`h` must be positive and finite, got {h}")
-    return h
+    """The step ``h``: a positive, finite span of time (:func:`duration`)."""
+    return duration(h, "h")
 
 
 def duration(x, name: str) -> float:

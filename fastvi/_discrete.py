@@ -76,6 +76,9 @@ class Run:
     sized: object
     #: the same for the step's stages
     step_sized: object
+    #: ``(q0, v0)`` as given, where the projection onto the constraints moved them by more
+    #: than round-off (:func:`_moved_start`), else None
+    raw_start: object = None
 
     @property
     def loop_ws(self):
@@ -142,7 +145,11 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
                   or model.param_derivatives_exact and not model.param_derivatives_checked):
         model.check(q0, v0, params=prm, n_random=1, t=t0)
     check_time = time.perf_counter() - check_time
+    raw = q0, v0
     q0, v0 = valid.initial_state(model, q0, v0, prm, t0)
+    # below 1e-14 the terms of the projection's derivative that the move scales are round-off
+    moved = (np.max(np.abs(q0 - raw[0])) > 1e-14 * max(1.0, np.max(np.abs(raw[0])))
+             or np.max(np.abs(v0 - raw[1])) > 1e-14 * max(1.0, np.max(np.abs(raw[1]))))
     compile_time = time.perf_counter()
     md = model.kernel_data(prm, t0)
     tabs = meth.kernel_tables
@@ -176,7 +183,8 @@ def prepare(model, q0, v0, *, h, t_end, n_steps, t0, t_span, method, save_every,
                extended_tables(tabs, meth.s, meth.J), ws, opts,
                events_.prepare(model, meth, None, 0), stepk, stages, state, info,
                np.zeros(lay.STEP_OUT_SIZE), smp, K, started, compile_time, check_time,
-               valid.flag(monitor, "monitor"), sparsity, sized, step_sized)
+               valid.flag(monitor, "monitor"), sparsity, sized, step_sized,
+               raw if moved else None)
 
 
 def with_full_newton(run: Run) -> None:
@@ -353,7 +361,9 @@ def initial_tangent(run: Run, D: np.ndarray, initial_state=None):
     for j in range(len(pidx) if t.dstate is not None else 0):
         dq += np.outer(dth[:, j], t.dstate[j, :n])
         dv += np.outer(dth[:, j], t.dstate[j, n:])
-    if t.G.shape[0]:
+    if t.moved is not None:
+        dq, dv = _moved_projection(t, dq, dv, dth)
+    elif t.G.shape[0]:
         dq = dq - np.linalg.solve(t.S, t.G @ dq.T + t.g_th.T @ dth.T).T @ t.W.T
         dv = dv - np.linalg.solve(t.S, t.G @ dv.T + t.Hv @ dq.T + t.gv_th.T @ dth.T).T @ t.W.T
     dp = dv @ t.M.T + dq @ t.Cq.T + dth @ t.mv_th
@@ -373,6 +383,8 @@ def initial_cotangent(run: Run, lq, lp, pidx, initial_state=None) -> np.ndarray:
               (+ the derivative of ``initial_state(params)`` applied to (λ_{q0}, λ_{v0}))
     """
     t = _start_parts(run, pidx, initial_state)
+    if t.moved is not None:
+        return _moved_cotangent(t, lq, lp)
     av = t.M.T @ lp
     c = lq + t.Cq.T @ lp
     lth = t.mv_th @ lp
@@ -398,6 +410,20 @@ StartParts = namedtuple("StartParts", [
     # pidx of g, G v (+ ∂g/∂t) and M v
     "g_th", "gv_th", "mv_th",
     "dstate",  # (len(pidx), 2n) that of initial_state(params) (None without it)
+    "moved",  # a MovedStart where the projection moved the given start, else None
+])
+
+
+#: the terms of the derivative of the projection of a start off the constraints that the
+#: move scales (:func:`_moved_start`), beside :class:`StartParts`
+MovedStart = namedtuple("MovedStart", [
+    "metric0",  # M̄ at the given q0, the metric of the positions' projection
+    "B",  # M̄0 + Σ μ_c ∇²g_c at q*
+    "Eq",  # (n, n) ∂(M̄(q0) w)/∂q0, w = q* − q0 (None for a constant definite mass)
+    "Eth",  # (n, len(pidx)) ∂(M̄(q0) w + G(q*)ᵀ μ)/∂θ
+    "metric",  # M̄ at q*, the metric of the velocities' projection
+    "Cq",  # (n, n) ∂(M̄(q) a + G(q)ᵀ ν)/∂q at q*, a = v* − v0
+    "Cth",  # (n, len(pidx)) the same by θ
 ])
 
 
@@ -439,9 +465,91 @@ def _start_parts(run: Run, pidx, initial_state) -> StartParts:
         diagonal = run.ws.structured and lay.reciprocal_mass.py_func(run.model_data.flags)
         W = G.T / np.diag(M)[:, None] if diagonal else np.linalg.solve(M, G.T)
         S = G @ W
+    moved = None if run.raw_start is None else _moved_start(run, pidx, G, S)
     if model.mass_singular:  # p0 = M v0 itself: its derivative M δv0 has no C_q term
         M, Cq = model.mass_matrix_constant, np.zeros((n, n))
-    return StartParts(M, G, Hv, Cq, W, S, g_th, gv_th, mv_th, dstate)
+    return StartParts(M, G, Hv, Cq, W, S, g_th, gv_th, mv_th, dstate, moved)
+
+
+def _jacobian(f, x: np.ndarray, idx) -> np.ndarray:
+    """``∂f/∂x_j`` for ``j`` in ``idx``, as columns, by :func:`theta_derivative`'s rule."""
+    cols = [np.asarray(theta_derivative(f, x, j), dtype=float) for j in idx]
+    return np.stack(cols, axis=1) if cols else np.zeros((np.asarray(f(x)).shape[0], 0))
+
+
+def _moved_start(run: Run, pidx, G, S) -> MovedStart:
+    r"""The terms of the derivative of the projection of a given start ``(q0, v0)`` off the
+    constraints that its move scales (:func:`fastvi._validate.initial_state`).
+
+    The positions' projection ``q*`` solves ``M̄0 (q* − q0) + G(q*)ᵀ μ = 0``,
+    ``g(q*) = 0`` with ``M̄0 = M̄(q0)``; the velocities' ``v*`` solves
+    ``M̄(q*) (v* − v0) + G(q*)ᵀ ν = 0``, ``G(q*) v* + g_t = 0``. Their derivatives by the
+    implicit function theorem carry, beside the linearised projection of a consistent
+    start, the terms in ``μ``, ``ν``, ``w = q* − q0`` and ``a = v* − v0``: all of the size
+    of the move, so five-point differences of the callbacks give them to round-off of the
+    derivative."""
+    model, prm, t0 = run.model, run.prm, run.t0
+    q0, v0 = run.raw_start
+    qs, vs = run.q0, run.v0
+    n = model.n
+    every = range(n)
+
+    def metric(q, p):
+        return valid.mass_metric(model.mass_matrix(q, p), model.constraint_jacobian_value(q, p, t0))
+
+    def gt_mul(q, p, y):
+        return model.constraint_jacobian_value(q, p, t0).T @ y
+
+    metric0 = metric(q0, prm)
+    w = qs - q0
+    W0 = np.linalg.solve(metric0, G.T)
+    mu = -np.linalg.solve(G @ W0, G @ w)
+    B = metric0 + _jacobian(lambda q: gt_mul(q, prm, mu), qs, every)
+    moving_metric = model.mass_matrix_constant is None or model.mass_singular
+    Eq = _jacobian(lambda q: metric(q, prm) @ w, q0, every) if moving_metric else None
+    Eth = _jacobian(lambda p: metric(q0, p) @ w + gt_mul(qs, p, mu), prm, pidx)
+    a = vs - v0
+    nu = -np.linalg.solve(S, G @ a)
+    Cq = _jacobian(lambda q: metric(q, prm) @ a + gt_mul(q, prm, nu), qs, every)
+    Cth = _jacobian(lambda p: metric(qs, p) @ a + gt_mul(qs, p, nu), prm, pidx)
+    return MovedStart(metric0, B, Eq, Eth, metric(qs, prm), Cq, Cth)
+
+
+def _moved_projection(t: StartParts, dq, dv, dth):
+    r"""``(δq*, δv*)`` (d, n) of the raw directions ``(δq, δv, δθ)`` (rows) through the
+    projection of a start it moved (:class:`MovedStart`)::
+
+        u   = B⁻¹ (M̄0 δq − E_q δq − E_θ δθ),    W_B = B⁻¹ Gᵀ,  S_B = G W_B
+        δq* = u − W_B S_B⁻¹ (G u + g_θ δθ)
+        δv' = δv − M̄⁻¹ (C_q δq* + C_θ δθ)
+        δv* = δv' − W S⁻¹ (G δv' + H_v δq* + (G_θ v) δθ)
+
+    which is :func:`initial_tangent`'s for a consistent start, where ``B = M̄0 = M̄`` and
+    the ``E`` and ``C`` terms vanish."""
+    ms = t.moved
+    rhs = dq @ ms.metric0.T - dth @ ms.Eth.T
+    if ms.Eq is not None:
+        rhs -= dq @ ms.Eq.T
+    u = np.linalg.solve(ms.B, rhs.T).T
+    WB = np.linalg.solve(ms.B, t.G.T)
+    dq = u - np.linalg.solve(t.G @ WB, t.G @ u.T + t.g_th.T @ dth.T).T @ WB.T
+    dv = dv - np.linalg.solve(ms.metric, ms.Cq @ dq.T + ms.Cth @ dth.T).T
+    dv = dv - np.linalg.solve(t.S, t.G @ dv.T + t.Hv @ dq.T + t.gv_th.T @ dth.T).T @ t.W.T
+    return dq, dv
+
+
+def _moved_cotangent(t: StartParts, lq, lp) -> np.ndarray:
+    """:func:`initial_cotangent` through the projection of a moved start: the transpose of
+    :func:`_moved_projection`, applied as the Jacobian it gives on the unit directions
+    (O(n³), for a start that was off the constraints only)."""
+    n, kp = t.M.shape[0], t.mv_th.shape[0]
+    eye = np.eye(2 * n + kp)
+    dq, dv = _moved_projection(t, eye[:, :n], eye[:, n:2 * n], eye[:, 2 * n:])
+    dp = dv @ t.M.T + dq @ t.Cq.T + eye[:, 2 * n:] @ t.mv_th
+    out = dq @ lq + dp @ lp
+    if t.dstate is not None:
+        out[2 * n:] += t.dstate @ out[:2 * n]
+    return out
 
 
 def _start_terms(run: Run):

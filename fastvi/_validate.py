@@ -293,11 +293,38 @@ def tangent_definite(M: np.ndarray, G: np.ndarray, where: str = "`q0`") -> None:
         "add the constraints that determine them")
 
 
+def _nearest_on_constraints(model, q0, g, G, metric, prm, t0, scale):
+    """``(q*, G(q*))``: the point of ``g(t0, q) = 0`` nearest ``q0`` in the metric ``M̄0`` of
+    ``q0``, i.e. the solution of ``M̄0 (q − q0) + G(q)ᵀ μ = 0``, ``g(q) = 0``.
+
+    A projection with this definition has a derivative (the implicit function theorem on
+    those equations, :func:`fastvi._discrete.initial_tangent`); the iteration that reaches
+    it does not matter. Each iteration solves the equations linearised with ``∇²g`` left
+    out: ``q ← q0 − W S⁻¹ (g(q) − G (q − q0))``, ``W = M̄0⁻¹ G(q)ᵀ``, ``S = G W``. Its
+    first step is the Gauss–Newton step from ``q0``; it then converges at a rate of the
+    order of ``|μ|`` (the offset) times the constraints' curvature, a few iterations for
+    offsets below ``CONSISTENCY_TOL``."""
+    q = q0
+    for _ in range(20):
+        W = np.linalg.solve(metric, G.T)
+        q_next = q0 - W @ _min_norm_solve(G @ W, g - G @ (q - q0))
+        step = float(np.max(np.abs(q_next - q)))
+        q = q_next
+        g = model.constraint_value(q, prm, t0)
+        G = model.constraint_jacobian_value(q, prm, t0)
+        if np.max(np.abs(g)) <= 4e-16 * scale and step <= 4e-16 * scale:
+            break
+    return q, G
+
+
 def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray, t0: float = 0.0):
     """Check M(q0), G(q0), and project (q0, v0) onto ``g(t0, q) = 0``, ``G v + g_t = 0``.
 
     Data off the constraint manifold by more than ``CONSISTENCY_TOL`` (relative) raise;
-    smaller violations are projected, with a warning when the move exceeds round-off.
+    smaller violations are projected, with a warning when the move exceeds round-off:
+    ``q0`` to the nearest point of ``g = 0`` in the metric ``M̄`` of ``q0``
+    (:func:`_nearest_on_constraints`), then ``v0`` to the nearest velocity with
+    ``G v + g_t = 0`` there, in the metric there.
     """
     M = model.mass_matrix(q0, prm)
     if not np.all(np.isfinite(M)):
@@ -342,15 +369,10 @@ def initial_state(model, q0: np.ndarray, v0: np.ndarray, prm: np.ndarray, t0: fl
     if model.mass_singular:
         tangent_definite(M, G)
     q = q0.copy()
-    for _ in range(0 if gmax <= 4e-16 * scale else 20):  # the loop's own test, before a move
-        Minv_Gt = np.linalg.solve(mass_metric(M, G), G.T)
-        q = q - Minv_Gt @ _min_norm_solve(G @ Minv_Gt, g)
-        g = model.constraint_value(q, prm, t0)
-        G = model.constraint_jacobian_value(q, prm, t0)
+    if gmax > 4e-16 * scale:
+        q, G = _nearest_on_constraints(model, q0, g, G, mass_metric(M, G), prm, t0, scale)
         if model.mass_matrix_constant is None:
             M = model.mass_matrix(q, prm)
-        if np.max(np.abs(g)) <= 4e-16 * scale:
-            break
     moved = float(np.max(np.abs(q - q0)))
     if gmax > SILENT_PROJECTION * scale:
         warnings.warn(f"`q0` was projected onto the constraints (max|g| was {gmax:.2e}; "

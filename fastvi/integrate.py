@@ -172,8 +172,9 @@ def integrate(
     model : Model
     q0, v0 : array_like (n,)
         Initial configuration and velocity. Slightly inconsistent data are projected onto
-        ``g = 0``, ``G v = 0`` (with a warning when the move exceeds round-off); data off by
-        more than 1e-6 raise.
+        ``g = 0``, ``G v = 0`` (with a warning when the move exceeds round-off): ``q0`` to
+        the nearest point in the metric of ``M(q0)``, then ``v0`` to the nearest velocity in
+        the metric of ``M`` there. Data off by more than 1e-6 raise.
     h : float
         Step size.
     t_end, n_steps :

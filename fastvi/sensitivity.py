@@ -247,7 +247,11 @@ def sensitivity(model, q0, v0, *, h: float, t_end: float | None = None,
 
     ``W = M⁻¹Gᵀ``, ``S = G W``, ``H_v = ∂(G v)/∂q``: a tangent vector of the constrained
     phase space (the parameters may move the constraints: a rod length). The columns for
-    ``q0`` and ``v0`` therefore have rank ``n − m`` each.
+    ``q0`` and ``v0`` therefore have rank ``n − m`` each. These are the formulas at a
+    consistent start; a start that the projection moves (by up to ``1e-6``, with a
+    warning) is the nearest point in the metric of ``M`` at ``q0``, and its derivative
+    also carries the terms of the size of the move (``docs/sensitivities.md``, "What a
+    perturbation of the initial state means").
 
     Parameters
     ----------

@@ -23,6 +23,7 @@ from . import _validate as check
 from ._validate import flag as _flag
 from . import events as events_
 from . import guards
+from . import scipy_compat as compat
 from . import structure
 from ._launch import Launcher
 from ._numba import quiet
@@ -51,7 +52,7 @@ _MEMBER_FIELDS = ("q", "v", "p", "energy", "constraint_residual", "velocity_resi
                   "newton_iterations", "max_energy_error", "max_constraint_residual",
                   "max_velocity_residual", "iterations", "max_residual", "residual", "status",
                   "failed_step", "steps", "n_saved", "initial_energy", "work", "t_events",
-                  "q_events", "v_events", "n_events")
+                  "q_events", "v_events", "n_events", "t_terminal")
 
 
 @dataclass(repr=False)
@@ -75,9 +76,12 @@ class EnsembleResult(ResultBase):
     ========================  ==========================  ===================  ==================
 
     In stride mode the samples of a member that failed stop at ``n_saved[i]``; later slots
-    are NaN. A member ended by a terminal event (status ``TERMINATED``) is a success; its
-    last sample is the step that contains the event, at ``t_final[i]`` (not on the grid
-    ``t``).
+    are NaN. A member ended by a terminal event (status ``TERMINATED``) is a success that
+    ends at the event, as :func:`fastvi.integrate` does: its last sample (stride mode) or
+    final state (the other modes) is the state at the event time ``t_final[i]`` (not on the
+    grid ``t``), taken from the step polynomial (the crossing's ``q_events``, ``v_events``),
+    with ``p``, the energy and the residuals evaluated there and the work interpolated
+    linearly between its last two samples; crossings later in that step are dropped.
 
     With ``events``, each member keeps its first ``K = keep_events`` crossings of each of
     the ``E`` events (SciPy's ``t_events`` per member, padded with NaN):
@@ -97,9 +101,15 @@ class EnsembleResult(ResultBase):
     constraint_residual, velocity_residual, newton_iterations : ndarray (N, K) or None
         ``max |g|``, ``max |Gv|`` and Newton iterations since the previous sample.
     max_energy_error : ndarray (N,) or None
-        ``max_k |H(q_k, p_k) − H(q_0, p_0)|`` over every step.
+        ``max_k |H(q_k, p_k) − H(q_0, p_0) − W_k|`` over the ends of every step taken
+        (``W`` the work of forces and time, zero for a conservative model). For a member a
+        terminal event ended, the steps run to the end of the one that contains the event
+        (past it), and the state at the event, its final state, is included too, except
+        for a model with forces or time: the work is known at the ends of steps only.
     max_constraint_residual, max_velocity_residual : ndarray (N,) or None
-        ``max_k |g(q_k)|`` and ``max_k |G(q_k) v_k|`` over every step, ``k = 0`` included.
+        ``max_k |g(q_k)|`` and ``max_k |G(q_k) v_k + g_t|`` over every step, ``k = 0``
+        included; for a member a terminal event ended, over its steps as above and the
+        state at the event (interpolated from the step polynomial, so usually the largest).
     iterations : ndarray (N,) int
         Newton iterations of each member in total (the failed step's included).
     max_residual : ndarray (N,)
@@ -131,6 +141,9 @@ class EnsembleResult(ResultBase):
         Start time of every member.
     t_events, q_events, v_events, n_events : ndarray or None
         The event records (table above); None without ``events``.
+    t_terminal : ndarray (N,) or None
+        The time of the terminal event that ended each member, NaN for the members no
+        terminal event ended; None without ``events``.
     """
 
     t: np.ndarray | None
@@ -166,6 +179,7 @@ class EnsembleResult(ResultBase):
     q_events: np.ndarray | None = None
     v_events: np.ndarray | None = None
     n_events: np.ndarray | None = None
+    t_terminal: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.status.shape[0])
@@ -264,8 +278,12 @@ class EnsembleResult(ResultBase):
 
     @property
     def t_final(self) -> np.ndarray:
-        """(N,) time of each member's last good state (``t0 + steps · h``)."""
-        return self.t0 + self.steps * self.h
+        """(N,) time of each member's last good state: ``t0 + steps · h``, or the event time
+        of a member a terminal event ended."""
+        at_steps = self.t0 + self.steps * self.h
+        if self.t_terminal is None:
+            return at_steps
+        return np.where(self.status == Status.TERMINATED, self.t_terminal, at_steps)
 
     @property
     def terminated(self) -> np.ndarray:
@@ -325,11 +343,9 @@ class EnsembleResult(ResultBase):
         """Member ``i`` as a :class:`fastvi.Result` (stride mode only).
 
         Equal, array for array, to ``integrate(..., save_every=k, on_failure="return")`` of
-        that member (the times in ``stats`` are NaN: members share the clock; the
-        summary says "time not measured"), except for a member a terminal event ended:
-        its last sample is the end of the step that contains the event, where
-        ``integrate`` moves it to the event (the state there is the member's
-        ``q_events``/``v_events`` entry of that event).
+        that member, a member a terminal event ended included (its last sample is the state
+        at the event, at ``t_final[i]``). The times in ``stats`` are NaN: members share the
+        clock; the summary says "time not measured".
         """
         if self.t is None:
             raise ValueError(f"member trajectories need `save` = an integer stride; this ensemble "
@@ -339,7 +355,7 @@ class EnsembleResult(ResultBase):
         status = Status(int(self.status[i]))
         t = self.t[:J].copy()
         if status == Status.TERMINATED:
-            t[-1] = self.t0 + self.steps[i] * self.h  # the step that contained the event
+            t[-1] = self.t_final[i]  # the event: off the grid of samples
         kept = {}
         if self.t_events is not None:
             K = self.t_events.shape[2]
@@ -466,11 +482,13 @@ def integrate_ensemble(
         Event functions ``event(t, q, v, params) -> float`` with the optional attributes
         ``terminal`` and ``direction``, exactly as in :func:`fastvi.integrate` (members get
         their own ``params`` row). Crossings are located inside the compiled loop; a terminal
-        event ends that member only (status ``TERMINATED``, a success), and the others go on.
+        event ends that member only (status ``TERMINATED``, a success), at the event as
+        :func:`fastvi.integrate` ends a run, and the others go on.
     keep_events : int, default 1
         Crossings kept per event and member (the first ones); later crossings are counted
         in ``n_events`` (and towards ``terminal``) but not located. Memory:
-        ``8 N E K (2n + 1)`` bytes.
+        ``8 N E K (2n + 1)`` bytes. The crossing that ends a member is always located (a
+        ``terminal`` count above ``keep_events`` is kept for the run, then let go).
     solver : {"auto", "dense", "banded", "sparse"}, default "auto"
         How each member solves a step's linear systems, as in :func:`fastvi.integrate`: a
         large mechanism's members solve banded or sparse (planned once for the ensemble), a
@@ -636,7 +654,10 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
     ist = np.zeros((N, lay.E_SIZE), dtype=np.int64)
     fst = np.zeros((N, lay.F_SIZE))
     fst[:, lay.F_G], fst[:, lay.F_GV] = g0, gv0
-    E, cap = max(1, ev.count), opts.get("keep_events", 1) if ev.count else 1
+    keep = opts.get("keep_events", 1)
+    # a member ends at the state of its terminal crossing, so that crossing must be located
+    # whatever `keep_events` (the room beyond it is let go after the run)
+    E, cap = max(1, ev.count), max(keep, int(ev.terminal.max())) if ev.count else 1
     Te = np.full((N, E, cap), np.nan)
     Qe, Ve = np.full((N, E, cap, n), np.nan), np.full((N, E, cap, n), np.nan)
     Ne = np.zeros((N, lay.EVENT_SLOTS), dtype=np.int64)
@@ -687,7 +708,7 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
     else:
         t = None
         q, v, p, energy = Qs[:, 0], Vs[:, 0], Ps[:, 0], En[:, 0]
-    return EnsembleResult(
+    result = EnsembleResult(
         t=t, q=q, v=v, p=p, energy=energy,
         constraint_residual=Gr if stride else None, velocity_residual=GVr if stride else None,
         newton_iterations=It if stride else None,
@@ -703,6 +724,56 @@ def _ensemble(model, Q0, V0, params, opts, threads, run_check, first_member=0,
                                           v_events=Ve[:, :ev.count],
                                           n_events=Ne[:, :ev.count].copy())),
     )
+    if ev.count:
+        result.t_terminal = _end_at_events(result, model, P, events)
+        if cap > keep:  # the room for a terminal count beyond `keep_events` is let go
+            result.t_events, result.q_events, result.v_events = (
+                np.ascontiguousarray(a[:, :, :keep])
+                for a in (result.t_events, result.q_events, result.v_events))
+    return result
+
+
+def _end_at_events(result: EnsembleResult, model: Model, P, events) -> np.ndarray:
+    """End every member a terminal event ended at its event, as :func:`fastvi.integrate`
+    ends a run (:func:`fastvi.scipy_compat.end_at_event`, by the same helpers): its last
+    sample or final state moved to the event, crossings after the event dropped. Changes
+    ``result`` in place; returns the members' event times (NaN where none ended one)."""
+    t_terminal = np.full(len(result), np.nan)
+    stride = result.t is not None
+    for i in result.terminated:
+        found = compat.terminal_crossing(events, result.n_events[i], result.t_events[i])
+        if found is None:  # never: the kernel ends a member at such a crossing
+            continue
+        te, e, j = found
+        qe, ve = result.q_events[i, e, j].copy(), result.v_events[i, e, j].copy()
+        p, H, g, gv = compat.state_at_event(model, P[i], te, qe, ve)
+        kept = compat.crossings_kept(result.t_events[i], te, e, j)
+        for k, keep in enumerate(kept):
+            # a dropped crossing is one that was located (a record beyond `keep_events`
+            # holds no time to compare, and its count stays)
+            result.n_events[i, k] -= int(np.count_nonzero(~keep & ~np.isnan(result.t_events[i, k])))
+            result.t_events[i, k, ~keep] = np.nan
+            result.q_events[i, k, ~keep] = np.nan
+            result.v_events[i, k, ~keep] = np.nan
+        if stride:
+            last = int(result.n_saved[i]) - 1
+            at = (i, last)
+            result.constraint_residual[at], result.velocity_residual[at] = g, gv
+            if result.work is not None:
+                t_step = result.t0 + result.steps[i] * result.h  # the step's end, as sampled
+                result.work[at] = compat.work_at_event(result.work[i, last - 1], result.work[at],
+                                                       float(result.t[last - 1]), float(t_step), te)
+        else:
+            at = i
+            if result.max_energy_error is not None:  # the final state is among the maxima
+                result.max_constraint_residual[i] = max(result.max_constraint_residual[i], g)
+                result.max_velocity_residual[i] = max(result.max_velocity_residual[i], gv)
+                if not model.timed:  # the work at the event is not known
+                    result.max_energy_error[i] = max(result.max_energy_error[i],
+                                                     abs(H - result.initial_energy[i]))
+        result.q[at], result.v[at], result.p[at], result.energy[at] = qe, ve, p, H
+        t_terminal[i] = te
+    return t_terminal
 
 
 def _initial_states(model: Model, Q0, V0, P, first_member: int, t0: float = 0.0):

@@ -144,25 +144,63 @@ def _state_arrays(model, prm, t, q, v):
     return p, H, g, gv
 
 
+def terminal_crossing(events, counts, times):
+    """The crossing that ended a run: ``(t, e, j)``, crossing ``j`` of event ``e`` at time
+    ``t``, the earliest over the terminal events whose count of crossings ``counts[e]``
+    reached their ``terminal`` count; None if none did.
+
+    ``times[e][j]`` is the located time of crossing ``j`` of event ``e`` (a single run's
+    ``t_events``, or an ensemble member's rows of ``t_events``, which hold at least the
+    ``terminal`` count of crossings)."""
+    from .events import as_list, _terminal
+
+    best = None
+    for e, fn in enumerate(as_list(events)):
+        count = _terminal(fn, e)
+        if count and counts[e] >= count:
+            te = float(times[e][count - 1])
+            if best is None or te < best[0]:
+                best = (te, e, count - 1)
+    return best
+
+
+def crossings_kept(times, t_event: float, e: int, j: int):
+    """Per event, the boolean mask of the crossings ``times[k]`` that a run ended at
+    crossing ``j`` of event ``e`` (at ``t_event``) keeps: those up to the event. Crossings
+    later in the same last step did not happen (the run ended before them)."""
+    keep = [np.asarray(ti) <= t_event for ti in times]
+    keep[e] = np.arange(len(times[e])) <= j
+    return keep
+
+
+def state_at_event(model, prm, t_event: float, q, v):
+    """``p, H, max|g|, max|Gv + g_t|`` at the event state ``(t_event, q, v)``."""
+    p, H, g, gv = _state_arrays(model, prm, np.array([t_event]), q[None], v[None])
+    return p[0], H[0], g[0], gv[0]
+
+
+def work_at_event(w_prev, w_step, t_prev: float, t_step: float, t_event: float):
+    """The work at ``t_event``, interpolated linearly between the last two samples
+    ``(t_prev, w_prev)`` and ``(t_step, w_step)`` (the work is known at step ends only)."""
+    frac = (t_event - t_prev) / (t_step - t_prev) if t_step > t_prev else 1.0
+    return w_prev + frac * (w_step - w_prev)
+
+
 def end_at_event(result, model, prm, events):
     """A result ended by a terminal event, with its last sample moved to the event: the
     state at the event time from the step polynomial (``sol(t_event)`` with dense output,
     else the crossing's record, the same polynomial). Crossings after it, in the same last
     step, are dropped. The work there (a forced or driven model) is interpolated linearly
-    between the last two samples (the ends of the step with ``save_every=1``)."""
-    from .events import as_list, _terminal
+    between the last two samples (the ends of the step with ``save_every=1``).
+
+    :func:`fastvi.integrate_ensemble` ends its terminated members by the same helpers
+    (:func:`terminal_crossing`, :func:`crossings_kept`, :func:`state_at_event`,
+    :func:`work_at_event`)."""
     from .status import Status
 
     if result.status != Status.TERMINATED or not result.t_events:
         return result
-    fns = as_list(events)
-    best = None
-    for e, fn in enumerate(fns):
-        count = _terminal(fn, e)
-        if count and len(result.t_events[e]) >= count:
-            te = float(result.t_events[e][count - 1])
-            if best is None or te < best[0]:
-                best = (te, e, count - 1)
+    best = terminal_crossing(events, [len(x) for x in result.t_events], result.t_events)
     if best is None:
         return result
     te, e, j = best
@@ -171,21 +209,18 @@ def end_at_event(result, model, prm, events):
         result.sol.t_max = te
     else:
         qe, ve = result.q_events[e][j].copy(), result.v_events[e][j].copy()
-    keep = [ti <= te for ti in result.t_events]
-    keep[e] = np.arange(len(result.t_events[e])) <= j
+    keep = crossings_kept(result.t_events, te, e, j)
     t_prev, t_step = float(result.t[-2]), float(result.t[-1])
     t, q, v = result.t.copy(), result.q.copy(), result.v.copy()
     p, H = result.p.copy(), result.energy.copy()
     g, gv = result.constraint_residual.copy(), result.velocity_residual.copy()
     t[-1], q[-1], v[-1] = te, qe, ve
-    pp, HH, gg, ggv = _state_arrays(model, prm, t[-1:], q[-1:], v[-1:])
-    p[-1], H[-1], g[-1], gv[-1] = pp[0], HH[0], gg[0], ggv[0]
+    p[-1], H[-1], g[-1], gv[-1] = state_at_event(model, prm, te, q[-1], v[-1])
     extra = {}
-    frac = (te - t_prev) / (t_step - t_prev) if t_step > t_prev else 1.0
     for name in ("work", "work_forces"):
         if getattr(result, name) is not None:
             w = getattr(result, name).copy()
-            w[-1] = w[-2] + frac * (w[-1] - w[-2])
+            w[-1] = work_at_event(w[-2], w[-1], t_prev, t_step, te)
             extra[name] = w
     return replace(result, t=t, q=q, v=v, p=p, energy=H, constraint_residual=g, velocity_residual=gv,
                    t_events=[x[k] for x, k in zip(result.t_events, keep)],

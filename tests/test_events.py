@@ -169,6 +169,22 @@ def _flip_members(dp, count, seed):
     return np.array([s[0] for s in states]), np.array([s[1] for s in states])
 
 
+_RUN_FIELDS = ("t", "q", "v", "p", "energy", "constraint_residual", "velocity_residual",
+               "newton_iterations", "work")
+
+
+def _same_run(m, r, i):
+    """``m`` (an ensemble's member) is ``r`` (integrate of it) array for array."""
+    assert m.status == r.status, i
+    for name in _RUN_FIELDS:
+        a, b = getattr(m, name), getattr(r, name)
+        assert (a is None and b is None) or np.array_equal(a, b), (i, name)
+    for name in ("t_events", "q_events", "v_events"):
+        assert len(getattr(m, name)) == len(getattr(r, name)), (i, name)
+        for a, b in zip(getattr(m, name), getattr(r, name)):
+            assert np.array_equal(a, b), (i, name)
+
+
 def test_ensemble_members_record_the_events_of_integrate_bit_for_bit(double_pendulum):
     dp = double_pendulum
     Q0, V0 = _flip_members(dp, 10, 3)
@@ -183,27 +199,18 @@ def test_ensemble_members_record_the_events_of_integrate_bit_for_bit(double_pend
     assert ens.n_events[0, 2] >= 3 and ens.n_events[0, :2].sum() == 0
     for i in range(10):
         r = fastvi.integrate(dp, Q0[i], V0[i], save_every=7, events=events, **kw)
-        m = ens.member(i)
-        assert r.status == m.status
-        # integrate ends a terminated run at its event; an ensemble member at that step's end
-        last = -1 if i in ended else None
-        for name in ("t", "q", "v", "p", "energy", "constraint_residual", "velocity_residual",
-                     "newton_iterations"):
-            assert np.array_equal(getattr(r, name)[:last], getattr(m, name)[:last]), (i, name)
-        if i in ended:
+        _same_run(ens.member(i), r, i)
+        if i in ended:  # integrate, and the member, end at the event
             e = int(np.flatnonzero(ens.n_events[i, :2])[0])
-            assert r.t[-1] == ens.t_events[i, e, 0] <= m.t[-1]
+            assert r.t[-1] == ens.t_events[i, e, 0] == ens.t_final[i]
             assert np.array_equal(r.q[-1], ens.q_events[i, e, 0])
-        for name in ("t_events", "q_events", "v_events"):
-            for a, b in zip(getattr(r, name), getattr(m, name)):
-                assert np.array_equal(a, b), (i, name)
     # a flip is located on the top: the rod is vertical there, pointing up
     for i in ended:
         e = int(np.flatnonzero(ens.n_events[i, :2])[0])
         q = ens.q_events[i, e, 0]
         dx, dy = (q[0], q[1]) if e == 0 else (q[2] - q[0], q[3] - q[1])
         assert abs(dx) < 1e-12 and dy > 0.999
-        assert ens.t_final[i] - 0.01 < ens.t_events[i, e, 0] <= ens.t_final[i]
+        assert ens.t0 + (ens.steps[i] - 1) * ens.h < ens.t_final[i] <= ens.t0 + ens.steps[i] * ens.h
 
 
 def test_ensemble_keeps_the_first_crossings_and_counts_them_all(double_pendulum):
@@ -219,3 +226,111 @@ def test_ensemble_keeps_the_first_crossings_and_counts_them_all(double_pendulum)
         fastvi.integrate_ensemble(dp, Q0, V0, h=0.01, n_steps=300, events=inner_under, save=10).member(0)
     with pytest.raises(ValueError, match="`keep_events` must be >= 1"):
         fastvi.integrate_ensemble(dp, Q0, V0, h=0.01, n_steps=3, events=inner_under, keep_events=0)
+
+
+# ----------------------------------------------------------- ensemble members end at their event
+def ends_at(t, q, v, p):
+    return t - 0.505  # inside the step from 0.50 to 0.51
+
+
+ends_at.terminal = True
+
+
+def just_before(t, q, v, p):
+    return t - 0.503  # in that last step, before the terminal event
+
+
+def just_after(t, q, v, p):
+    return t - 0.507  # in that last step, after the terminal event: it never happens
+
+
+def twice_under(t, q, v, p):
+    return q[0]
+
+
+twice_under.terminal = 2  # the second pass under the pivot
+
+
+@pytest.fixture(scope="module")
+def damped():
+    return fastvi.scenes.double_pendulum(damping=0.3)  # a force: the results carry the work
+
+
+def _spinning_members(dp, count, seed):
+    """Member 0 at rest, the others spun (θ1, θ2, ω1, ω2): most flip within a second or two."""
+    rng = np.random.default_rng(seed)
+    spun = np.column_stack((rng.uniform(-3.0, 3.0, (count - 1, 2)), rng.uniform(-8.0, 8.0, (count - 1, 2))))
+    states = [dp.initial_state(*a) for a in np.vstack([[[0.5, 0.5, 0.0, 0.0]], spun])]
+    return np.array([s[0] for s in states]), np.array([s[1] for s in states])
+
+
+def test_terminated_members_of_a_forced_model_are_integrate_work_included(damped):
+    Q0, V0 = _spinning_members(damped, 8, 3)
+    events = list(damped.flips) + [inner_under]
+    kw = dict(h=0.01, n_steps=300)
+    ens = fastvi.integrate_ensemble(damped, Q0, V0, save=7, events=events, keep_events=50, **kw)
+    ended = ens.terminated
+    assert 0 < ended.size < 8 and ens.work is not None
+    for i in range(8):
+        r = fastvi.integrate(damped, Q0[i], V0[i], save_every=7, events=events, on_failure="return", **kw)
+        _same_run(ens.member(i), r, i)
+        assert ens.t_final[i] == r.t[-1]
+    # the trajectory up to the event is the run's without events; the other members are
+    # that run's bit for bit
+    plain = fastvi.integrate_ensemble(damped, Q0, V0, save=7, **kw)
+    going = ens.status == Status.SUCCESS
+    assert going.sum() == 8 - ended.size and np.array_equal(ens.t_final[going], plain.t_final[going])
+    for name in ("q", "v", "p", "energy", "constraint_residual", "velocity_residual",
+                 "newton_iterations", "work"):
+        a, b = getattr(ens, name), getattr(plain, name)
+        assert np.array_equal(a[going], b[going], equal_nan=True), name
+        for i in ended:
+            J = ens.n_saved[i]
+            assert np.array_equal(a[i, :J - 1], b[i, :J - 1]), (i, name)
+            assert np.isnan(a[i, J:]).all() and ens.t[J - 2] < ens.t_final[i] < ens.t[J - 1]
+
+
+def test_final_state_of_a_terminated_member_is_the_last_sample_of_integrate(double_pendulum):
+    dp = double_pendulum
+    Q0, V0 = _flip_members(dp, 5, 5)
+    events = [ends_at, just_before, just_after]
+    kw = dict(h=0.01, n_steps=200, events=events)
+    fin = fastvi.integrate_ensemble(dp, Q0, V0, **kw)
+    diag = fastvi.integrate_ensemble(dp, Q0, V0, save="diagnostics", **kw)
+    stride = fastvi.integrate_ensemble(dp, Q0, V0, save=10, **kw)
+    assert (fin.status == Status.TERMINATED).all() and np.array_equal(fin.steps, [51] * 5)
+    q, v = fin.final_state()
+    for i in range(5):
+        r = fastvi.integrate(dp, Q0[i], V0[i], **kw)
+        assert r.status == Status.TERMINATED and abs(r.t[-1] - 0.505) < 1e-12
+        assert fin.t_final[i] == diag.t_final[i] == fin.t_terminal[i] == r.t[-1]
+        assert np.array_equal(q[i], r.q[-1]) and np.array_equal(v[i], r.v[-1])
+        _same_run(stride.member(i), fastvi.integrate(dp, Q0[i], V0[i], save_every=10, **kw), i)
+        for ens in (fin, diag, stride):
+            last = (i,) if ens.t is None else (i, ens.n_saved[i] - 1)
+            for name in ("q", "v", "p", "energy"):
+                assert np.array_equal(getattr(ens, name)[last], getattr(r, name)[-1]), (i, name)
+            # the crossing after the terminal one, in the same step, did not happen
+            assert ens.n_events[i].tolist() == [a.size for a in r.t_events] == [1, 1, 0]
+            assert np.isnan(ens.t_events[i, 2]).all() and np.isnan(ens.q_events[i, 2]).all()
+            assert ens.t_events[i, :2, 0].tolist() == [r.t_events[0][0], r.t_events[1][0]]
+        # diagnostics: the maxima over every step taken (to 0.51) and the state at the event
+        steps = fastvi.integrate(dp, Q0[i], V0[i], h=0.01, n_steps=51)
+        assert diag.max_energy_error[i] == max(np.max(np.abs(steps.energy_error)), abs(r.energy_error[-1]))
+        assert diag.max_constraint_residual[i] == max(np.max(steps.constraint_residual),
+                                                      r.constraint_residual[-1])
+        assert diag.max_velocity_residual[i] == max(np.max(steps.velocity_residual),
+                                                    r.velocity_residual[-1])
+
+
+def test_a_terminal_count_beyond_keep_events_ends_the_member_at_its_event(double_pendulum):
+    dp = double_pendulum
+    Q0, V0 = _flip_members(dp, 4, 5)
+    kw = dict(h=0.01, n_steps=300, events=twice_under)
+    one = fastvi.integrate_ensemble(dp, Q0, V0, **kw)  # keep_events=1 < terminal = 2
+    assert one.t_events.shape == (4, 1, 1) and one.terminated.size > 0
+    for i in range(4):
+        r = fastvi.integrate(dp, Q0[i], V0[i], **kw)
+        assert one.status[i] == r.status and one.t_final[i] == r.t[-1]
+        assert np.array_equal(one.q[i], r.q[-1]) and np.array_equal(one.energy[i], r.energy[-1])
+        assert one.n_events[i, 0] == r.t_events[0].size and one.t_events[i, 0, 0] == r.t_events[0][0]

@@ -323,7 +323,7 @@ class EnsembleResult(ResultBase):
             balance = self.stats.get("timed")
             lines.append(f"max {'|ΔH − W|' if balance else '|ΔH|'} = {np.max(self.max_energy_error):.3e}, "
                          f"max |g| = {np.max(self.max_constraint_residual):.3e}, "
-                         f"max {'|Gv + g_t|' if timed else '|Gv|'} = "
+                         f"max {'|Gv + g_t|' if balance else '|Gv|'} = "
                          f"{np.max(self.max_velocity_residual):.3e}")
         failed = self.failed
         ended = self.terminated.size

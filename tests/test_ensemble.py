@@ -74,6 +74,9 @@ def test_diagnostics_equal_the_maxima_of_integrate(double_pendulum, dp_members, 
     # and they are what a variational integrator should give (not only self-consistent)
     assert ens.max_constraint_residual.max() <= 1e-13  # measured 3e-16
     assert 0 < ens.max_energy_error.max() <= 2e-3  # measured 4e-4 (tumbling members, h = 0.01)
+    # the summary names the figures as the single run's does: a conservative model's
+    # hidden constraint is G v = 0, its energy figure |ΔH|
+    assert "max |ΔH| = " in ens.summary() and "max |Gv| = " in ens.summary()
 
 
 def test_q_dependent_mass_model_members_equal_integrate():

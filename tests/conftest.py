@@ -16,7 +16,8 @@ def pytest_addoption(parser):
 #: compile it (the on-disk cache helps only once one of them has finished), so under
 #: ``--dist loadfile`` every file of a family goes to one worker, in one work unit.
 KERNEL_FAMILIES = {
-    "derivatives": ("test_hard_cases", "test_lyapunov", "test_param_patterns", "test_periodic",
+    "derivatives": ("test_hard_cases", "test_lyapunov", "test_mass_params",
+                    "test_off_constraint_start", "test_param_patterns", "test_periodic",
                     "test_periodic_forced",
                     "test_sensitivity", "test_sensitivity_ensemble",
                     "test_sensitivity_structured", "test_singular_mass_derivatives",

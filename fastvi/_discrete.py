@@ -457,7 +457,10 @@ def _start_parts(run: Run, pidx, initial_state) -> StartParts:
             gv_th = by_differences(lambda p: model.constraint_jacobian_value(q0, p, run.t0) @ v0
                                    + model.constraint_time_derivative_value(q0, p, run.t0), m)
     if model.mass_matrix_constant is None and kp:  # a constant mass is not a parameter's
-        mv_th = by_differences(lambda p: model.mass_matrix(q0, p) @ v0, n)
+        if "mass" in model.param_derivatives:  # the model's ∂M/∂θ, as the steps take it
+            mv_th = model.param_derivative_value("mass", q0, params=prm)[list(pidx)] @ v0
+        else:
+            mv_th = by_differences(lambda p: model.mass_matrix(q0, p) @ v0, n)
     W = S = None
     if m:
         # a large mechanism's constant diagonal mass: M⁻¹Gᵀ by its reciprocals, O(m n); a
@@ -669,10 +672,14 @@ def sample_terms_by_chunk(model, prm, result, by_theta=0):
 
 def momentum_by_theta(model, prm, result, start, stop, pidx) -> np.ndarray:
     """``∂p/∂θ_l`` (``p`` the :func:`momentum`) at the samples ``start … stop − 1`` of
-    ``result``, (stop − start, len(pidx), n): :func:`theta_derivative`'s rule, sample by
-    sample the same arithmetic, with the masses of each point in θ in one compiled loop
-    (:func:`.kernels.tangent.sample_masses`)."""
+    ``result``, (stop − start, len(pidx), n): ``(∂M/∂θ_l) v`` from the model's derivative of
+    its mass function by θ where it gives one, as the linearised step takes it, else
+    :func:`theta_derivative`'s rule, sample by sample the same arithmetic, with the masses
+    of each point in θ in one compiled loop (:func:`.kernels.tangent.sample_masses`)."""
     q, v, t = result.q[start:stop], result.v[start:stop], result.t[start:stop]
+    if "mass" in model.param_derivatives and not model.mass_singular:
+        dM = _mass_by_theta(model, prm, q, t)[:, list(pidx)]
+        return np.matmul(dM, v[:, None, :, None])[..., 0]
     out = np.zeros((stop - start, len(pidx), model.n))
     for c, l in enumerate(pidx):
         points, scale = _theta_stencil(prm, l)
@@ -681,6 +688,18 @@ def momentum_by_theta(model, prm, result, start, stop, pidx) -> np.ndarray:
             out[:, c] += wgt * (Mv + _rate_shifts(model, q, p, t))
         out[:, c] /= scale
     return out
+
+
+def _mass_by_theta(model, prm, q, t) -> np.ndarray:
+    """``∂M/∂θ`` (K, k, n, n) at the samples ``q[i]``: the model's derivative of ``mass`` by
+    θ (:meth:`fastvi.Model.param_derivative_value`'s) at every sample in one compiled loop
+    (:func:`.kernels.tangent.sample_callback`, given the derivatives by θ in place of the
+    callbacks)."""
+    md = model.kernel_data(prm, float(t[0]))
+    by_theta = md._replace(fns=model.param_derivative_data().fns)
+    n = model.n
+    return sample_callback(by_theta, lay.PARAM_SLOTS.index("mass"), q, t,
+                           (model.params.shape[0], n, n))
 
 
 def _rate_shifts(model, q, prm, t):

@@ -338,19 +338,12 @@ def _cotangents(run, result, cotangent, pidx):
     if model.mass_matrix_constant is not None and not model.mass_singular:
         return Jq, np.linalg.solve(model.mass_matrix_constant, Jv.T).T.copy(), direct
     Lq, Lp = Jq.copy(), np.zeros((K, n))
-    exact = "mass" in model.param_derivatives and not model.mass_singular
-    by_theta = 0 if exact else len(pidx)
-    for start, Ms, _, _, Cqs in disc.sample_terms_by_chunk(model, run.prm, result, by_theta):
-        Pth = disc.momentum_by_theta(model, run.prm, result, start, start + len(Ms),
-                                     pidx[:by_theta])
+    for start, Ms, _, _, Cqs in disc.sample_terms_by_chunk(model, run.prm, result, len(pidx)):
         s = slice(start, start + len(Ms))
         Lp[s] = np.linalg.solve(Ms, Jv[s, :, None])[..., 0]
         Lq[s] -= np.matmul(Cqs.transpose(0, 2, 1), Lp[s, :, None])[..., 0]
-        if exact and pidx:  # the model's ∂M/∂θ, as the linearised step reads it
-            for i in range(s.start, s.stop):
-                dM = model.param_derivative_value("mass", result.q[i], params=run.prm)
-                direct -= (dM[pidx] @ result.v[i]) @ Lp[i]
-        elif by_theta:
+        if pidx:
+            Pth = disc.momentum_by_theta(model, run.prm, result, s.start, s.stop, pidx)
             for d in np.matmul(Pth, Lp[s, :, None])[..., 0]:  # sample by sample, in order
                 direct -= d
     return Lq, Lp, direct

@@ -14,7 +14,8 @@ import fastvi
 from tests.models import td_potential, td_potential_grad
 from fastvi.check import ModelCheckError
 from fastvi.kernels.layout import PARAM_SLOTS
-from fastvi.scenes import chain, double_pendulum, pendulum, triple_pendulum
+from fastvi.scenes import (chain, closed_chain, double_pendulum, four_bar, pendulum,
+                           rotary_rod_slider, spherical_pendulum, triple_pendulum)
 
 sp = pytest.importorskip("sympy")
 from fastvi.symbolic import model_from_lagrangian, velocities  # noqa: E402
@@ -52,12 +53,21 @@ SCENES = {
     "double_pendulum-damped": lambda: double_pendulum(m1=1.2, m2=0.7, damping=0.3),
     "triple_pendulum": lambda: triple_pendulum(m=(1.0, 2.0, 0.5), l=(1.0, 0.7, 1.2)),
     "chain4-damped": lambda: chain(4, m=(1.0, 2.0, 0.5, 1.5), damping=0.2),
+    "spherical_pendulum": lambda: spherical_pendulum(m=1.3, l=0.9, g=9.7),
+    "four_bar": lambda: four_bar(mB=1.2, mC=0.7, a=0.8, L=1.3),
+    "closed_chain6": lambda: closed_chain(6, m=1.1, l=0.9, d=3.0),
+    "rotary_rod_slider": lambda: rotary_rod_slider(l=1.7, mA=2.5, mB=4.0, k=800.0, r0=0.9),
 }
-#: which slots fns holds: the constant M is data, no kinetic_grad, G does not move with θ
-#: (declared 0), the damping force does
+#: which slots fns holds (in PARAM_SLOTS order: mass, kinetic_grad, potential_grad,
+#: constraint, constraint_jacobian, force): a constant M is data, so no mass or kinetic_grad;
+#: G moves with θ where a length sits inside it (the four-bar's and closed chain's pivot
+#: distance), else it is declared 0; the damping force moves with c; the rod–slider's mass
+#: function moves, its constraint φ − θ does not (declared 0)
 GIVEN = {"pendulum": [0, 0, 1, 1, 0, 0], "double_pendulum": [0, 0, 1, 1, 0, 0],
          "double_pendulum-damped": [0, 0, 1, 1, 0, 1], "triple_pendulum": [0, 0, 1, 1, 0, 0],
-         "chain4-damped": [0, 0, 1, 1, 0, 1]}
+         "chain4-damped": [0, 0, 1, 1, 0, 1], "spherical_pendulum": [0, 0, 1, 1, 0, 0],
+         "four_bar": [0, 0, 1, 1, 1, 0], "closed_chain6": [0, 0, 1, 1, 1, 0],
+         "rotary_rod_slider": [1, 1, 1, 0, 0, 0]}
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))
@@ -69,8 +79,9 @@ def test_scene_derivatives_by_the_parameters_match_differences_and_are_exact(nam
     data = model.param_derivative_data()
     assert data.exact == 1 and type(data.exact) is int
     assert data.given.dtype == np.int64 and data.given.tolist() == GIVEN[name]
-    assert "constraint_jacobian" in slots  # declared 0, still covered
-    assert not model.param_derivative_value("constraint_jacobian", q).any()
+    assert "constraint_jacobian" in slots  # given, or declared 0: still covered
+    if not GIVEN[name][PARAM_SLOTS.index("constraint_jacobian")]:
+        assert not model.param_derivative_value("constraint_jacobian", q).any()
     assert model.check(q, v, n_random=1).ok and model.param_derivatives_checked
 
 

@@ -12,7 +12,10 @@ and every configuration is singular; for ``d`` close to ``N l`` the loop is near
 Constant diagonal mass, linear potential, exact second derivatives.
 
 ``params = (m, l, d, g)`` (equal masses and lengths); the functions read the number of bodies
-from ``len(q) // 2``.
+from ``len(q) // 2``. The model has exact derivatives by its parameters
+(``Model(param_derivatives=...)``): ``∇V`` by ``m`` and ``g``, every constraint by ``l``, the
+last by ``d`` (with ``param_patterns``: O(N) entries), and ``G`` by ``d`` (one entry, but
+``∂G/∂θ`` has no pattern: the kernels read its k·m·n entries, O(N²) a call).
 """
 
 from __future__ import annotations
@@ -72,6 +75,43 @@ def _G(q, p, out):
             out[i, 2 * i - 1] = -dy
 
 
+# the derivatives by θ = (m, l, d, g) write only the entries of `param_patterns`
+# (the kernels hand them `out` zeroed there and read nothing else); the constant mass
+# matrix is data
+def _dV_by_params(q, p, out):
+    """``∂(∇V)/∂θ``: at each ``y_i``, ``g`` by ``m`` and ``m`` by ``g``; zero by ``l``, ``d``."""
+    for i in range(q.shape[0] // 2):
+        out[0, 2 * i + 1] = p[3]
+        out[3, 2 * i + 1] = p[0]
+
+
+def _g_by_params(q, p, out):
+    """``∂g/∂θ``: ``∂g_i/∂l = −l`` for every link, and ``∂g_N/∂d = d − x_{N−1}`` for the
+    last (D = (d, 0) moves with d); zero by ``m`` and ``g``."""
+    nb = q.shape[0] // 2
+    for i in range(nb + 1):
+        out[1, i] = -p[1]
+    out[2, nb] = p[2] - q[2 * nb - 2]
+
+
+def _G_by_params(q, p, out):
+    """``∂G/∂θ`` (k, m, n): only the last row's ``∂g_N/∂x_{N−1} = x_{N−1} − d`` moves,
+    ``∂/∂d = −1``. Dense: the kernels read all k·m·n entries (no pattern by θ for ``G``)."""
+    nb = q.shape[0] // 2
+    out[:, :, :] = 0.0
+    out[2, nb, 2 * nb - 2] = -1.0
+
+
+def param_patterns(N: int) -> dict:
+    """``(l, entry)`` of the non-zeros of the derivatives by θ (``Model``'s
+    ``param_patterns``): ``∂(∇V)/∂θ`` at every ``y_i`` by ``m`` and by ``g``, ``∂g_i/∂l``
+    at every link and ``∂g_N/∂d`` at the last."""
+    nb = N - 1
+    i = np.arange(nb)
+    return dict(potential_grad=(np.repeat([0, 3], nb), np.tile(2 * i + 1, 2)),
+                constraint=(np.r_[np.ones(N, dtype=np.int64), 2], np.r_[np.arange(N), N - 1]))
+
+
 def pattern(N: int):
     """``(rows, cols)`` of the non-zeros of ``G`` (m = N, n = 2N − 2): link i joins body
     i − 1 (pivot A for i = 0) to body i (pivot D for i = N − 1)."""
@@ -124,9 +164,9 @@ def closed_chain(N: int = 8, m: float = 1.0, l: float = 1.0, d: float | None = N
     Returns
     -------
     Model
-        With ``initial_state() -> (q0, v0)``: at rest on a circular arc through both pivots
-        (consistent: ``g(q0) = 0`` to round-off), and a ``drawing`` (pivot A, the bodies,
-        pivot D).
+        With exact derivatives by its parameters, ``initial_state() -> (q0, v0)``: at rest
+        on a circular arc through both pivots (consistent: ``g(q0) = 0`` to round-off), and
+        a ``drawing`` (pivot A, the bodies, pivot D).
     """
     if isinstance(N, bool) or not isinstance(N, (int, np.integer)) or N < MIN_LINKS:
         raise ValueError(f"`N` must be an integer >= {MIN_LINKS}, got {N!r}")
@@ -140,7 +180,10 @@ def closed_chain(N: int = 8, m: float = 1.0, l: float = 1.0, d: float | None = N
                   potential_grad=_dV, potential_hessian=0, constraint=_g,
                   constraint_jacobian=_G, constraint_hessian=_ddg,
                   constraint_jacobian_pattern=pattern(N), mass_params=(0,),
-                  name=f"closed_chain{N}")
+                  name=f"closed_chain{N}",
+                  param_derivatives=dict(potential_grad=_dV_by_params, constraint=_g_by_params,
+                                         constraint_jacobian=_G_by_params),
+                  param_patterns=param_patterns(N))
 
     def initial_state():
         return _arc(N, l, d).ravel(), np.zeros(n)

@@ -9,6 +9,10 @@ Ground pivots ``A = (0, 0)`` and ``D = (L, 0)``; crank ``AB`` and rocker ``DC`` 
 one degree of freedom. When the bars are aligned (crank angle 0 or π) the constraint
 Jacobian loses rank: the parallelogram and anti-parallelogram branches cross there, and a
 crank with enough energy passes through that singular position twice per turn.
+
+The model has exact derivatives by its parameters ``params = (mB, mC, a, L, g)``
+(``Model(param_derivatives=...)``): ``∇V`` by the masses and ``g``, the constraints by
+``a`` and ``L``, and ``G`` by ``L`` (the rocker's pivot ``D`` sits at ``(L, 0)``).
 """
 
 from __future__ import annotations
@@ -18,8 +22,11 @@ import numpy as np
 from ..model import Model
 from ..drawing import cartesian
 from ._common import attach, check_positive
-# the same masses-then-g layout: V = g (mB yB + mC yC)
+# the same masses-then-g layout: V = g (mB yB + mC yC), and so the same ∂(∇V)/∂θ as a
+# 2-link chain's (g by mB at yB, by mC at yC; mB and mC by g), written on its pattern only
 from .double_pendulum import potential as _V, potential_grad as _dV
+from .chain import param_patterns as _chain_param_patterns
+from .chain import potential_grad_by_params as _dV_by_params
 
 # params = (mB, mC, a, L, g)
 
@@ -62,8 +69,33 @@ def _ddg(q, eta, p, out):
     out[3, 1] = -b
 
 
+# the derivatives by θ = (mB, mC, a, L, g) write only the entries of `param_patterns`
+# (the kernels hand them `out` zeroed there); the constant mass matrix is data
+def _g_by_params(q, p, out):
+    """``∂g/∂θ``: ``∂g1/∂a = ∂g3/∂a = −a``, ``∂g2/∂L = −L`` and ``∂g3/∂L = −(xC − L)``
+    (D = (L, 0) moves with L); zero by the masses and ``g``."""
+    out[2, 0] = -p[2]
+    out[2, 2] = -p[2]
+    out[3, 1] = -p[3]
+    out[3, 2] = p[3] - q[2]
+
+
+def _G_by_params(q, p, out):
+    """``∂G/∂θ`` (k, m, n): only ``G[2, 2] = xC − L`` moves, ``∂/∂L = −1``."""
+    out[:, :, :] = 0.0
+    out[3, 2, 2] = -1.0
+
+
+def _param_patterns():
+    """``(l, entry)`` of the non-zeros of the derivatives by θ: ``∂(∇V)/∂θ`` as a 2-link
+    chain's, ``∂g/∂θ`` at ``(a: g1, g3)`` and ``(L: g2, g3)``."""
+    return dict(potential_grad=_chain_param_patterns(2)["potential_grad"],
+                constraint=(np.array([2, 2, 3, 3]), np.array([0, 2, 1, 2])))
+
+
 def four_bar(mB: float = 1.0, mC: float = 1.0, a: float = 1.0, L: float = 2.0, g: float = 9.81) -> Model:
-    """Parallelogram four-bar linkage (n = 4, m = 3) with exact second derivatives.
+    """Parallelogram four-bar linkage (n = 4, m = 3) with exact second derivatives and
+    exact derivatives by its parameters.
 
     The model has ``initial_state(theta, omega=0.0) -> (q0, v0)`` on the parallelogram
     branch (crank angle ``theta`` from the ground line, coupler parallel to the ground),
@@ -75,6 +107,9 @@ def four_bar(mB: float = 1.0, mC: float = 1.0, a: float = 1.0, L: float = 2.0, g
         4, 3, params=(mB, mC, a, L, g), mass=np.diag([mB, mB, mC, mC]), potential=_V,
         potential_grad=_dV, potential_hessian=0, constraint=_g, constraint_jacobian=_G,
         constraint_hessian=_ddg, mass_params=(0, 1), name="four_bar",
+        param_derivatives=dict(potential_grad=_dV_by_params, constraint=_g_by_params,
+                               constraint_jacobian=_G_by_params),
+        param_patterns=_param_patterns(),
     )
 
     def initial_state(theta: float, omega: float = 0.0):

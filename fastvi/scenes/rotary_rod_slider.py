@@ -18,6 +18,10 @@ path (with exact second derivatives). Paper B gives ``l = 2 m``, ``mA = 2 kg``,
 ``mB = 5 kg``, ``k = 1000 N/m``; the spring's natural length and the initial state did not
 survive, so ``r0 = 1 m`` and the default start (θ = φ = 0, r = r0, at rest: the rod released
 horizontally) are fastvi's choices.
+
+The model has exact derivatives of its callbacks by its parameters (``M``, ``∂T/∂q`` and
+``∇V`` by ``(l, mA, mB, k, r0, g)``; the constraint does not depend on them), so
+:func:`fastvi.sensitivity` and :func:`fastvi.adjoint` need no differences in ``params``.
 """
 
 from __future__ import annotations
@@ -92,6 +96,51 @@ def _ddg(q, eta, p, out):
     out[:, :] = 0.0  # the constraint is linear
 
 
+# derivatives by params = (l, mA, mB, k, r0, g) (``Model``'s ``param_derivatives``): each
+# ``out[i]`` is the callback's derivative by ``params[i]``; the constraint and G do not
+# depend on them
+
+
+def _mass_by_params(q, p, out):
+    """``∂M/∂θ``: ``M₀₀ = mA l²/3`` by ``l`` (``2 mA l/3``) and ``mA`` (``l²/3``);
+    ``M₁₁ = mB`` and ``M₂₂ = mB r²`` by ``mB`` (``1``, ``r²``)."""
+    out[:, :, :] = 0.0
+    out[0, 0, 0] = 2.0 * p[1] * p[0] / 3.0
+    out[1, 0, 0] = p[0] * p[0] / 3.0
+    out[2, 1, 1] = 1.0
+    out[2, 2, 2] = q[1] * q[1]
+
+
+def _dT_by_params(q, v, p, out):
+    """``∂(∂T/∂q)/∂θ``: ``∂T/∂r = mB r φ̇²`` by ``mB`` (``r φ̇²``), zero otherwise."""
+    out[:, :] = 0.0
+    out[2, 1] = q[1] * v[2] * v[2]
+
+
+def _dV_by_params(q, p, out):
+    """``∂(∇V)/∂θ``: ``∂V/∂θ = mA g (l/2) cos θ`` by ``l``, ``mA``, ``g``;
+    ``∂V/∂r = mB g sin φ + k (r − r0)`` by ``mB``, ``k`` (``r − r0``), ``r0`` (``−k``), ``g``;
+    ``∂V/∂φ = mB g r cos φ`` by ``mB``, ``g``."""
+    out[:, :] = 0.0
+    c0 = np.cos(q[0])
+    s2 = np.sin(q[2])
+    c2 = np.cos(q[2])
+    out[0, 0] = 0.5 * p[1] * p[5] * c0              # by l
+    out[1, 0] = 0.5 * p[5] * p[0] * c0              # by mA
+    out[5, 0] = 0.5 * p[1] * p[0] * c0              # by g
+    out[2, 1] = p[5] * s2                           # by mB
+    out[3, 1] = q[1] - p[4]                         # by k
+    out[4, 1] = -p[3]                               # by r0
+    out[5, 1] = p[2] * s2                           # by g
+    out[2, 2] = p[5] * q[1] * c2                    # by mB
+    out[5, 2] = p[2] * q[1] * c2                    # by g
+
+
+#: ``Model``'s ``param_derivatives``: every callback θ enters (``G`` and ``g`` declared 0)
+param_derivatives = dict(mass=_mass_by_params, kinetic_grad=_dT_by_params,
+                         potential_grad=_dV_by_params, constraint=0, constraint_jacobian=0)
+
+
 def energy_parts(q, v, l=2.0, mA=2.0, mB=5.0, k=1000.0, r0=1.0, g=9.81):
     """Energy components at configurations ``q`` and velocities ``v`` (..., 3).
 
@@ -133,13 +182,15 @@ def rotary_rod_slider(l: float = 2.0, mA: float = 2.0, mB: float = 5.0, k: float
     Model
         With ``initial_state(theta=0, r=r0, omega=0, r_dot=0) -> (q0, v0)`` (consistent:
         ``φ = θ``, ``φ̇ = θ̇``), ``energy_parts(q, v)`` (see :func:`energy_parts`) and
-        ``slider_position(q) -> (x, y)``, and a ``drawing`` (O, the rod O–A, the slider B).
+        ``slider_position(q) -> (x, y)``, and a ``drawing`` (O, the rod O–A, the slider B);
+        its callbacks have exact derivatives by ``params`` (:data:`param_derivatives`).
     """
     check_positive(l=l, mA=mA, mB=mB, k=k, r0=r0, g=g)
     model = Model(
         3, 1, params=(l, mA, mB, k, r0, g), mass=_mass, kinetic_grad=_dT, kinetic_hessian=_ddT,
         momentum_jacobian=_dMv, potential=_V, potential_grad=_dV, potential_hessian=_ddV,
-        constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg, name="rotary_rod_slider",
+        constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
+        param_derivatives=param_derivatives, name="rotary_rod_slider",
     )
     kw = dict(l=l, mA=mA, mB=mB, k=k, r0=r0, g=g)
 

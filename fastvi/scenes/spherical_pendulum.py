@@ -11,6 +11,10 @@ Noether theorem, by every variational integrator whose discrete Lagrangian inher
 symmetry (fastvi's Galerkin integrators do: the interpolation and the quadrature commute
 with rotations, and the momentum projection adds a multiple of ``∇g ∥ q``, which has no
 torque about the origin).
+
+The model has exact derivatives of its callbacks by its parameters (``∇V`` by ``m`` and
+``g``, ``g(q)`` by ``l``; the constant ``M`` is data), so :func:`fastvi.sensitivity` and
+:func:`fastvi.adjoint` need no differences in ``params``.
 """
 
 from __future__ import annotations
@@ -49,6 +53,28 @@ def _ddg(q, eta, p, out):
     out[0, 0] = eta[0]
     out[1, 1] = eta[0]
     out[2, 2] = eta[0]
+
+
+# derivatives by params = (m, l, g) (``Model``'s ``param_derivatives``): ``out[i]`` is the
+# callback's derivative by ``params[i]``; the constant M = m I is data, G does not depend on θ
+
+
+def _dV_by_params(q, p, out):
+    """``∂(∇V)/∂θ``: ``∂V/∂z = m g`` by ``m`` (``g``) and ``g`` (``m``), zero by ``l``."""
+    out[:, :] = 0.0
+    out[0, 2] = p[2]
+    out[2, 2] = p[0]
+
+
+def _g_by_params(q, p, out):
+    """``∂g/∂θ``: ``∂g/∂l = −l``, zero by ``m`` and ``g``."""
+    out[:, :] = 0.0
+    out[1, 0] = -p[1]
+
+
+#: ``Model``'s ``param_derivatives``: every callback θ enters (``G`` declared 0)
+param_derivatives = dict(potential_grad=_dV_by_params, constraint=_g_by_params,
+                         constraint_jacobian=0)
 
 
 def state_from_angles(theta, phi, theta_dot=0.0, phi_dot=0.0, l=1.0):
@@ -107,7 +133,8 @@ def spherical_pendulum(m: float = 1.0, l: float = 1.0, g: float = 9.81) -> Model
     Model
         With ``initial_state(theta, phi, theta_dot=0, phi_dot=0) -> (q0, v0)`` (``theta``
         the polar angle from the downward vertical), ``angles(q) -> (theta, phi)``,
-        ``angular_momentum(q, p) -> q × p`` and a 3-D ``drawing`` (pivot, bob).
+        ``angular_momentum(q, p) -> q × p`` and a 3-D ``drawing`` (pivot, bob); its
+        callbacks have exact derivatives by ``params`` (:data:`param_derivatives`).
 
     Examples
     --------
@@ -123,7 +150,7 @@ def spherical_pendulum(m: float = 1.0, l: float = 1.0, g: float = 9.81) -> Model
     model = Model(
         3, 1, params=(m, l, g), mass=m * np.eye(3), potential=_V, potential_grad=_dV,
         potential_hessian=0, constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
-        mass_params=(0,), name="spherical_pendulum",
+        param_derivatives=param_derivatives, mass_params=(0,), name="spherical_pendulum",
     )
 
     def initial_state(theta: float, phi: float, theta_dot: float = 0.0, phi_dot: float = 0.0):

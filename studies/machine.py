@@ -28,18 +28,28 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine()
 
 
+#: the folders whose sources make the numbers: a change elsewhere (the pages and figures a
+#: study writes as it goes) does not mark the checkout dirty
+CODE = ("fastvi", "studies")
+
+
 def fastvi_version() -> str:
     """``fastvi.__version__``, and ``git describe`` of the checkout it was imported from
-    (where there is one): the commit the numbers belong to."""
+    (where there is one): the commit the numbers belong to, ``-dirty`` when the code
+    (:data:`CODE`) differs from it."""
     import fastvi
 
     root = Path(fastvi.__file__).resolve().parent.parent
     try:
-        described = subprocess.run(["git", "describe", "--tags", "--always", "--dirty"],
+        described = subprocess.run(["git", "describe", "--tags", "--always"],
                                    cwd=root, capture_output=True, text=True, timeout=10)
+        changed = subprocess.run(["git", "diff", "--quiet", "HEAD", "--", *CODE],
+                                 cwd=root, capture_output=True, timeout=10)
     except (OSError, subprocess.SubprocessError):
         return fastvi.__version__
     tag = described.stdout.strip() if described.returncode == 0 else ""
+    if tag and changed.returncode == 1:
+        tag += "-dirty"
     return f"{fastvi.__version__} (git {tag})" if tag else fastvi.__version__
 
 

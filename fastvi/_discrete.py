@@ -708,16 +708,21 @@ def _rate_shifts(model, q, prm, t):
     :func:`.kernels.linalg.augment_weights` in its own order of sums over a whole chunk."""
     if not (model.mass_singular and model.time_dependent):
         return 0.0
-    n, m = model.n, model.m
     md = model.kernel_data(prm, float(t[0]))
-    G = sample_callback(md, lay.CJAC, q, t, (m, n))
+    return _shifts_of(model, sample_callback(md, lay.CJAC, q, t, (model.m, model.n)),
+                      _constraint_rates(model, md, q, t))
+
+
+def _shifts_of(model, G, gt):
+    """:func:`_rate_shifts` from ``G`` (K, m, n) and ``g_t`` (K, m) at the samples."""
+    n = model.n
     M = model.mass_matrix_constant
     gamma = min(M[a, a] for a in range(n) if M[a, a] > 0.0) * AUGMENT_SCALE
     norm2 = np.zeros(G.shape[:2])
     for a in range(n):
         norm2 += G[:, :, a] * G[:, :, a]
     w = np.divide(gamma, norm2, out=np.zeros_like(norm2), where=norm2 != 0.0)
-    return _stacked(G.transpose(0, 2, 1), w * _constraint_rates(model, md, q, t))
+    return _stacked(G.transpose(0, 2, 1), w * gt)
 
 
 def constraints_by_theta(model, prm, result, start, stop, pidx):
@@ -733,11 +738,14 @@ def constraints_by_theta(model, prm, result, start, stop, pidx):
         points, scale = _theta_stencil(prm, l)
         for th, wgt in points:
             md = model.kernel_data(th, float(t[0]))
-            rhs = p - _rate_shifts(model, q, th, t)
-            v = np.linalg.solve(sample_masses(md, q, t, m), rhs[..., None])[..., 0]
+            # G and g_t at θ once: the velocity's shift (a singular mass whose constraints
+            # move) and the rate of the hidden constraint both read them
             G = sample_callback(md, lay.CJAC, q, t, (m, n))
+            gt = _constraint_rates(model, md, q, t)
+            shift = _shifts_of(model, G, gt) if model.mass_singular and model.time_dependent else 0.0
+            v = np.linalg.solve(sample_masses(md, q, t, m), (p - shift)[..., None])[..., 0]
             gth[:, c] += wgt * sample_callback(md, lay.CON, q, t, (m,))
-            hth[:, c] += wgt * (_stacked(G, v) + _constraint_rates(model, md, q, t))
+            hth[:, c] += wgt * (_stacked(G, v) + gt)
         gth[:, c] /= scale
         hth[:, c] /= scale
     return gth, hth

@@ -436,14 +436,14 @@ def _start_parts(run: Run, pidx, initial_state) -> StartParts:
     n, m = model.n, model.m
     dstate = None
     if initial_state is not None and len(pidx):
-        dstate = np.array([theta_derivative(lambda p: np.concatenate(_state_of(initial_state, p, n)),
-                                            prm, l) for l in pidx]).reshape(len(pidx), 2 * n)
+        dstate = np.ascontiguousarray(
+            _jacobian(lambda p: np.concatenate(_state_of(initial_state, p, n)), prm, pidx).T)
     M, G, Hv, Cq = _start_terms(run)
     kp = len(pidx)
     g_th, gv_th, mv_th = np.zeros((kp, m)), np.zeros((kp, m)), np.zeros((kp, n))
 
-    def by_differences(f, size):
-        return np.array([theta_derivative(f, prm, l) for l in pidx]).reshape(kp, size)
+    def by_differences(f):
+        return np.ascontiguousarray(_jacobian(f, prm, pidx).T)
 
     # the model's derivatives by θ where it gives them, as the linearised step takes them;
     # five-point differences of the callbacks elsewhere
@@ -451,16 +451,16 @@ def _start_parts(run: Run, pidx, initial_state) -> StartParts:
         if "constraint" in model.param_derivatives:
             g_th = model.param_derivative_value("constraint", q0, v0, prm, run.t0)[list(pidx)]
         else:
-            g_th = by_differences(lambda p: model.constraint_value(q0, p, run.t0), m)
+            g_th = by_differences(lambda p: model.constraint_value(q0, p, run.t0))
         if ("constraint_jacobian" not in model.param_derivatives_zero
                 or model.time_dependent):  # else G v is not a parameter's
             gv_th = by_differences(lambda p: model.constraint_jacobian_value(q0, p, run.t0) @ v0
-                                   + model.constraint_time_derivative_value(q0, p, run.t0), m)
+                                   + model.constraint_time_derivative_value(q0, p, run.t0))
     if model.mass_matrix_constant is None and kp:  # a constant mass is not a parameter's
         if "mass" in model.param_derivatives:  # the model's ∂M/∂θ, as the steps take it
             mv_th = model.param_derivative_value("mass", q0, params=prm)[list(pidx)] @ v0
         else:
-            mv_th = by_differences(lambda p: model.mass_matrix(q0, p) @ v0, n)
+            mv_th = by_differences(lambda p: model.mass_matrix(q0, p) @ v0)
     W = S = None
     if m:
         # a large mechanism's constant diagonal mass: M⁻¹Gᵀ by its reciprocals, O(m n); a

@@ -15,7 +15,7 @@ from tests.models import td_potential, td_potential_grad
 from fastvi.check import ModelCheckError
 from fastvi.kernels.layout import PARAM_SLOTS
 from fastvi.scenes import (chain, closed_chain, double_pendulum, four_bar, pendulum,
-                           rotary_rod_slider, spherical_pendulum, triple_pendulum)
+                           rotary_rod_slider, slider_crank, spherical_pendulum, triple_pendulum)
 
 sp = pytest.importorskip("sympy")
 from fastvi.symbolic import model_from_lagrangian, velocities  # noqa: E402
@@ -57,6 +57,7 @@ SCENES = {
     "four_bar": lambda: four_bar(mB=1.2, mC=0.7, a=0.8, L=1.3),
     "closed_chain6": lambda: closed_chain(6, m=1.1, l=0.9, d=3.0),
     "rotary_rod_slider": lambda: rotary_rod_slider(l=1.7, mA=2.5, mB=4.0, k=800.0, r0=0.9),
+    "slider_crank": lambda: slider_crank(r=0.35, L=1.1, m_a=0.6, m_c=1.2, m_b=1.7, g=9.7),
 }
 #: which slots fns holds (in PARAM_SLOTS order: mass, kinetic_grad, potential_grad,
 #: constraint, constraint_jacobian, force): a constant M is data, so no mass or kinetic_grad;
@@ -67,7 +68,7 @@ GIVEN = {"pendulum": [0, 0, 1, 1, 0, 0], "double_pendulum": [0, 0, 1, 1, 0, 0],
          "double_pendulum-damped": [0, 0, 1, 1, 0, 1], "triple_pendulum": [0, 0, 1, 1, 0, 0],
          "chain4-damped": [0, 0, 1, 1, 0, 1], "spherical_pendulum": [0, 0, 1, 1, 0, 0],
          "four_bar": [0, 0, 1, 1, 1, 0], "closed_chain6": [0, 0, 1, 1, 1, 0],
-         "rotary_rod_slider": [1, 1, 1, 0, 0, 0]}
+         "rotary_rod_slider": [1, 1, 1, 0, 0, 0], "slider_crank": [0, 0, 1, 1, 0, 0]}
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))

@@ -16,7 +16,7 @@ The mechanism then has no degree of freedom left, and the multiplier of ``g_6`` 
 motor's torque over ``r``: the power of the drive is ``λ_6 g_{6,t} = λ_6 r Ω``, so the
 torque is ``τ = (dW/dt)/Ω`` with ``W`` the work in :attr:`fastvi.Result.work`.
 
-``params = (r, L, m_A, m_C, m_B, g, Ω)``.
+``params = (r, L, m_A, m_C, m_B, g, Ω)`` (``Ω`` unused when free).
 """
 
 from __future__ import annotations
@@ -27,55 +27,106 @@ from ..model import Model
 from ..drawing import cartesian
 from ._common import attach, check_positive
 
+# Two sets of callbacks with the same five rows. The free mechanism's take no time: it is a
+# time-independent model, which is what lets it give exact derivatives by θ (``Model``
+# refuses them for a time-dependent model with constraints). The driven one's (``_*_t``)
+# take ``t`` first, as ``time_dependent=True`` requires of the potential and constraint
+# callbacks, for the drive's sixth row. numba cannot call a plain Python function from a
+# compiled callback, so the driven set repeats the rows instead of calling the free one.
 
-def _V(t, q, p):
+
+def _V(q, p):
     return p[5] * (p[2] * q[1] + p[3] * q[3] + p[4] * q[5])
 
 
-def _dV(t, q, p, out):
-    out[0] = 0.0
-    out[1] = p[5] * p[2]
-    out[2] = 0.0
-    out[3] = p[5] * p[3]
-    out[4] = 0.0
-    out[5] = p[5] * p[4]
+def _dV(q, p, out):
+    out[:] = 0.0
+    for i in range(3):  # the weights m_A g, m_C g, m_B g at y_A, y_C, y_B
+        out[2 * i + 1] = p[5] * p[2 + i]
 
 
-def _g(t, q, p, out):
+def _g(q, p, out):
     dx, dy = q[4] - q[0], q[5] - q[1]
     out[0] = 0.5 * (q[0] * q[0] + q[1] * q[1] - p[0] * p[0])
     out[1] = 0.5 * (dx * dx + dy * dy - p[1] * p[1])
     out[2] = q[2] - 0.5 * (q[0] + q[4])
     out[3] = q[3] - 0.5 * (q[1] + q[5])
     out[4] = q[5]
-    if out.shape[0] > 5:
-        phi = p[6] * t
-        out[5] = q[0] * np.sin(phi) - q[1] * np.cos(phi)
 
 
-def _G(t, q, p, out):
-    dx, dy = q[4] - q[0], q[5] - q[1]
+#: the rows of G that do not move: C − (A + B)/2 and y_B
+_G_FIXED = np.array([[-0.5, 0.0, 1.0, 0.0, -0.5, 0.0],
+                     [0.0, -0.5, 0.0, 1.0, 0.0, -0.5],
+                     [0.0, 0.0, 0.0, 0.0, 0.0, 1.0]])
+
+
+def _G(q, p, out):
     out[:, :] = 0.0
-    out[0, 0] = q[0]
-    out[0, 1] = q[1]
-    out[1, 0] = -dx
-    out[1, 1] = -dy
-    out[1, 4] = dx
-    out[1, 5] = dy
-    out[2, 0] = -0.5
-    out[2, 2] = 1.0
-    out[2, 4] = -0.5
-    out[3, 1] = -0.5
-    out[3, 3] = 1.0
-    out[3, 5] = -0.5
-    out[4, 5] = 1.0
-    if out.shape[0] > 5:
-        phi = p[6] * t
-        out[5, 0] = np.sin(phi)
-        out[5, 1] = -np.cos(phi)
+    out[2:5, :] = _G_FIXED
+    for a in (0, 1):  # the x (a = 0) and y (a = 1) columns of A and B
+        out[0, a] = q[a]
+        out[1, a] = q[a] - q[a + 4]
+        out[1, a + 4] = q[a + 4] - q[a]
 
 
-def _ddg(t, q, eta, p, out):
+def _ddg(q, eta, p, out):
+    out[:, :] = 0.0
+    for a in (0, 1):
+        out[a, a] = eta[0] + eta[1]
+        out[a + 4, a + 4] = eta[1]
+        out[a, a + 4] = -eta[1]
+        out[a + 4, a] = -eta[1]
+
+
+# the free mechanism's derivatives by θ = (r, L, m_A, m_C, m_B, g, Ω); G is declared 0
+def _dV_by_params(q, p, out):
+    """``∂(∇V)/∂θ``: ``g`` by each mass at its ``y``, each mass by ``g``."""
+    out[:, :] = 0.0
+    for i in range(3):
+        out[2 + i, 2 * i + 1] = p[5]
+        out[5, 2 * i + 1] = p[2 + i]
+
+
+def _g_by_params(q, p, out):
+    """``∂g/∂θ``: ``∂g_1/∂r = −r``, ``∂g_2/∂L = −L``."""
+    out[:, :] = 0.0
+    out[0, 0] = -p[0]
+    out[1, 1] = -p[1]
+
+
+# the driven mechanism's, time first: the free rows, and the drive's sixth
+def _V_t(t, q, p):
+    return p[5] * (p[2] * q[1] + p[3] * q[3] + p[4] * q[5])
+
+
+def _dV_t(t, q, p, out):
+    out[:] = 0.0
+    for i in range(3):
+        out[2 * i + 1] = p[5] * p[2 + i]
+
+
+def _g_t(t, q, p, out):
+    dx, dy, phi = q[4] - q[0], q[5] - q[1], p[6] * t
+    out[0] = 0.5 * (q[0] * q[0] + q[1] * q[1] - p[0] * p[0])
+    out[1] = 0.5 * (dx * dx + dy * dy - p[1] * p[1])
+    out[2] = q[2] - 0.5 * (q[0] + q[4])
+    out[3] = q[3] - 0.5 * (q[1] + q[5])
+    out[4] = q[5]
+    out[5] = q[0] * np.sin(phi) - q[1] * np.cos(phi)
+
+
+def _G_t(t, q, p, out):
+    out[:, :] = 0.0
+    out[2:5, :] = _G_FIXED
+    for a in (0, 1):
+        out[0, a] = q[a]
+        out[1, a] = q[a] - q[a + 4]
+        out[1, a + 4] = q[a + 4] - q[a]
+    out[5, 0] = np.sin(p[6] * t)
+    out[5, 1] = -np.cos(p[6] * t)
+
+
+def _ddg_t(t, q, eta, p, out):
     out[:, :] = 0.0  # the drive row is linear in q
     for a in (0, 1):
         out[a, a] = eta[0] + eta[1]
@@ -85,10 +136,9 @@ def _ddg(t, q, eta, p, out):
 
 
 def _gt(t, q, p, out):
+    phi = p[6] * t
     out[:5] = 0.0
-    if out.shape[0] > 5:
-        phi = p[6] * t
-        out[5] = p[6] * (q[0] * np.cos(phi) + q[1] * np.sin(phi))
+    out[5] = p[6] * (q[0] * np.cos(phi) + q[1] * np.sin(phi))
 
 
 def state(phi, omega, r=0.3, L=1.0):
@@ -122,9 +172,15 @@ def slider_crank(r: float = 0.3, L: float = 1.0, m_a: float = 0.5, m_c: float = 
     Returns
     -------
     Model
-        ``time_dependent=True`` (the callbacks take ``t`` first, unused when free), exact
-        derivatives; helpers ``initial_state(phi, omega=drive)`` (exact, consistent at
-        ``t0 = phi/Ω`` when driven), ``crank_angle(q)`` and a ``drawing`` (O, A, C, B).
+        Exact second derivatives. Free: a time-independent model (callbacks without ``t``)
+        with exact derivatives by the parameters (``param_derivatives``): ``∇V`` by each
+        mass (``g`` at its ``y``) and by ``g`` (each mass at its ``y``), ``g_1`` by ``r``
+        and ``g_2`` by ``L``, ``G`` declared 0 (it holds no parameter); the rest are zero.
+        Driven: ``time_dependent=True`` (the callbacks take ``t`` first) with an exact
+        ``∂g/∂t`` and no derivatives by θ (a time-dependent model with constraints cannot
+        give them: the step is differenced in θ). Helpers ``initial_state(phi,
+        omega=drive)`` (exact, consistent at ``t0 = phi/Ω`` when driven), ``crank_angle(q)``
+        and a ``drawing`` (O, A, C, B).
     """
     check_positive(r=r, L=L, m_a=m_a, m_c=m_c, m_b=m_b, g=g)
     if not r < L:
@@ -132,11 +188,18 @@ def slider_crank(r: float = 0.3, L: float = 1.0, m_a: float = 0.5, m_c: float = 
     driven = drive is not None
     if driven and not np.isfinite(drive):
         raise ValueError(f"`drive` must be a finite crank speed or None, got {drive!r}")
+    if driven:
+        callbacks = dict(potential=_V_t, potential_grad=_dV_t, constraint=_g_t,
+                         constraint_jacobian=_G_t, constraint_hessian=_ddg_t,
+                         time_dependent=True, constraint_time_derivative=_gt)
+    else:
+        callbacks = dict(potential=_V, potential_grad=_dV, constraint=_g, constraint_jacobian=_G,
+                         constraint_hessian=_ddg,
+                         param_derivatives=dict(potential_grad=_dV_by_params,
+                                                constraint=_g_by_params, constraint_jacobian=0))
     model = Model(
         6, 6 if driven else 5, params=(r, L, m_a, m_c, m_b, g, float(drive or 0.0)),
-        mass=np.diag([m_a, m_a, m_c, m_c, m_b, m_b]), potential=_V, potential_grad=_dV,
-        potential_hessian=0, constraint=_g, constraint_jacobian=_G, constraint_hessian=_ddg,
-        time_dependent=True, constraint_time_derivative=_gt,
+        mass=np.diag([m_a, m_a, m_c, m_c, m_b, m_b]), potential_hessian=0, **callbacks,
         mass_params=(2, 3, 4), name="slider_crank" + ("-driven" if driven else ""),
     )
 

@@ -6,7 +6,8 @@ Measurements on the double pendulum (Cartesian, n = 4, m = 2), and on chains of 
 * **cost**: the compiled loop's time of :func:`fastvi.sensitivity` for 1, 2n and 2n + k
   directions and of :func:`fastvi.adjoint`, against a plain :func:`fastvi.integrate` and
   against the 2n + k (forward) or 2(2n + k) (central) runs of finite differences, on the
-  damped pendulum (k = 6 parameters), best of ``--repeat``, side by side in one process;
+  damped pendulum (k = 6 parameters), ``--repeat`` rounds that call each computation in
+  turn, in one process (medians, and ratios as the median of each round's ratio);
 * **order**: the error of ``∂(q, v)(1)/∂(θ0, ω0)`` from θ1 = θ2 = π/2 at rest against
   five-point differences of SciPy DOP853 runs in angles (rtol = atol = 1e-13), and its
   log–log slope;
@@ -41,8 +42,24 @@ from fastvi.studies.reference import chain_cartesian, chain_pendulum_reference
 FD_POINTS = ((2.0, -1.0), (1.0, 8.0), (-1.0, -8.0), (-2.0, 1.0))
 
 
-def _best(fn, repeat):
-    return min(fn() for _ in range(repeat))
+def _in_turn(fns, repeat: int) -> np.ndarray:
+    """The times of ``fns`` over ``repeat`` rounds, ``(repeat, len(fns))``: each round calls
+    every function once, the order turned by one each round, after one untimed call of each
+    (which may compile). On a shared machine whose speed drifts over seconds, the times of
+    one round are comparable where those of separate blocks of calls are not: a ratio is
+    the median of the rounds' ratios."""
+    for fn in fns:
+        fn()
+    times = np.empty((repeat, len(fns)))
+    for r in range(repeat):
+        for j in np.roll(np.arange(len(fns)), r):
+            times[r, j] = fns[j]()
+    return times
+
+
+def _ratio(times: np.ndarray, j: int, base: int = 0) -> float:
+    """The median over the rounds of column ``j`` over column ``base``."""
+    return float(np.median(times[:, j] / times[:, base]))
 
 
 def cost_table(steps: int, repeat: int, h: float = 0.01, method: str = "P2L-Q3G") -> str:
@@ -72,31 +89,30 @@ def cost_table(steps: int, repeat: int, h: float = 0.01, method: str = "P2L-Q3G"
 
     one = np.zeros((2 * n + k, 1))
     one[0, 0] = 1.0
-    t_plain = _best(plain, repeat)
-    rows = [("integrate (no derivatives)", t_plain, 1),
-            ("integrate, generic stages (`specialize=False`)",
-             _best(lambda: plain(False), repeat), 1)]
-    rows.append(("sensitivity, 1 direction (q0[0])", _best(sens(one), repeat), 1))
-    rows.append((f"sensitivity, 2n = {2 * n} directions (q0, v0)", _best(sens(("q0", "v0")), repeat),
-                 2 * n))
-    rows.append((f"sensitivity, 2n + k = {2 * n + k} directions (q0, v0, params)",
-                 _best(sens(("q0", "v0", "params")), repeat), 2 * n + k))
-    rows.append(("adjoint: gradient by q0 and v0", _best(adj([]), repeat), 2 * n))
-    rows.append((f"adjoint: gradient by q0, v0 and the k = {k} params", _best(adj(), repeat),
-                 2 * n + k))
-    rows.append(("sensitivity, 1 direction, generic kernels (`specialize=False`)",
-                 _best(sens(one, False), repeat), 1))
-    rows.append((f"adjoint by q0, v0 and the {k} params, generic kernels (`specialize=False`)",
-                 _best(adj(None, False), repeat), 2 * n + k))
-    rows.append((f"finite differences, forward: {2 * n + k + 1} runs", (2 * n + k + 1) * t_plain,
-                 2 * n + k))
-    rows.append((f"finite differences, central: {2 * (2 * n + k)} runs", 2 * (2 * n + k) * t_plain,
-                 2 * n + k))
-    out = [f"Damped double pendulum (c = 0.3), `{method}`, h = {h}, {steps} steps, best of "
-           f"{repeat}: the compiled loop's time.", "",
+    timed = [("integrate (no derivatives)", plain, 1),
+             ("integrate, generic stages (`specialize=False`)", lambda: plain(False), 1),
+             ("sensitivity, 1 direction (q0[0])", sens(one), 1),
+             (f"sensitivity, 2n = {2 * n} directions (q0, v0)", sens(("q0", "v0")), 2 * n),
+             (f"sensitivity, 2n + k = {2 * n + k} directions (q0, v0, params)",
+              sens(("q0", "v0", "params")), 2 * n + k),
+             ("adjoint: gradient by q0 and v0", adj([]), 2 * n),
+             (f"adjoint: gradient by q0, v0 and the k = {k} params", adj(), 2 * n + k),
+             ("sensitivity, 1 direction, generic kernels (`specialize=False`)",
+              sens(one, False), 1),
+             (f"adjoint by q0, v0 and the {k} params, generic kernels (`specialize=False`)",
+              adj(None, False), 2 * n + k)]
+    times = _in_turn([fn for _, fn, _ in timed], repeat)
+    t_plain = float(np.median(times[:, 0]))
+    rows = [(name, float(np.median(times[:, j])), d, _ratio(times, j))
+            for j, (name, _, d) in enumerate(timed)]
+    for runs, d in ((2 * n + k + 1, "forward"), (2 * (2 * n + k), "central")):
+        rows.append((f"finite differences, {d}: {runs} runs", runs * t_plain, 2 * n + k, runs))
+    out = [f"Damped double pendulum (c = 0.3), `{method}`, h = {h}, {steps} steps, the "
+           f"compiled loop's time, median of {repeat} rounds run in turn (a ratio is the "
+           "median of the rounds' ratios).", "",
            "| computation | directions | time (s) | × integrate |", "|---|---|---|---|"]
-    for name, t, d in rows:
-        out.append(f"| {name} | {d} | {t:.3f} | {t / t_plain:.1f} |")
+    for name, t, d, ratio in rows:
+        out.append(f"| {name} | {d} | {t:.3f} | {ratio:.1f} |")
     return "\n".join(out)
 
 
@@ -362,11 +378,11 @@ def chain_start(links: int, angle: float = 0.3):
 def scaling_table(links=(8, 16, 32, 64, 128), steps: int = 200, h: float = 0.01,
                   method: str = "P2L-Q3G", repeat: int = 3) -> str:
     """One forward direction and one adjoint gradient (by q0 and v0) of planar chains of
-    growing length, against a plain run: the compiled loops' time, best of ``repeat``."""
+    growing length, against a plain run: the compiled loops' time, ``repeat`` rounds in turn."""
     import fastvi
 
     out = [f"Planar chains of N links (n = 2N, m = N), `{method}`, h = {h}, {steps} steps: "
-           f"the compiled loops' time, best of {repeat}.", "",
+           f"the compiled loops' time, median of {repeat} rounds run in turn.", "",
            "| links N | Newton matrix | plain step (µs) | sensitivity, 1 direction | "
            "adjoint by q0, v0 |", "|---|---|---|---|---|"]
     for N in links:
@@ -387,10 +403,10 @@ def scaling_table(links=(8, 16, 32, 64, 128), steps: int = 200, h: float = 0.01,
                                param_index=[], **run)
             return A.result.stats["integration_time"] + A.stats["backward_time"]
 
-        t0, ts, ta = (_best(f, repeat) for f in (plain, sens, adj))
+        times = _in_turn([plain, sens, adj], repeat)
         solver = fastvi.structure.plan(ch, fastvi.tables.method(method)).solvers["newton"]
-        out.append(f"| {N} | {solver} | {t0 / steps * 1e6:.1f} | {ts / t0:.1f} | "
-                   f"{ta / t0:.1f} |")
+        out.append(f"| {N} | {solver} | {np.median(times[:, 0]) / steps * 1e6:.1f} | "
+                   f"{_ratio(times, 1):.1f} | {_ratio(times, 2):.1f} |")
     return "\n".join(out)
 
 
@@ -398,12 +414,12 @@ def parameters_table(links=(2, 4, 8, 16, 32, 64, 128), steps: int = 2_000, h: fl
                      method: str = "P2L-Q3G", repeat: int = 5) -> str:
     """The adjoint's gradient by the initial state, and by the initial state and every
     parameter (k = 2N + 2: masses, lengths, g, c), of damped chains of N links, over a plain
-    run: the compiled loops' time, best of ``repeat``, everything compiled for the model's
+    run: the compiled loops' time, ``repeat`` rounds in turn, everything compiled for the model's
     sizes first (``specialize=True``)."""
     import fastvi
 
     out = [f"Damped chains (c = 0.3) of N links, `{method}`, h = {h}, {steps} steps, the "
-           f"compiled loops' time over a plain run, best of {repeat}:", "",
+           f"compiled loops' time over a plain run, median of {repeat} rounds run in turn:", "",
            "| links N | n | k | plain step (µs) | adjoint by q0, v0 | by q0, v0 and θ | "
            "a parameter, a step |", "|---|---|---|---|---|---|---|"]
     for N in links:
@@ -422,19 +438,20 @@ def parameters_table(links=(2, 4, 8, 16, 32, 64, 128), steps: int = 2_000, h: fl
                 return A.result.stats["integration_time"] + A.stats["backward_time"]
             return timed
 
-        plain(), adj([])(), adj(None)()  # compiled first: not timed
-        t0, a0, a1 = _best(plain, repeat), _best(adj([]), repeat), _best(adj(None), repeat)
+        times = _in_turn([plain, adj([]), adj(None)], repeat)
+        # a parameter's cost: the rounds' median of the difference of the two gradients
+        by_param = np.median(times[:, 2] - times[:, 1]) / steps / k
         solver = fastvi.structure.plan(ch, fastvi.tables.method(method)).solvers["newton"]
         label = f"{N} (banded)" if solver == "banded" else f"{N}"
-        out.append(f"| {label} | {2 * N} | {k} | {t0 / steps * 1e6:.1f} | {a0 / t0:.2f} | "
-                   f"{a1 / t0:.2f} | {(a1 - a0) / steps / k * 1e6:.2f} µs |")
+        out.append(f"| {label} | {2 * N} | {k} | {np.median(times[:, 0]) / steps * 1e6:.1f} | "
+                   f"{_ratio(times, 1):.2f} | {_ratio(times, 2):.2f} | {by_param * 1e6:.2f} µs |")
     return "\n".join(out)
 
 
 def main(argv=None) -> int:
     parser = study_parser("python -m fastvi sensitivities", __doc__)
     parser.add_argument("--steps", type=int, default=10_000, help="steps of the cost and symplecticity runs")
-    parser.add_argument("--repeat", type=int, default=3, help="timings: best of this many")
+    parser.add_argument("--repeat", type=int, default=3, help="timings: rounds of calls in turn (medians)")
     parser.add_argument("--out", default=f"{default_out('sensitivities')}/sensitivities.md",
                         help="where to write the tables")
     args = parser.parse_args(argv)

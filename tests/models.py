@@ -105,7 +105,7 @@ def quartic(eps=1.0):
 # q = (xa, ya, xc, yc, xb, yb); five constraints leave one degree of freedom.
 # params = (r, L, ma, mc, mb, g). The same mechanism as fastvi.scenes.slider_crank, written
 # here as an autonomous user model (callbacks without t): the consistent-state tests need a
-# model a user would write, and the scene's callbacks take the time (its driven variant).
+# model a user would write, independent of the scene's own callbacks.
 def sc_V(q, p):
     return p[5] * (p[2] * q[1] + p[3] * q[3] + p[4] * q[5])
 

@@ -29,8 +29,8 @@ from ._common import attach, check_positive
 
 # Two sets of callbacks with the same five rows. The free mechanism's take no time: it is a
 # time-independent model, which is what lets it give exact derivatives by θ (``Model``
-# refuses them for a time-dependent model with constraints). The driven one's (``_*_t``)
-# take ``t`` first, as ``time_dependent=True`` requires of the potential and constraint
+# refuses them for a time-dependent model with constraints). The driven set (``_*_driven``)
+# takes ``t`` first, as ``time_dependent=True`` requires of the potential and constraint
 # callbacks, for the drive's sixth row. numba cannot call a plain Python function from a
 # compiled callback, so the driven set repeats the rows instead of calling the free one.
 
@@ -95,17 +95,17 @@ def _g_by_params(q, p, out):
 
 
 # the driven mechanism's, time first: the free rows, and the drive's sixth
-def _V_t(t, q, p):
+def _V_driven(t, q, p):
     return p[5] * (p[2] * q[1] + p[3] * q[3] + p[4] * q[5])
 
 
-def _dV_t(t, q, p, out):
+def _dV_driven(t, q, p, out):
     out[:] = 0.0
     for i in range(3):
         out[2 * i + 1] = p[5] * p[2 + i]
 
 
-def _g_t(t, q, p, out):
+def _g_driven(t, q, p, out):
     dx, dy, phi = q[4] - q[0], q[5] - q[1], p[6] * t
     out[0] = 0.5 * (q[0] * q[0] + q[1] * q[1] - p[0] * p[0])
     out[1] = 0.5 * (dx * dx + dy * dy - p[1] * p[1])
@@ -115,7 +115,7 @@ def _g_t(t, q, p, out):
     out[5] = q[0] * np.sin(phi) - q[1] * np.cos(phi)
 
 
-def _G_t(t, q, p, out):
+def _G_driven(t, q, p, out):
     out[:, :] = 0.0
     out[2:5, :] = _G_FIXED
     for a in (0, 1):
@@ -126,7 +126,7 @@ def _G_t(t, q, p, out):
     out[5, 1] = -np.cos(p[6] * t)
 
 
-def _ddg_t(t, q, eta, p, out):
+def _ddg_driven(t, q, eta, p, out):
     out[:, :] = 0.0  # the drive row is linear in q
     for a in (0, 1):
         out[a, a] = eta[0] + eta[1]
@@ -189,8 +189,8 @@ def slider_crank(r: float = 0.3, L: float = 1.0, m_a: float = 0.5, m_c: float = 
     if driven and not np.isfinite(drive):
         raise ValueError(f"`drive` must be a finite crank speed or None, got {drive!r}")
     if driven:
-        callbacks = dict(potential=_V_t, potential_grad=_dV_t, constraint=_g_t,
-                         constraint_jacobian=_G_t, constraint_hessian=_ddg_t,
+        callbacks = dict(potential=_V_driven, potential_grad=_dV_driven, constraint=_g_driven,
+                         constraint_jacobian=_G_driven, constraint_hessian=_ddg_driven,
                          time_dependent=True, constraint_time_derivative=_gt)
     else:
         callbacks = dict(potential=_V, potential_grad=_dV, constraint=_g, constraint_jacobian=_G,

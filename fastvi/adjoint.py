@@ -193,6 +193,20 @@ def adjoint(model, q0, v0, cotangent, *, h: float, t_end: float | None = None,
     fastvi.IntegrationError
         A step failed, or its Newton matrix is singular at the solution.
 
+    Notes
+    -----
+    Cost: the forward run records each step; the backward sweep linearises each step once
+    (the exact Newton matrix, assembled and factored) and solves once with its transpose.
+    That is about three to four plain runs for the gradient by ``q0``, ``v0`` and every
+    parameter, however many there are, when the model gives its derivatives by θ
+    (``Model(param_derivatives=...)``; :func:`fastvi.symbolic.model_from_lagrangian`
+    generates them): each parameter then adds a few entries a point. Without them each
+    parameter differences the step, four residual evaluations a parameter and step, and
+    the gradient costs several times more (the free ``slider_crank``'s seven parameters:
+    about 10 plain runs without, under 3 with). Name only the parameters needed in
+    ``param_index`` for such a model. Steps retaken between checkpoints add up to one
+    plain run. See ``docs/sensitivities.md`` for measured costs.
+
     References
     ----------
     J. M. Sanz-Serna, Symplectic Runge–Kutta schemes for adjoint equations, automatic

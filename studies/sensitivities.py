@@ -291,19 +291,18 @@ def memory_table(sizes=(1_000, 10_000, 100_000), h: float = 0.01,
 
     out = [f"Damped double pendulum, `{method}`, h = {h}: peak memory of one adjoint gradient "
            "by q0 and v0 (`tracemalloc`), and its time over a plain run's (the compiled "
-           "loops, best of 3).", "",
+           "loops, median of 3 rounds run in turn).", "",
            "| steps N | checkpoints × segment | peak (KiB) | × integrate | every step kept (KiB) "
            "| × integrate |", "|---|---|---|---|---|---|"]
     took(100, checkpoint_every=10)  # compiled
     for N in sizes:
-        t0 = min(plain(N) for _ in range(3))
         C = math.isqrt(N - 1) + 1
+        times = _in_turn([lambda: plain(N), lambda: took(N, checkpoint_every=C),
+                          lambda: took(N, checkpoint_every=N)], 3)
         A, size = peak(N, checkpoint_every=C)
         nck, seg = A.stats["checkpoints"], A.stats["segment"]
-        out.append(f"| {N} | {nck} × {seg} | {size / 1024:.0f} | "
-                   f"{min(took(N, checkpoint_every=C) for _ in range(3)) / t0:.1f} | "
-                   f"{peak(N, checkpoint_every=N)[1] / 1024:.0f} | "
-                   f"{min(took(N, checkpoint_every=N) for _ in range(3)) / t0:.1f} |")
+        out.append(f"| {N} | {nck} × {seg} | {size / 1024:.0f} | {_ratio(times, 1):.1f} | "
+                   f"{peak(N, checkpoint_every=N)[1] / 1024:.0f} | {_ratio(times, 2):.1f} |")
     return "\n".join(out)
 
 
@@ -319,20 +318,21 @@ def ensemble_table(members: int = 16, steps: int = 2_000, h: float = 0.01,
     V0 = np.array([v for _, v in starts])
     run = dict(h=h, n_steps=steps, method=method, save_every=steps)
     fastvi.sensitivity_ensemble(dp, Q0[:2], V0[:2], **{**run, "n_steps": 2})  # compiled first
-    ens = min((fastvi.sensitivity_ensemble(dp, Q0, V0, **run) for _ in range(3)),
-              key=lambda e: e.stats["integration_time"])
-    serial = min(sum(fastvi.sensitivity(dp, Q0[i], V0[i], **run).result.stats["integration_time"]
-                     for i in range(members)) for _ in range(3))
+    times = _in_turn([
+        lambda: fastvi.sensitivity_ensemble(dp, Q0, V0, **run).stats["integration_time"],
+        lambda: sum(fastvi.sensitivity(dp, Q0[i], V0[i], **run).result.stats["integration_time"]
+                    for i in range(members))], 3)
+    ens = fastvi.sensitivity_ensemble(dp, Q0, V0, **run)
     one = [fastvi.sensitivity(dp, Q0[i], V0[i], **run) for i in range(members)]
     same = all(np.array_equal(o.dq, ens.dq[i]) for i, o in enumerate(one))
-    t_ens = ens.stats["integration_time"]
+    t_ens, serial = np.median(times, axis=0)
     return (f"{members} members of the damped double pendulum, `{method}`, h = {h}, {steps} "
             f"steps, 2n = {2 * dp.n} directions each, {ens.stats['threads']} threads; the "
-            "compiled loops' time, best of 3:\n\n"
+            "compiled loops' time, median of 3 rounds run in turn:\n\n"
             "| computation | time (s) |\n|---|---|\n"
             f"| `sensitivity_ensemble` (one parallel loop) | {t_ens:.3f} |\n"
             f"| `sensitivity`, member by member | {serial:.3f} |\n\n"
-            f"Speed-up {serial / t_ens:.2f}; members equal bit for bit: {same}.")
+            f"Speed-up {_ratio(times, 1, 0):.2f}; members equal bit for bit: {same}.")
 
 
 def segments_table(links: int = 256, sizes=(1_000, 4_000, 8_000, 16_000),
@@ -341,8 +341,8 @@ def segments_table(links: int = 256, sizes=(1_000, 4_000, 8_000, 16_000),
     """The adjoint's default schedule on a model that records much a step: the gradient by
     q0 and v0 of a damped chain of ``links`` links, for each memory budget (``None``: the
     default, ``fastvi.adjoint.KEEP_ALL_BYTES``), its segment, the steps retaken, the peak
-    memory (``tracemalloc``) and the time over a plain run's (the compiled loops, best of
-    ``repeat``)."""
+    memory (``tracemalloc``) and the time over a plain run's (the compiled loops,
+    ``repeat`` rounds in turn)."""
     import fastvi
 
     default = sys.modules["fastvi.adjoint"].KEEP_ALL_BYTES  # the module, not the function
@@ -351,18 +351,19 @@ def segments_table(links: int = 256, sizes=(1_000, 4_000, 8_000, 16_000),
     took(10)  # compiled
     out = [f"Damped chain of {links} links (n = {ch.n}, m = {ch.m}), `{method}`, h = {h}: "
            "one adjoint gradient by q0 and v0 under the default schedule for each memory "
-           f"budget; peak memory by `tracemalloc`, time over a plain run's (best of {repeat}).",
+           f"budget; peak memory by `tracemalloc`, time over a plain run's (median of {repeat} "
+           "rounds run in turn).",
            "", "| steps N | budget (MiB) | segment × checkpoints | steps retaken | peak (MiB) "
            "| × integrate |", "|---|---|---|---|---|---|"]
     for N in sizes:
-        t0 = min(plain(N) for _ in range(repeat))
-        for budget in budgets:
+        times = _in_turn([lambda: plain(N)] + [lambda b=b: took(N, max_memory=b)
+                                               for b in budgets], repeat)
+        for j, budget in enumerate(budgets, start=1):
             A, size = peak(N, max_memory=budget)
             C, nck = A.stats["segment"], A.stats["checkpoints"]
             mib = (default if budget is None else budget) / 2**20
-            ratio = min(took(N, max_memory=budget) for _ in range(repeat)) / t0
             out.append(f"| {N} | {mib:.0f} | {C} × {nck} | {N - C} | {size / 2**20:.0f} | "
-                       f"{ratio:.2f} |")
+                       f"{_ratio(times, j):.2f} |")
     return "\n".join(out)
 
 

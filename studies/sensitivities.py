@@ -294,7 +294,6 @@ def memory_table(sizes=(1_000, 10_000, 100_000), h: float = 0.01,
            "loops, median of 3 rounds run in turn).", "",
            "| steps N | checkpoints × segment | peak (KiB) | × integrate | every step kept (KiB) "
            "| × integrate |", "|---|---|---|---|---|---|"]
-    took(100, checkpoint_every=10)  # compiled
     for N in sizes:
         C = math.isqrt(N - 1) + 1
         times = _in_turn([lambda: plain(N), lambda: took(N, checkpoint_every=C),
@@ -317,7 +316,6 @@ def ensemble_table(members: int = 16, steps: int = 2_000, h: float = 0.01,
     Q0 = np.array([q for q, _ in starts])
     V0 = np.array([v for _, v in starts])
     run = dict(h=h, n_steps=steps, method=method, save_every=steps)
-    fastvi.sensitivity_ensemble(dp, Q0[:2], V0[:2], **{**run, "n_steps": 2})  # compiled first
     times = _in_turn([
         lambda: fastvi.sensitivity_ensemble(dp, Q0, V0, **run).stats["integration_time"],
         lambda: sum(fastvi.sensitivity(dp, Q0[i], V0[i], **run).result.stats["integration_time"]
@@ -348,7 +346,6 @@ def segments_table(links: int = 256, sizes=(1_000, 4_000, 8_000, 16_000),
     default = sys.modules["fastvi.adjoint"].KEEP_ALL_BYTES  # the module, not the function
     ch = fastvi.scenes.chain(links, damping=0.3)
     took, peak, plain = _adjoint_runs(ch, *chain_start(links), h, method)
-    took(10)  # compiled
     out = [f"Damped chain of {links} links (n = {ch.n}, m = {ch.m}), `{method}`, h = {h}: "
            "one adjoint gradient by q0 and v0 under the default schedule for each memory "
            f"budget; peak memory by `tracemalloc`, time over a plain run's (median of {repeat} "
